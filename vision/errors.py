@@ -1,0 +1,48 @@
+"""The one exception hierarchy of VisionCell.
+
+Every domain error raised by ``vision``, ``robot`` or ``backend`` derives from
+:class:`VisionCellError`.  The root lives here because ``vision`` is the one package that
+imports nothing else of ours; ``robot.errors`` subclasses it.  Each class carries a stable
+``code`` (the ``error`` field of the API's JSON body) and the HTTP status the API maps it to.
+"""
+
+from __future__ import annotations
+
+
+class VisionCellError(Exception):
+    """Root of all VisionCell domain errors."""
+
+    code: str = "visioncell_error"
+    http_status: int = 400
+
+    def __init__(self, detail: str) -> None:
+        super().__init__(detail)
+        self.detail = detail
+
+
+class ImageError(VisionCellError, ValueError):
+    """An image has the wrong dtype, shape or content."""
+
+    code = "bad_image"
+    http_status = 422
+
+
+class CameraError(VisionCellError):
+    """An image source failed (device gone, stream ended, folder empty)."""
+
+    code = "camera_error"
+    http_status = 503
+
+
+class CalibrationError(VisionCellError):
+    """A calibration cannot be solved (too few views, no pattern, degenerate motion)."""
+
+    code = "calibration_failed"
+    http_status = 422
+
+
+class RecognitionFailed(VisionCellError):
+    """Recognition could not decide on an object."""
+
+    code = "recognition_failed"
+    http_status = 422
