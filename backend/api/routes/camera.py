@@ -1,0 +1,28 @@
+"""The live camera image."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter
+from fastapi.responses import Response
+
+from backend.api.deps import CellDep, ViewerUser
+from backend.api.errors import ApiError
+
+router = APIRouter(prefix="/camera", tags=["camera"])
+
+
+@router.get("/frame.jpg", summary="The latest camera frame as JPEG", response_class=Response)
+async def read_frame(_: ViewerUser, cell: CellDep) -> Response:
+    jpeg = cell.latest_jpeg()
+    if jpeg is None:
+        status = cell.camera_status()
+        raise ApiError(503, "camera_unavailable", status.error or "no frame has arrived yet")
+    return Response(jpeg, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
+
+
+@router.get("/status", summary="Camera health and rate")
+async def read_camera_status(_: ViewerUser, cell: CellDep) -> dict[str, Any]:
+    s = cell.camera_status()
+    return {"name": s.name, "ok": s.ok, "frames": s.frames, "fps": s.fps, "error": s.error}

@@ -1,0 +1,79 @@
+"""Health (no token) and status (viewer)."""
+
+from __future__ import annotations
+
+import platform
+from typing import Any
+
+from fastapi import APIRouter, Request
+
+from backend import __version__
+from backend.api.deps import CellDep, DatabaseDep, SettingsDep, ViewerUser
+from backend.db.migrate import current_revision, head_revision
+
+router = APIRouter(tags=["health"])
+
+
+@router.get("/health", summary="Liveness; needs no token")
+async def read_health(request: Request) -> dict[str, Any]:
+    view = getattr(request.app.state, "view3d", None)
+    return {
+        "status": "ok",
+        "version": __version__,
+        "viser_port": view.port if view is not None else None,
+    }
+
+
+def _versions() -> dict[str, str]:
+    import cv2
+    import mujoco
+    import numpy
+    import viser
+
+    return {
+        "visioncell": __version__,
+        "python": platform.python_version(),
+        "numpy": numpy.__version__,
+        "opencv": cv2.__version__,
+        "mujoco": mujoco.__version__,
+        "viser": viser.__version__,
+    }
+
+
+@router.get("/status", summary="Driver, camera, database and versions")
+async def read_status(
+    _: ViewerUser, settings: SettingsDep, db: DatabaseDep, cell: CellDep, request: Request
+) -> dict[str, Any]:
+    state = cell.driver.state
+    cam = cell.camera_status()
+    db_ok = await db.ping()
+    revision = await current_revision(db.engine) if db_ok else None
+    view = getattr(request.app.state, "view3d", None)
+    return {
+        "driver": {
+            "name": cell.driver.name,
+            "connected": state.connected,
+            "moving": state.moving,
+            "estopped": state.estopped,
+            "fault": state.fault,
+        },
+        "camera": {
+            "name": cam.name,
+            "ok": cam.ok,
+            "frames": cam.frames,
+            "fps": cam.fps,
+            "error": cam.error,
+        },
+        "database": {
+            "url": settings.redacted_database_url(),
+            "ok": db_ok,
+            "revision": revision,
+            "head": head_revision(),
+        },
+        "view3d": {
+            "port": view.port if view else None,
+            "clients": view.client_count() if view else 0,
+        },
+        "jobs": {"running": [j.public() for j in cell.jobs.running()]},
+        "versions": _versions(),
+    }

@@ -1,0 +1,65 @@
+"""Recognition settings: the global score threshold and how it was chosen."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter
+from pydantic import BaseModel, Field
+from sqlalchemy import select
+
+from backend.api.deps import EngineerUser, SessionDep, ViewerUser
+from backend.db.models import RecognitionSettings
+
+router = APIRouter(prefix="/recognition", tags=["recognition"])
+
+DEFAULT_THRESHOLD = 0.5
+
+
+class RecognitionSettingsIn(BaseModel):
+    global_threshold: float = Field(
+        ge=0.0, le=1.0, description="Score above which a model is reported"
+    )
+    note: str = Field("", max_length=500)
+
+
+def _public(row: RecognitionSettings | None) -> dict[str, Any]:
+    if row is None:
+        return {
+            "global_threshold": DEFAULT_THRESHOLD,
+            "chosen_by": "default",
+            "detail": {},
+            "created_at": None,
+        }
+    return {
+        "global_threshold": row.global_threshold,
+        "chosen_by": row.chosen_by,
+        "detail": row.detail,
+        "created_at": row.created_at.isoformat(),
+    }
+
+
+async def latest_settings(session: Any) -> RecognitionSettings | None:
+    """The settings row in force (the newest)."""
+    return await session.scalar(
+        select(RecognitionSettings).order_by(RecognitionSettings.id.desc()).limit(1)
+    )
+
+
+@router.get("/settings", summary="The recognition settings in force")
+async def read_recognition_settings(_: ViewerUser, session: SessionDep) -> dict[str, Any]:
+    return _public(await latest_settings(session))
+
+
+@router.put("/settings", summary="Set the global threshold by hand (engineer)")
+async def update_recognition_settings(
+    user: EngineerUser, session: SessionDep, body: RecognitionSettingsIn
+) -> dict[str, Any]:
+    row = RecognitionSettings(
+        global_threshold=body.global_threshold,
+        chosen_by="manual",
+        detail={"by": user.name, "note": body.note},
+    )
+    session.add(row)
+    await session.flush()
+    return _public(row)

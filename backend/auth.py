@@ -1,0 +1,109 @@
+"""API tokens: creation, hashing and lookup.
+
+A token is ``vc_`` followed by 32 random bytes (URL-safe base64).  Only its HMAC-SHA256
+under the configured secret is stored, so a copy of the database does not reveal usable
+tokens.  Roles are ordered ``viewer < operator < engineer``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import re
+import secrets
+
+from sqlalchemy import select, update
+from sqlalchemy.ext.asyncio import AsyncSession
+from sqlalchemy.orm import selectinload
+
+from backend.db.models import ApiToken, Role, User
+from backend.db.types import utcnow
+
+__all__ = [
+    "TOKEN_PREFIX",
+    "authenticate",
+    "create_user",
+    "hash_token",
+    "issue_token",
+    "parse_role",
+    "revoke_tokens",
+    "validate_user_name",
+]
+
+TOKEN_PREFIX = "vc_"
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.@-]{0,63}$")
+
+
+def parse_role(value: str) -> Role:
+    """The :class:`Role` named ``value``; ``ValueError`` listing the roles otherwise."""
+    try:
+        return Role[value]
+    except KeyError:
+        raise ValueError(
+            f"role must be one of {', '.join(r.name for r in Role)}, got {value!r}"
+        ) from None
+
+
+def validate_user_name(name: str) -> str:
+    """Return ``name`` if it is a valid user name, else raise ``ValueError`` quoting it."""
+    if not _NAME.match(name):
+        raise ValueError(
+            f"user name must be 1-64 characters of letters, digits, '_', '.', '@', '-' "
+            f"starting with a letter or digit, got {name!r}"
+        )
+    return name
+
+
+def hash_token(token: str, secret: str) -> str:
+    """HMAC-SHA256 of the token under the secret, hex."""
+    return hmac.new(secret.encode(), token.encode(), hashlib.sha256).hexdigest()
+
+
+async def issue_token(session: AsyncSession, user: User, secret: str, *, label: str = "") -> str:
+    """Create a new token for ``user`` and return it (it is not stored in clear)."""
+    token = TOKEN_PREFIX + secrets.token_urlsafe(32)
+    session.add(
+        ApiToken(
+            user_id=user.id, token_hash=hash_token(token, secret), prefix=token[:10], label=label
+        )
+    )
+    await session.flush()
+    return token
+
+
+async def create_user(
+    session: AsyncSession, name: str, role: Role, secret: str, *, label: str = "created"
+) -> tuple[User, str]:
+    """Create a user with one token; ``ValueError`` if the name is invalid or taken."""
+    validate_user_name(name)
+    existing = await session.scalar(select(User).where(User.name == name))
+    if existing is not None:
+        raise ValueError(f"user {name!r} already exists")
+    user = User(name=name, role=role.name)
+    session.add(user)
+    await session.flush()
+    return user, await issue_token(session, user, secret, label=label)
+
+
+async def revoke_tokens(session: AsyncSession, user: User, *, label: str | None = None) -> int:
+    """Revoke the user's tokens (only those with ``label`` if given); returns how many."""
+    stmt = update(ApiToken).where(ApiToken.user_id == user.id, ApiToken.revoked.is_(False))
+    if label is not None:
+        stmt = stmt.where(ApiToken.label == label)
+    result = await session.execute(stmt.values(revoked=True))
+    return int(result.rowcount or 0)  # type: ignore[attr-defined]
+
+
+async def authenticate(session: AsyncSession, token: str, secret: str) -> User | None:
+    """The enabled user owning the unrevoked ``token``, or None."""
+    if not token.startswith(TOKEN_PREFIX) or len(token) > 200:
+        return None
+    row = await session.scalar(
+        select(ApiToken)
+        .options(selectinload(ApiToken.user))
+        .where(ApiToken.token_hash == hash_token(token, secret), ApiToken.revoked.is_(False))
+    )
+    if row is None or row.user.disabled:
+        return None
+    row.last_used_at = utcnow()
+    return row.user

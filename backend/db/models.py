@@ -1,0 +1,330 @@
+"""SQLAlchemy 2 models of VisionCell; ``migrations/`` holds the matching Alembic revisions.
+
+Tables: users and their API tokens (hashed), cells, object models and their trained views,
+calibration sessions with their samples and solutions, inspections with their images, and
+the recognition settings.  Timestamps are timezone-aware UTC (:class:`UTCDateTime`).
+"""
+
+from __future__ import annotations
+
+import enum
+from datetime import datetime
+from typing import Any, ClassVar
+
+from sqlalchemy import (
+    JSON,
+    Boolean,
+    CheckConstraint,
+    Enum,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    LargeBinary,
+    MetaData,
+    String,
+    Text,
+    UniqueConstraint,
+    text,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+from backend.db.types import UTCDateTime, utcnow
+
+__all__ = [
+    "ApiToken",
+    "Base",
+    "Calibration",
+    "CalibrationKind",
+    "CalibrationSample",
+    "CalibrationSession",
+    "Cell",
+    "Decision",
+    "Inspection",
+    "InspectionImage",
+    "ObjectKind",
+    "ObjectModel",
+    "RecognitionSettings",
+    "Role",
+    "TrainedView",
+    "User",
+]
+
+# Stable constraint names so that Alembic migrations are identical on SQLite and PostgreSQL.
+NAMING = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+
+class Base(DeclarativeBase):
+    """Declarative base with the naming convention above."""
+
+    metadata = MetaData(naming_convention=NAMING)
+    type_annotation_map: ClassVar[dict[Any, Any]] = {datetime: UTCDateTime(), dict[str, Any]: JSON, list[Any]: JSON}
+
+
+class Role(enum.IntEnum):
+    """Access levels, ordered: each role may do everything the lower ones may."""
+
+    viewer = 1
+    operator = 2
+    engineer = 3
+
+
+class ObjectKind(enum.StrEnum):
+    """Whether recognition needs only the top view (2D) or may visit side views (3D)."""
+
+    two_d = "2d"
+    three_d = "3d"
+
+
+class CalibrationKind(enum.StrEnum):
+    """What a calibration solves."""
+
+    intrinsic = "intrinsic"
+    hand_eye = "hand_eye"
+
+
+class Decision(enum.StrEnum):
+    """Outcome of one inspection."""
+
+    recognized = "recognized"
+    unknown = "unknown"
+    failed = "failed"
+
+
+def _enum(cls: type[enum.Enum], name: str) -> Enum:
+    return Enum(
+        cls, name=name, native_enum=False, values_callable=lambda c: [m.value for m in c], length=16
+    )
+
+
+class User(Base):
+    """A person or a program that uses the API."""
+
+    __tablename__ = "users"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+    role: Mapped[str] = mapped_column(String(16))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    disabled: Mapped[bool] = mapped_column(Boolean, default=False)
+
+    tokens: Mapped[list[ApiToken]] = relationship(
+        back_populates="user", cascade="all, delete-orphan"
+    )
+
+    __table_args__ = (CheckConstraint("role IN ('viewer', 'operator', 'engineer')", name="role"),)
+
+
+class ApiToken(Base):
+    """A bearer token; only its HMAC-SHA256 hash is stored."""
+
+    __tablename__ = "api_tokens"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("users.id", ondelete="CASCADE"), index=True)
+    token_hash: Mapped[str] = mapped_column(String(64), unique=True)
+    prefix: Mapped[str] = mapped_column(String(12))
+    label: Mapped[str] = mapped_column(String(64), default="")
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    last_used_at: Mapped[datetime | None] = mapped_column(default=None)
+    revoked: Mapped[bool] = mapped_column(Boolean, default=False)
+
+    user: Mapped[User] = relationship(back_populates="tokens")
+
+
+class Cell(Base):
+    """One robot cell (a plant database may hold several)."""
+
+    __tablename__ = "cells"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+    description: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class ObjectModel(Base):
+    """A trainable object; an object with two sitting bases is two models (chapter 3.5.3)."""
+
+    __tablename__ = "object_models"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+    kind: Mapped[ObjectKind] = mapped_column(_enum(ObjectKind, "object_kind"))
+    sitting_base: Mapped[str] = mapped_column(String(64), default="default")
+    threshold: Mapped[float | None] = mapped_column(Float, default=None)
+    description: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    views: Mapped[list[TrainedView]] = relationship(
+        back_populates="model", cascade="all, delete-orphan"
+    )
+
+    __table_args__ = (
+        CheckConstraint(
+            "threshold IS NULL OR (threshold >= 0 AND threshold <= 1)", name="threshold_range"
+        ),
+    )
+
+
+class TrainedView(Base):
+    """One trained image of a model from viewpoint 1 (top), 2 or 3 (sides), with its features."""
+
+    __tablename__ = "trained_views"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    model_id: Mapped[int] = mapped_column(
+        ForeignKey("object_models.id", ondelete="CASCADE"), index=True
+    )
+    viewpoint: Mapped[int] = mapped_column(Integer)
+    image_png: Mapped[bytes] = mapped_column(LargeBinary)
+    features: Mapped[bytes] = mapped_column(LargeBinary)
+    descriptor_kind: Mapped[str] = mapped_column(String(32))
+    descriptor_version: Mapped[str] = mapped_column(String(32))
+    keypoint_count: Mapped[int] = mapped_column(Integer, default=0)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    model: Mapped[ObjectModel] = relationship(back_populates="views")
+
+    __table_args__ = (CheckConstraint("viewpoint BETWEEN 1 AND 3", name="viewpoint_range"),)
+
+
+class CalibrationSession(Base):
+    """A set of calibration samples gathered together (automatic run or upload)."""
+
+    __tablename__ = "calibration_sessions"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    cell_id: Mapped[int] = mapped_column(ForeignKey("cells.id", ondelete="CASCADE"), index=True)
+    kind: Mapped[CalibrationKind] = mapped_column(_enum(CalibrationKind, "calibration_kind"))
+    source: Mapped[str] = mapped_column(String(16), default="upload")
+    board: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    note: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    samples: Mapped[list[CalibrationSample]] = relationship(
+        back_populates="session", cascade="all, delete-orphan", order_by="CalibrationSample.index"
+    )
+    calibrations: Mapped[list[Calibration]] = relationship(back_populates="session")
+
+
+class CalibrationSample(Base):
+    """One image of a calibration session with the robot state and the detection outcome."""
+
+    __tablename__ = "calibration_samples"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    session_id: Mapped[int] = mapped_column(
+        ForeignKey("calibration_sessions.id", ondelete="CASCADE"), index=True
+    )
+    index: Mapped[int] = mapped_column(Integer)
+    image_png: Mapped[bytes] = mapped_column(LargeBinary)
+    joints: Mapped[list[Any] | None] = mapped_column(JSON, default=None)
+    T_base_ee: Mapped[list[Any] | None] = mapped_column(JSON, default=None)
+    corners: Mapped[list[Any] | None] = mapped_column(JSON, default=None)
+    accepted: Mapped[bool] = mapped_column(Boolean, default=False)
+    reason: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    session: Mapped[CalibrationSession] = relationship(back_populates="samples")
+
+    __table_args__ = (
+        UniqueConstraint("session_id", "index", name="uq_calibration_samples_session_index"),
+    )
+
+
+class Calibration(Base):
+    """A solved calibration: parameters, residuals and whether it is the active one."""
+
+    __tablename__ = "calibrations"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    cell_id: Mapped[int] = mapped_column(ForeignKey("cells.id", ondelete="CASCADE"), index=True)
+    session_id: Mapped[int | None] = mapped_column(
+        ForeignKey("calibration_sessions.id", ondelete="SET NULL"), index=True, default=None
+    )
+    kind: Mapped[CalibrationKind] = mapped_column(_enum(CalibrationKind, "calibration_kind"))
+    parameters: Mapped[dict[str, Any]] = mapped_column(JSON)
+    residuals: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    options: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    sample_count: Mapped[int] = mapped_column(Integer)
+    rms_px: Mapped[float | None] = mapped_column(Float, default=None)
+    active: Mapped[bool] = mapped_column(Boolean, default=False)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    session: Mapped[CalibrationSession | None] = relationship(back_populates="calibrations")
+
+    __table_args__ = (
+        # At most one active calibration of each kind per cell.
+        Index(
+            "uq_calibrations_active",
+            "cell_id",
+            "kind",
+            unique=True,
+            sqlite_where=text("active"),
+            postgresql_where=text("active"),
+        ),
+    )
+
+
+class Inspection(Base):
+    """One run of the recognition loop on one object."""
+
+    __tablename__ = "inspections"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    cell_id: Mapped[int] = mapped_column(ForeignKey("cells.id", ondelete="CASCADE"), index=True)
+    started_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)
+    finished_at: Mapped[datetime | None] = mapped_column(default=None)
+    decision: Mapped[Decision] = mapped_column(_enum(Decision, "decision"))
+    model_id: Mapped[int | None] = mapped_column(
+        ForeignKey("object_models.id", ondelete="SET NULL"), default=None
+    )
+    score: Mapped[float | None] = mapped_column(Float, default=None)
+    viewpoints_visited: Mapped[list[Any]] = mapped_column(JSON, default=list)
+    object_pose: Mapped[list[Any] | None] = mapped_column(JSON, default=None)
+    duration_s: Mapped[float | None] = mapped_column(Float, default=None)
+    note: Mapped[str] = mapped_column(Text, default="")
+
+    images: Mapped[list[InspectionImage]] = relationship(
+        back_populates="inspection", cascade="all, delete-orphan"
+    )
+
+
+class InspectionImage(Base):
+    """An image taken during an inspection, with the viewpoint it was taken from."""
+
+    __tablename__ = "inspection_images"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    inspection_id: Mapped[int] = mapped_column(
+        ForeignKey("inspections.id", ondelete="CASCADE"), index=True
+    )
+    viewpoint: Mapped[int] = mapped_column(Integer)
+    image_jpeg: Mapped[bytes] = mapped_column(LargeBinary)
+    scores: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    inspection: Mapped[Inspection] = relationship(back_populates="images")
+
+
+class RecognitionSettings(Base):
+    """The global recognition threshold and how it was chosen (one row per change; the latest applies)."""
+
+    __tablename__ = "recognition_settings"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    global_threshold: Mapped[float] = mapped_column(Float)
+    chosen_by: Mapped[str] = mapped_column(String(32))
+    detail: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    __table_args__ = (
+        CheckConstraint("global_threshold >= 0 AND global_threshold <= 1", name="threshold_range"),
+    )

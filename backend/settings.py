@@ -1,0 +1,165 @@
+"""The one ``Settings`` object of VisionCell (environment prefix ``VISIONCELL_``).
+
+Only the backend reads configuration; it builds a :class:`Settings` at start-up and passes
+it down.  Validators refuse unsafe or inconsistent configurations with a message that names
+the setting and the value.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, SecretStr, field_validator, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+__all__ = ["DEV_SECRET", "Settings"]
+
+#: The secret used when none is configured.  Accepted only in the development
+#: environment and only while every listener is bound to the loopback interface.
+DEV_SECRET = "visioncell-development-secret-change-me"
+
+
+def _is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+class Settings(BaseSettings):
+    """Configuration of one VisionCell process.
+
+    Every field can be set from the environment as ``VISIONCELL_<NAME>`` (case-insensitive).
+    """
+
+    model_config = SettingsConfigDict(
+        env_prefix="VISIONCELL_", extra="ignore", validate_default=True
+    )
+
+    environment: Literal["development", "production"] = Field(
+        "development", description="'production' forbids the development secret and disabling auth."
+    )
+    database_url: str = Field(
+        "sqlite+aiosqlite:///var/visioncell.db",
+        description="SQLAlchemy async URL: sqlite+aiosqlite:///FILE or postgresql+asyncpg://USER@HOST/DB.",
+    )
+    http_host: str = Field("127.0.0.1", description="Address of the console and REST API.")
+    http_port: int = Field(8000, ge=1, le=65535, description="Port of the console and REST API.")
+    viser_host: str = Field("127.0.0.1", description="Address of the viser 3D view.")
+    viser_port: int = Field(8080, ge=1, le=65535, description="Port of the viser 3D view (pinned).")
+    driver: Literal["sim", "serial", "ideal"] = Field("ideal", description="Robot driver.")
+    camera: Literal["sim", "opencv", "folder"] = Field("folder", description="Image source.")
+    camera_device: str = Field("0", description="OpenCV camera: V4L2 index or a video/stream URL.")
+    camera_folder: Path | None = Field(
+        None,
+        description="Folder camera: images to replay (default: the OpenCV chessboard photos in the data directory).",
+    )
+    camera_fps: float = Field(
+        10.0, gt=0, le=120, description="Acquisition rate of the camera task, frames/s."
+    )
+    data_dir: Path = Field(Path("../shared/data"), description="Public test data (see its README).")
+    var_dir: Path = Field(
+        Path("var"), description="Writable directory for the SQLite file, logs and job output."
+    )
+    serial_port: str | None = Field(
+        None, description="Serial driver: device path of the controller."
+    )
+    serial_baud: int = Field(115200, gt=0, description="Serial driver: baud rate.")
+    time_scale: float = Field(
+        1.0,
+        gt=0,
+        le=100,
+        description="Simulated seconds per wall-clock second (sim and ideal drivers).",
+    )
+    state_rate_hz: float = Field(
+        50.0, gt=0, le=1000, description="Robot state publishing rate, Hz."
+    )
+    auth_enabled: bool = Field(
+        True, description="Require bearer tokens on the API (only loopback may turn this off)."
+    )
+    secret_key: SecretStr = Field(
+        SecretStr(DEV_SECRET), description="Pepper for hashing API tokens (HMAC-SHA256)."
+    )
+    bootstrap_operator: bool = Field(
+        True,
+        description="At start-up, issue a fresh token for the built-in 'operator' user and print it.",
+    )
+    view3d_enabled: bool = Field(True, description="Start the viser 3D view.")
+    log_level: Literal["debug", "info", "warning", "error"] = "info"
+
+    @field_validator("http_host", "viser_host")
+    @classmethod
+    def _valid_host(cls, v: str) -> str:
+        if v != "localhost":
+            try:
+                ipaddress.ip_address(v)
+            except ValueError as exc:
+                raise ValueError(f"host must be an IP address or 'localhost', got {v!r}") from exc
+        return v
+
+    @field_validator("database_url")
+    @classmethod
+    def _valid_db(cls, v: str) -> str:
+        if not (v.startswith("sqlite+aiosqlite://") or v.startswith("postgresql+asyncpg://")):
+            raise ValueError(
+                "database_url must use an async driver: 'sqlite+aiosqlite:///FILE' or "
+                f"'postgresql+asyncpg://USER@HOST/DB', got {v!r}"
+            )
+        return v
+
+    @model_validator(mode="after")
+    def _safe(self) -> Settings:
+        public = [
+            f"{name}={host!r}"
+            for name, host in (("http_host", self.http_host), ("viser_host", self.viser_host))
+            if not _is_loopback(host)
+        ]
+        if public and not self.auth_enabled:
+            raise ValueError(
+                f"refusing to bind to a non-loopback address ({', '.join(public)}) with "
+                "auth_enabled=False: anyone on the network could move the robot"
+            )
+        dev_secret = self.secret_key.get_secret_value() == DEV_SECRET
+        if dev_secret and (public or self.environment == "production"):
+            raise ValueError(
+                "VISIONCELL_SECRET_KEY must be set to a private value in production or when "
+                f"binding to a non-loopback address ({', '.join(public) or 'environment=production'})"
+            )
+        if len(self.secret_key.get_secret_value()) < 16:
+            raise ValueError("VISIONCELL_SECRET_KEY must be at least 16 characters long")
+        if self.environment == "production" and not self.auth_enabled:
+            raise ValueError("auth_enabled=False is not allowed in production")
+        if self.driver == "serial" and not self.serial_port:
+            raise ValueError(
+                "driver='serial' needs VISIONCELL_SERIAL_PORT (the controller's device path)"
+            )
+        if self.http_port == self.viser_port and self.http_host == self.viser_host:
+            raise ValueError(f"http_port and viser_port must differ, both are {self.http_port}")
+        return self
+
+    # -- derived paths ---------------------------------------------------------------------
+    @property
+    def is_sqlite(self) -> bool:
+        """True for the embedded SQLite database."""
+        return self.database_url.startswith("sqlite")
+
+    def sqlite_path(self) -> Path | None:
+        """File of the SQLite database, or None for in-memory/PostgreSQL."""
+        if not self.is_sqlite:
+            return None
+        path = self.database_url.split(":///", 1)[-1]
+        return None if path in ("", ":memory:") else Path(path)
+
+    def resolved_camera_folder(self) -> Path:
+        """Folder replayed by the folder camera."""
+        return self.camera_folder or self.data_dir / "calibration" / "opencv-left"
+
+    def redacted_database_url(self) -> str:
+        """The database URL with any password replaced by ``***``."""
+        from sqlalchemy.engine import make_url
+
+        return make_url(self.database_url).render_as_string(hide_password=True)

@@ -1,0 +1,20 @@
+"""Fixtures shared by every test package."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def data_dir() -> Path:
+    """The public data directory (``../shared/data`` beside the repository, or
+    ``VISIONCELL_DATA_DIR``); tests that need it skip when it is absent."""
+    path = Path(os.environ.get("VISIONCELL_DATA_DIR", REPO.parent / "shared" / "data"))
+    if not path.is_dir():
+        pytest.skip(f"public data directory {path} is absent (set VISIONCELL_DATA_DIR)")
+    return path

@@ -1,0 +1,1 @@
+"""Test helpers shared by the suites (factories, free ports, process control)."""

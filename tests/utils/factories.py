@@ -1,0 +1,85 @@
+"""Factories for settings, databases, users and images used across the backend tests."""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from backend.auth import create_user
+from backend.db.migrate import upgrade
+from backend.db.models import Role
+from backend.db.session import Database
+from backend.settings import Settings
+
+TEST_SECRET = "test-secret-0123456789abcdef"
+
+
+def free_port() -> int:
+    """A TCP port that was free a moment ago on 127.0.0.1."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def make_image_folder(folder: Path, n: int = 3, *, size: tuple[int, int] = (160, 120)) -> Path:
+    """Write ``n`` small distinct PNG images into ``folder``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(0)
+    for i in range(n):
+        img = rng.integers(0, 255, size=(size[1], size[0], 3), dtype=np.uint8)
+        cv2.putText(img, str(i), (10, 60), cv2.FONT_HERSHEY_SIMPLEX, 2.0, (255, 255, 255), 3)
+        cv2.imwrite(str(folder / f"img{i:02d}.png"), img)
+    return folder
+
+
+def make_settings(tmp_path: Path, **overrides: object) -> Settings:
+    """Settings for a test: SQLite in ``tmp_path``, ideal driver running 20x real time,
+    a folder camera on generated images, no 3D view (unless overridden)."""
+    values: dict[str, object] = {
+        "database_url": f"sqlite+aiosqlite:///{tmp_path / 'test.db'}",
+        "var_dir": tmp_path / "var",
+        "driver": "ideal",
+        "camera": "folder",
+        "camera_folder": make_image_folder(tmp_path / "images"),
+        "time_scale": 20.0,
+        "secret_key": TEST_SECRET,
+        "view3d_enabled": False,
+        "bootstrap_operator": False,
+        "http_port": free_port(),
+        "viser_port": free_port(),
+    }
+    values.update(overrides)
+    return Settings(**values)  # type: ignore[arg-type]
+
+
+def migrate(settings: Settings) -> None:
+    upgrade(settings.database_url)
+
+
+async def _users(settings: Settings, roles: list[Role]) -> dict[str, str]:
+    db = Database(settings.database_url)
+    tokens = {}
+    try:
+        async with db.session() as s:
+            for role in roles:
+                _, tok = await create_user(
+                    s, f"test-{role.name}", role, settings.secret_key.get_secret_value()
+                )
+                tokens[role.name] = tok
+    finally:
+        await db.dispose()
+    return tokens
+
+
+def make_tokens(settings: Settings) -> dict[str, str]:
+    """One user per role; returns ``{role: token}``."""
+    return asyncio.run(_users(settings, list(Role)))
+
+
+def auth(token: str) -> dict[str, str]:
+    """Authorization header for ``token``."""
+    return {"Authorization": f"Bearer {token}"}
