@@ -20,6 +20,7 @@ from vision.segmentation.energy import ExternalField, edge_energy, edge_strength
 from vision.segmentation.levelset import LevelSetResult, chan_vese, region_contours
 from vision.segmentation.pyramid import auto_levels, gaussian_pyramid
 from vision.segmentation.snake import SnakeResult, active_contour, internal_energy, internal_matrix
+from vision.segmentation.warmup import warm_up
 
 __all__ = [
     "ExternalField",
@@ -45,4 +46,5 @@ __all__ = [
     "region_contours",
     "remove_loops",
     "resample_closed",
+    "warm_up",
 ]

@@ -207,54 +207,18 @@ def blob_contour(
     return c
 
 
-def _first_crossing(c: NDArray[np.float64]) -> tuple[int, int, NDArray[np.float64]] | None:
-    """First pair of non-adjacent edges (i, j), i < j, that cross, and the crossing point."""
-    n = c.shape[0]
-    p, q = c, np.roll(c, -1, axis=0)
-    lo, hi = np.minimum(p, q), np.maximum(p, q)
-    # Bounding boxes first (cheap, boolean); the exact test only runs on the few candidates.
-    cand = (lo[:, None, 0] <= hi[None, :, 0]) & (lo[None, :, 0] <= hi[:, None, 0])
-    cand &= (lo[:, None, 1] <= hi[None, :, 1]) & (lo[None, :, 1] <= hi[:, None, 1])
-    i_idx, j_idx = np.nonzero(np.triu(cand, 2))
-    keep = ~((i_idx == 0) & (j_idx == n - 1))  # the closing edge is adjacent to edge 0
-    i_idx, j_idx = i_idx[keep], j_idx[keep]
-    if i_idx.size == 0:
-        return None
-    d = q - p
-    di, dj, r = d[i_idx], d[j_idx], p[j_idx] - p[i_idx]
-    # Edge i: p_i + s d_i, edge j: p_j + t d_j; solve with 2D cross products.
-    den = di[:, 0] * dj[:, 1] - di[:, 1] * dj[:, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = (r[:, 0] * dj[:, 1] - r[:, 1] * dj[:, 0]) / den
-        t = (r[:, 0] * di[:, 1] - r[:, 1] * di[:, 0]) / den
-    hit = np.flatnonzero((s > 0.0) & (s < 1.0) & (t > 0.0) & (t < 1.0) & (den != 0.0))
-    if hit.size == 0:
-        return None
-    k = int(hit[0])
-    i, j = int(i_idx[k]), int(j_idx[k])
-    return i, j, p[i] + s[k] * d[i]
-
-
 def remove_loops(contour: ArrayLike, *, max_loops: int = 50) -> NDArray[np.float64]:
     """Cut self-intersection loops out of a closed contour, keeping the larger part each time.
 
     Where edges ``i`` and ``j`` cross, the polygon splits into the loop ``i+1 .. j`` and the
     rest; the part with the smaller absolute area is dropped and the crossing point joins the
     two ends.  A snake pulled by a distracting edge can fold over itself this way; the loop
-    carries no object area and would otherwise grow at each resampling.
+    carries no object area and would otherwise grow at each resampling.  (Compiled: the
+    snake calls the same code at every resampling.)
     """
-    c = np.asarray(contour, dtype=np.float64)
-    for _ in range(max_loops):
-        if c.shape[0] < 4:
-            break
-        found = _first_crossing(c)
-        if found is None:
-            break
-        i, j, x = found
-        inner = c[i + 1 : j + 1]
-        outer = np.concatenate([c[: i + 1], c[j + 1 :]])
-        if abs(polygon_area(inner)) > abs(polygon_area(outer)):
-            c = np.vstack([x, inner])
-        else:
-            c = np.vstack([outer[: i + 1], x, outer[i + 1 :]])
-    return c
+    c = np.ascontiguousarray(contour, dtype=np.float64)
+    if c.ndim != 2 or c.shape[1] != 2:
+        raise ValueError(f"contour must have shape (N, 2), got {c.shape}")
+    from vision.segmentation import _kernels  # Numba: load only when needed
+
+    return _kernels.remove_loops(c, check_int(max_loops, "max_loops", minimum=1))

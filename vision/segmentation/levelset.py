@@ -23,13 +23,13 @@ colours inside and outside.  Two solvers minimise it:
     (``cv2.GaussianBlur``) and a few array operations per iteration.
 
 ``method="pde"``
-    The original level-set evolution (Chan and Vese 2001, eq. 9 there): ``phi`` a signed
-    distance, positive inside, ``dphi/dt = delta_eps(phi) (mu kappa - D1 + D2)`` with
-    ``kappa`` the curvature of the level lines and ``delta_eps`` the regularised Dirac
-    (``eps`` = 1 px); explicit steps limited to ``step_px`` of front movement (and the
-    curvature term's stability bound), ``phi`` re-initialised to a signed distance
-    (``cv2.distanceTransform``) every ``reinit_every`` steps.  Slower; the front moves at most
-    ``step_px`` per iteration, which shows the gradual evolution of the chapter's Figure 3.
+    The level-set evolution of Chan and Vese (2001): ``phi`` a signed distance, positive
+    inside, ``dphi/dt = delta_eps(phi) (mu kappa - D1 + D2)`` with ``kappa`` the curvature of
+    the level lines and ``delta_eps`` the regularised Dirac (``eps`` = 1), discretised by their
+    semi-implicit scheme (their eq. 9; one Gauss-Seidel sweep per iteration, compiled with
+    Numba in :func:`vision.segmentation._kernels.chan_vese_sweep`), ``phi`` re-initialised to a
+    signed distance (``cv2.distanceTransform``) every ``reinit_every`` sweeps.  The front moves
+    at most ``step_px`` per sweep, so the evolution is gradual, as in the chapter's Figure 3.
 
 Images are float in [0, 1] (uint8 and uint16 are scaled), so ``mu`` is in units of squared
 intensity times pixels.
@@ -111,6 +111,7 @@ class _Data:
 
     f: NDArray[np.float32]  # (H, W, C)
     sq: NDArray[np.float32]  # (H, W): |f|^2 / C
+    fsq: NDArray[np.float32]  # (H, W, C + 1): f and sq stacked, summed by one cv2.mean
     total: NDArray[np.float64]  # (C,): sum of f over the image
     sq_total: float  # sum of |f|^2 / C over the image
     lambda1: float
@@ -122,7 +123,8 @@ class _Data:
         c = f.shape[2]
         sq = (np.einsum("ijc,ijc->ij", f, f) / c).astype(np.float32)
         total = f.reshape(-1, c).sum(axis=0, dtype=np.float64)
-        return cls(f, sq, total, float(sq.sum(dtype=np.float64)), lambda1, lambda2)
+        fsq = np.ascontiguousarray(np.dstack([f, sq]))
+        return cls(f, sq, fsq, total, float(sq.sum(dtype=np.float64)), lambda1, lambda2)
 
     def stats(
         self, u8: NDArray[np.uint8]
@@ -137,8 +139,8 @@ class _Data:
         n_in = int(cv2.countNonZero(u8))
         n_out = n_all - n_in
         if n_in:
-            s_in = np.asarray(cv2.mean(self.f, mask=u8)[:c]) * n_in
-            q_in = cv2.mean(self.sq, mask=u8)[0] * n_in
+            sums = np.asarray(cv2.mean(self.fsq, mask=u8)[: c + 1]) * n_in
+            s_in, q_in = sums[:c], float(sums[c])
         else:
             s_in, q_in = np.zeros(c), 0.0
         s_out = self.total - s_in
@@ -180,20 +182,19 @@ def _threshold_dynamics(
     *,
     mu: float,
     sigma_px: float,
+    sigma_start_px: float,
     band_px: int | None,
     max_num_iter: int,
     tol_px: int,
     snapshot_at: frozenset[int],
     progress: Callable[[int], None] | None,
 ) -> _Run:
-    dt = 0.5 * sigma_px * sigma_px
     kernel = (
         None
         if band_px is None
         else cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band_px + 1, 2 * band_px + 1))
     )
-    kappa = math.sqrt(dt / math.pi) / (2.0 * mu)
-    per_weight = mu * math.sqrt(math.pi / dt)
+    sigma = max(sigma_start_px, sigma_px)
     u = mask.astype(np.uint8)
     prev2: NDArray[np.uint8] | None = None
     energies: list[float] = []
@@ -203,15 +204,15 @@ def _threshold_dynamics(
     c1 = c2 = np.zeros(data.f.shape[2])
     it = 0
     for it in range(1, max_num_iter + 1):
+        dt = 0.5 * sigma * sigma  # heat-kernel time of a Gaussian of std sigma
+        kappa = math.sqrt(dt / math.pi) / (2.0 * mu)
         c1, c2, e_data = data.stats(u)
-        uf = u.astype(np.float32)
-        v = cv2.GaussianBlur(uf, (0, 0), sigma_px, borderType=cv2.BORDER_REFLECT)
+        v = cv2.GaussianBlur(u.astype(np.float32), (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
         diff = data.difference(c1, c2)
         # Heat-content perimeter: int (1 - u) G*u = int G*u - int u G*u.
-        overlap = float(v.sum(dtype=np.float64)) - float(cv2.mean(v, mask=u)[0]) * cv2.countNonZero(
-            u
-        )
-        energies.append(per_weight * overlap + e_data)
+        n_in = cv2.countNonZero(u)
+        overlap = float(v.sum(dtype=np.float64)) - float(cv2.mean(v, mask=u)[0]) * n_in
+        energies.append(mu * math.sqrt(math.pi / dt) * overlap + e_data)
         its.append(it - 1)
         # Minimiser of the linearised energy: inside where G*u - 1/2 beats the data term.
         new = (v > np.float32(0.5) + np.float32(kappa) * diff).astype(np.uint8)
@@ -229,8 +230,13 @@ def _threshold_dynamics(
         if progress is not None:
             progress(it)
         if changed <= tol_px or cycled:
-            converged = True
-            break
+            if sigma <= sigma_px:
+                converged = True
+                break
+            # Continuation: a front whose per-step move is under half a pixel is pinned
+            # to the grid; larger steps first, then the requested scale.
+            sigma = max(sigma_px, 0.7 * sigma)
+            prev2 = None
     return _Run(u.astype(bool), it, converged, energies, its, c1, c2, snaps)
 
 
@@ -240,19 +246,6 @@ def _signed_distance(mask: NDArray[np.bool_]) -> NDArray[np.float32]:
     d_in = cv2.distanceTransform(m, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     d_out = cv2.distanceTransform(1 - m, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     return (d_in - d_out - np.float32(0.5) * (2 * m.astype(np.float32) - 1)).astype(np.float32)
-
-
-def _curvature(phi: NDArray[np.float32]) -> NDArray[np.float32]:
-    """``div(grad phi / |grad phi|)`` by central differences (Osher and Fedkiw 2003, eq. 1.8)."""
-    b = cv2.BORDER_REPLICATE
-    px = cv2.Sobel(phi, cv2.CV_32F, 1, 0, ksize=1, scale=0.5, borderType=b)
-    py = cv2.Sobel(phi, cv2.CV_32F, 0, 1, ksize=1, scale=0.5, borderType=b)
-    pxx = cv2.Sobel(phi, cv2.CV_32F, 2, 0, ksize=1, borderType=b)
-    pyy = cv2.Sobel(phi, cv2.CV_32F, 0, 2, ksize=1, borderType=b)
-    pxy = cv2.Sobel(px, cv2.CV_32F, 0, 1, ksize=1, scale=0.5, borderType=b)
-    g2 = px * px + py * py
-    num = pxx * py * py - 2.0 * px * py * pxy + pyy * px * px
-    return num / (g2 * np.sqrt(g2) + np.float32(1e-8))
 
 
 def _pde(
@@ -269,8 +262,12 @@ def _pde(
     snapshot_at: frozenset[int],
     progress: Callable[[int], None] | None,
 ) -> _Run:
-    phi = _signed_distance(mask)
-    eps = np.float32(1.0)
+    from vision.segmentation import _kernels  # Numba: load only when this solver runs
+
+    phi = _signed_distance(mask).astype(np.float64)
+    # Between re-initialisations the front may travel step_px per iteration: the band must
+    # hold it, else the front would stall against frozen values.
+    band = -1.0 if band_px is None else float(band_px + step_px * reinit_every)
     energies: list[float] = []
     its: list[int] = []
     snaps = [(0, region_contours(phi > 0))] if 0 in snapshot_at else []
@@ -279,19 +276,17 @@ def _pde(
     c1 = c2 = np.zeros(data.f.shape[2])
     it = 0
     for it in range(1, max_num_iter + 1):
-        u8 = (phi > 0).astype(np.uint8)
-        c1, c2, _ = data.stats(u8)
-        delta = eps / (np.float32(math.pi) * (eps * eps + phi * phi))
-        force = np.float32(mu) * _curvature(phi) - data.difference(c1, c2)
-        speed = delta * force
-        if band_px is not None:
-            speed[np.abs(phi) > band_px] = 0.0  # narrow band: only the front moves
-        top = float(np.abs(speed).max())
-        # Explicit step: the front moves at most step_px; the curvature term stays stable.
-        dt = min(step_px / max(top, 1e-12), 0.7 / mu if mu > 0 else math.inf)
-        phi += np.float32(dt) * speed
+        c1, c2, _ = data.stats((phi > 0).astype(np.uint8))
+        diff = data.difference(c1, c2).astype(np.float64)
+        # Time step: a typical data term (the median near the front) moves the front, where
+        # delta = 1/pi, by step_px; every change is clipped to step_px, and the semi-implicit
+        # curvature term is stable at any step.
+        near = np.abs(phi) <= 1.0
+        scale = float(np.median(np.abs(diff[near]))) if near.any() else float(np.abs(diff).max())
+        dt = step_px * math.pi / max(scale, 1e-12)
+        _kernels.chan_vese_sweep(phi, diff, mu, dt, band, step_px)
         if it % reinit_every == 0:
-            phi = _signed_distance(phi > 0)
+            phi = _signed_distance(phi > 0).astype(np.float64)
         if it in snapshot_at:
             snaps.append((it, region_contours(phi > 0)))
         if it % check_every == 0 or it == max_num_iter:
@@ -313,17 +308,18 @@ def chan_vese(
     image: NDArray[np.generic],
     init: ArrayLike | None = None,
     *,
-    mu: float = 0.5,
+    mu: float | None = None,
     lambda1: float = 1.0,
     lambda2: float = 1.0,
     method: Literal["threshold", "pde"] = "threshold",
     sigma_px: float = 3.0,
+    sigma_start_px: float | None = None,
     band_px: int | None = 1,
     step_px: float = 1.0,
     reinit_every: int = 10,
     max_num_iter: int = 500,
     tol_px: int = 0,
-    check_every: int = 5,
+    check_every: int = 10,
     pyramid_levels: int = 0,
     snapshot_at: Sequence[int] = (),
     progress: Progress | None = None,
@@ -338,14 +334,23 @@ def chan_vese(
     init : ndarray of shape (H, W) bool, or (N, 2) contour, or None
         Initial inside region: a mask, a closed ``(x, y)`` contour (filled), or None for a
         centred disc of a quarter of the smaller side.
-    mu : float
-        Weight of the perimeter (> 0); larger gives smoother, rounder regions.
+    mu : float or None
+        Weight of the perimeter (> 0); larger gives smoother, rounder regions.  None: 0.5 for
+        ``"threshold"``, 0.05 for ``"pde"`` (whose front moves about ``|D1 - D2| / (4 mu)``
+        pixels per sweep, so a large ``mu`` makes it crawl).
     lambda1, lambda2 : float
         Weights of the inside and outside fitting terms (> 0).
     method : {"threshold", "pde"}
         Threshold dynamics (fast) or the level-set PDE; see the module docstring.
     sigma_px : float
-        ``"threshold"``: the diffusion's standard deviation, pixels (>= 1 avoids pinning).
+        ``"threshold"``: the diffusion's standard deviation, pixels.  One step moves the front
+        by about ``sigma_px^2 / 2 * |D1 - D2| / mu``; below half a pixel it cannot move at all
+        (pinning on the pixel grid, Esedoglu and Tsai 2006), so weak contrast needs larger
+        steps: see ``sigma_start_px``.
+    sigma_start_px : float or None
+        ``"threshold"``: start with this larger diffusion and shrink it by 0.7 each time the
+        region stops changing, down to ``sigma_px`` (continuation against pinning).  None:
+        ``2 * sigma_px``.
     band_px : int or None
         Local evolution: only pixels within this distance of the current boundary may change
         in one iteration (a narrow band), so the region evolves from its initial contour, as
@@ -415,12 +420,17 @@ def chan_vese(
             )
     if not mask0.any() or mask0.all():
         raise ValueError("init must leave pixels both inside and outside the region")
-    mu = check_positive(mu, "mu")
-    lambda1 = check_positive(lambda1, "lambda1")
-    lambda2 = check_positive(lambda2, "lambda2")
     if method not in ("threshold", "pde"):
         raise ValueError(f"method must be 'threshold' or 'pde', got {method!r}")
+    mu = (0.5 if method == "threshold" else 0.05) if mu is None else check_positive(mu, "mu")
+    lambda1 = check_positive(lambda1, "lambda1")
+    lambda2 = check_positive(lambda2, "lambda2")
     sigma_px = check_positive(sigma_px, "sigma_px")
+    sigma_start_px = (
+        2.0 * sigma_px
+        if sigma_start_px is None
+        else check_positive(sigma_start_px, "sigma_start_px")
+    )
     if band_px is not None:
         band_px = check_int(band_px, "band_px", minimum=1)
     step_px = check_positive(step_px, "step_px")
@@ -464,6 +474,7 @@ def chan_vese(
                 mask,
                 mu=mu,
                 sigma_px=max(sigma_px / 2**lev, 1.0),
+                sigma_start_px=max(sigma_start_px / 2**lev, 1.0),
                 band_px=band_px,
                 max_num_iter=max_num_iter,
                 tol_px=tol_px,

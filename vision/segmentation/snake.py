@@ -217,6 +217,7 @@ def active_contour(
     edge_weight: float = 1.0,
     balloon: float = 0.0,
     stop_k: float = 0.3,
+    gvf_iterations: int = 80,
     n_points: int | None = None,
     max_num_iter: int = 1000,
     max_px_move: float = 0.05,
@@ -253,6 +254,9 @@ def active_contour(
         ``gamma``, scaled down on edges by ``1 / (1 + (g_hat / stop_k)^2)``.  0 disables it.
     stop_k : float
         Edge strength (units of the image's 99th-percentile gradient) halving the balloon.
+    gvf_iterations : int
+        ``external="gvf"``: diffusion iterations; the capture range grows with their square
+        root (about 8 px for the default 80).
     n_points : int or None
         Points of the snake; None keeps ``len(init)``.  The init is resampled by arc length.
     max_num_iter : int
@@ -341,6 +345,7 @@ def active_contour(
             mode=external,
             weight=edge_weight,
             stop_k=stop_k,
+            gvf_iterations=gvf_iterations,
         )
         done_before = len(levels) - 1 - lev
 
