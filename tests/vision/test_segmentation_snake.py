@@ -175,3 +175,15 @@ def test_warm_up_runs_every_kernel():
     from vision.segmentation import warm_up
 
     assert warm_up() > 0.0
+
+
+def test_auto_levels_and_pyramid_limits():
+    from vision.segmentation import auto_levels, gaussian_pyramid
+
+    assert auto_levels((100, 120)) == 0
+    assert auto_levels((512, 512)) == 1
+    assert auto_levels((1536, 2048)) == 3
+    levels = gaussian_pyramid(np.zeros((100, 130), np.float32), 2)
+    assert [lv.shape for lv in levels] == [(100, 130), (50, 65), (25, 33)]
+    with pytest.raises(ValueError, match="pyramid_levels=4 is too many for a 100x130 image"):
+        gaussian_pyramid(np.zeros((100, 130), np.float32), 4)

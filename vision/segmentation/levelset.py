@@ -356,7 +356,8 @@ def chan_vese(
         in one iteration (a narrow band), so the region evolves from its initial contour, as
         an active contour does, instead of jumping to the global two-phase partition of the
         image; None lets every pixel change (the global behaviour of the original methods,
-        which also nucleates interior regions).
+        which also nucleates interior regions).  ``"pde"`` widens the band by
+        ``step_px * reinit_every`` so that the front can travel between re-initialisations.
     step_px : float
         ``"pde"``: largest front movement per iteration, pixels.
     reinit_every : int
