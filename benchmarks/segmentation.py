@@ -63,7 +63,7 @@ DOCS_IMG = Path(__file__).resolve().parent.parent / "docs" / "img"
 
 SNAKE_OURS: dict[str, Any] = {"balloon": -0.6, "alpha": 0.3, "beta": 5.0, "sigma_px": 1.5}
 SNAKE_SKIMAGE: dict[str, Any] = {"sigma": 3.0, "alpha": 0.1, "beta": 1.0, "gamma": 0.01}
-LEVELSET_OURS: dict[str, Any] = {"mu": 0.8, "sigma_px": 3.0, "band_px": 1}
+LEVELSET_OURS: dict[str, Any] = {"mu": 0.8, "sigma_px": 2.5, "band_px": 1}
 LEVELSET_MCV: dict[str, Any] = {"smoothing": 3, "num_iter": 50}
 
 GRIDS: dict[str, dict[str, list[Any]]] = {
