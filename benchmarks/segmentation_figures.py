@@ -103,7 +103,7 @@ def evolution_figure(
 ) -> None:
     """The chapter's Figure 3 style: the level-set contour at iterations 0, 20, 50 and 70.
 
-    Colour Chan-Vese (its PDE solver by default: the front moves at most a pixel per
+    Chan-Vese, on colour when the image has it (its PDE solver by default: the front moves at most a pixel per
     iteration, so the evolution is gradual), started from a box just inside the crop around
     the object, with the solver's default parameters.
     """
@@ -132,7 +132,7 @@ def evolution_figure(
         ax.set_xticks([])
         ax.set_yticks([])
     fig.suptitle(
-        f"Level-set contour evolution (colour Chan-Vese, {method} solver, {case.name})", fontsize=10
+        f"Level-set contour evolution (Chan-Vese, {method} solver, {case.name})", fontsize=10
     )
     fig.tight_layout()
     _save(fig, out, docs, dpi=80)
