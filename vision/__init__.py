@@ -9,7 +9,15 @@ from vision.errors import (
     CameraError,
     ImageError,
     RecognitionFailed,
+    StreamEnded,
     VisionCellError,
 )
 
-__all__ = ["CalibrationError", "CameraError", "ImageError", "RecognitionFailed", "VisionCellError"]
+__all__ = [
+    "CalibrationError",
+    "CameraError",
+    "ImageError",
+    "RecognitionFailed",
+    "StreamEnded",
+    "VisionCellError",
+]

@@ -34,6 +34,13 @@ class CameraError(VisionCellError):
     http_status = 503
 
 
+class StreamEnded(CameraError):
+    """A finite source (a video file, a folder replayed without looping) has no more frames."""
+
+    code = "stream_ended"
+    http_status = 409
+
+
 class CalibrationError(VisionCellError):
     """A calibration cannot be solved (too few views, no pattern, degenerate motion)."""
 

@@ -18,7 +18,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from vision.errors import CameraError
+from vision.errors import CameraError, StreamEnded
 
 __all__ = ["IMAGE_SUFFIXES", "Camera", "Frame", "ImageFolderCamera", "read_rgb"]
 
@@ -95,7 +95,8 @@ class ImageFolderCamera:
     folder : path
         Directory holding images with one of :data:`IMAGE_SUFFIXES`.
     loop : bool
-        Start again after the last image (else raise :class:`CameraError`).
+        Start again after the last image (else ``grab()`` raises
+        :class:`~vision.errors.StreamEnded`, a ``CameraError``).
     fps : float or None
         Pace ``grab()`` to this rate; None returns frames as fast as they are read.
     pattern : str
@@ -149,7 +150,7 @@ class ImageFolderCamera:
             raise CameraError("image folder camera is not open")
         if self._next >= len(self._files):
             if not self.loop:
-                raise CameraError(f"image folder {str(self.folder)!r} is exhausted")
+                raise StreamEnded(f"image folder {str(self.folder)!r} is exhausted")
             self._next = 0
         if self.fps is not None:
             wait = self._last_grab + 1.0 / self.fps - time.monotonic()
