@@ -1,0 +1,770 @@
+"""A controller emulator: the device side of the serial protocol on a pseudo-terminal.
+
+:class:`Emulator` plays the arm controller of ``docs/serial-protocol.md`` on a pseudo-terminal
+(:class:`~robot.drivers.serial.ptyport.PtyPort`) and carries out motion with any
+:class:`~robot.drivers.base.RobotDriver` (the MuJoCo simulator where it exists, else the
+ideal driver).  So the whole serial stack, from ``SerialDriver`` down to the bytes, runs in
+tests and demos without hardware.  Fault injection
+(:class:`~robot.drivers.serial.faults.FaultConfig`) drops, corrupts, truncates, delays and
+garbles lines, and makes the port vanish and come back at the same path.
+
+The controller's rules (section 5 of the protocol document):
+
+* a session starts with ``HELLO <session>``; the same session id resumes it (duplicate cache
+  and move table kept), a new id starts afresh (sequence numbers up to the HELLO's are stale);
+* each command's reply is cached under its sequence number (the last ``cache_depth``
+  numbers); a repeated number is answered from the cache and NOT executed again;
+* each move id runs at most once per session, whatever sequence numbers ask for it;
+* the emergency stop is acted on in the receive path, ahead of queued commands, which are
+  answered ``NAK ESTOP`` and not executed;
+* if the host falls silent for ``watchdog_s`` during a move, the arm is stopped (``WATCHDOG``)
+  and the state stream pauses until the host speaks again.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import random
+import secrets
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robot.drivers.base import RobotDriver
+from robot.drivers.serial.faults import FaultConfig, FaultStats, FaultyChannel
+from robot.drivers.serial.frames import (
+    PROTOCOL_VERSION,
+    Ack,
+    ArmSnapshot,
+    Command,
+    DoneEvent,
+    EStop,
+    Frame,
+    FrameParser,
+    GetLimits,
+    GetState,
+    Hello,
+    HelloInfo,
+    LimitsInfo,
+    MoveJoints,
+    MoveOutcome,
+    Nak,
+    Ping,
+    QueryMove,
+    Reset,
+    Run,
+    SetRate,
+    StateEvent,
+    Stop,
+    TrajBegin,
+    TrajPoint,
+    encode,
+)
+from robot.drivers.serial.ptyport import PtyPort
+from robot.model import ASEA, ArmModel
+from robot.trajectory import JointTrajectory, plan_joint_move
+
+__all__ = ["Emulator", "EmulatorStats", "ExecutionRecord", "FaultConfig", "run_emulator"]
+
+log = logging.getLogger(__name__)
+
+_WIRE_TOL_RAD = 1e-6  # values travel with six decimals: allow the rounding, then clip
+_MAX_RATE_HZ = 250.0
+_MAX_MOVES = 256
+
+
+@dataclass(frozen=True)
+class ExecutionRecord:
+    """One motion actually handed to the backing driver.
+
+    Attributes
+    ----------
+    session : str
+        Host session id the move belongs to.
+    mid : int
+        Move id chosen by the host.
+    kind : str
+        ``"TRAJ"`` (streamed trajectory) or ``"MOVE"`` (controller-planned joint move).
+    n_points : int
+        Points of the executed trajectory.
+    started_s : float
+        ``time.monotonic()`` when execution began.
+    """
+
+    session: str
+    mid: int
+    kind: str
+    n_points: int
+    started_s: float
+
+
+@dataclass
+class EmulatorStats:
+    """Counters of one emulator (mutable)."""
+
+    rx_frames: int = 0
+    rx_rejected: int = 0
+    duplicates: int = 0
+    stale: int = 0
+    executed: int = 0
+    events: int = 0
+    sessions: int = 0
+    watchdog_trips: int = 0
+    faults: FaultStats = field(default_factory=FaultStats)
+
+
+@dataclass(eq=False)
+class _Move:
+    mid: int
+    n_points: int
+    status: str = "LOADING"
+    t: np.ndarray | None = None
+    q: np.ndarray | None = None
+    qd: np.ndarray | None = None
+    have: np.ndarray | None = None
+    goal: tuple[float, ...] = ()
+    started: float = 0.0
+    outcome: MoveOutcome | None = None
+    task: asyncio.Task[None] | None = None
+    watchdog: bool = False
+
+
+class Emulator:
+    """The controller side of the serial protocol, on a pseudo-terminal, backed by ``driver``.
+
+    Parameters
+    ----------
+    driver : RobotDriver
+        Executes the motion; it must be connected before :meth:`start` (``run_emulator``
+        does it).  The emulator never closes it.
+    fault : FaultConfig
+        Faults to inject; can be replaced at any time through :attr:`fault`.
+    link : str or path, optional
+        Stable path where the pseudo-terminal's slave is published as a symlink (default: a
+        fresh temporary directory).  Give this path to ``SerialDriver``.
+    rate_hz : float
+        Initial state-event rate (the host may change it with ``RATE``).
+    baud : int, optional
+        Model a real line by pacing bytes at this speed in both directions (a pseudo-terminal
+        ignores baud rates); ``None`` (default) runs at memory speed.
+    model : ArmModel
+        Joint ranges the controller enforces and reports with ``LIMITS``.
+    cache_depth : int
+        Replies remembered per session for duplicate detection.
+    window : int
+        Commands the host may have unanswered at once (announced in ``HELLO``).
+    max_points : int
+        Largest trajectory accepted, in points.
+    watchdog_s : float
+        Host silence after which a running move is stopped (0 disables).
+    start_tolerance_rad : float
+        Largest distance between a trajectory's first point and the arm's position.
+    name : str
+        Controller name reported in ``HELLO``.
+    seed : int, optional
+        Seed of the fault injection's random numbers.
+    """
+
+    def __init__(
+        self,
+        driver: RobotDriver,
+        *,
+        fault: FaultConfig | None = None,
+        link: str | None = None,
+        rate_hz: float = 50.0,
+        baud: int | None = None,
+        model: ArmModel = ASEA,
+        cache_depth: int = 64,
+        window: int = 8,
+        max_points: int = 10_000,
+        watchdog_s: float = 1.0,
+        start_tolerance_rad: float = 1e-3,
+        name: str = "visioncell-emulator",
+        seed: int | None = None,
+    ) -> None:
+        if not 0 <= rate_hz <= _MAX_RATE_HZ:
+            raise ValueError(f"rate_hz must be in [0, {_MAX_RATE_HZ}], got {rate_hz!r}")
+        if cache_depth < window + 1:
+            raise ValueError(f"cache_depth must exceed window ({window}), got {cache_depth!r}")
+        if window < 1 or max_points < 1 or watchdog_s < 0:
+            raise ValueError(
+                f"window, max_points must be >= 1 and watchdog_s >= 0, got "
+                f"{window!r}, {max_points!r}, {watchdog_s!r}"
+            )
+        self.driver = driver
+        self.fault = fault or FaultConfig()
+        self.rate_hz = float(rate_hz)
+        self.model = model
+        self.cache_depth = int(cache_depth)
+        self.window = int(window)
+        self.max_points = int(max_points)
+        self.watchdog_s = float(watchdog_s)
+        self.start_tolerance_rad = float(start_tolerance_rad)
+        self.name = name
+        self.boot_id = secrets.token_hex(4).upper()
+        self.stats = EmulatorStats()
+        self.executions: list[ExecutionRecord] = []
+        self.received: deque[Command] = deque(maxlen=4096)
+        self.replies: deque[Ack | Nak] = deque(maxlen=4096)
+        self._rng = random.Random(seed)
+        self._port = PtyPort(self._on_rx_bytes, link=link)
+        self._rx_wire = FaultyChannel(
+            self._on_rx_wire, direction="rx", config=lambda: self.fault, rng=self._rng,
+            stats=self.stats.faults, baud=baud,
+        )  # fmt: skip
+        self._tx_wire = FaultyChannel(
+            self._port.write, direction="tx", config=lambda: self.fault, rng=self._rng,
+            stats=self.stats.faults, baud=baud,
+        )  # fmt: skip
+        self._rx_partial = bytearray()
+        self._parser = FrameParser(on_reject=self._on_reject)
+        self._t0 = time.monotonic()
+        self._session: str | None = None
+        self._floor = 0
+        self._max_seq = 0
+        self._cache: dict[int, bytes | None] = {}
+        self._moves: dict[int, _Move] = {}
+        self._last_mid = 0
+        self._active: _Move | None = None
+        self._estopped = False
+        self._eseq = 0
+        self._last_rx = 0.0
+        self._queue: asyncio.Queue[Command] = asyncio.Queue()
+        self._tasks: list[asyncio.Task[None]] = []
+        self._aux: set[asyncio.Task[None]] = set()
+        self._vanish_task: asyncio.Task[None] | None = None
+
+    # -- lifecycle ----------------------------------------------------------------------------
+    @property
+    def path(self) -> str:
+        """The stable device path to give the host (a symlink to the current slave)."""
+        return self._port.path
+
+    async def start(self) -> str:
+        """Create the pseudo-terminal, start serving; returns :attr:`path`."""
+        self._port.reopen()
+        if not self._tasks:
+            for coro, name in (
+                (self._worker(), "emulator-worker"),
+                (self._stream(), "emulator-stream"),
+                (self._watchdog(), "emulator-watchdog"),
+            ):
+                self._tasks.append(asyncio.create_task(coro, name=name))
+        return self.path
+
+    async def close(self) -> None:
+        """Stop serving and remove the port (the backing driver stays as it is)."""
+        tasks = [*self._tasks, *self._aux, *([self._vanish_task] if self._vanish_task else [])]
+        for t in tasks:
+            t.cancel()
+        for t in tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await t
+        self._tasks.clear()
+        if self._active is not None and self._active.task is not None:
+            self._active.task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await self._active.task
+        await self._rx_wire.close()
+        await self._tx_wire.close()
+        self._port.close()
+
+    async def __aenter__(self) -> Emulator:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    async def vanish(self, seconds: float) -> None:
+        """Make the port disappear for ``seconds``, then re-create it at the same path."""
+        if not seconds >= 0:
+            raise ValueError(f"seconds must be >= 0, got {seconds!r}")
+        self._port.vanish()
+        self._rx_wire.clear()
+        self._tx_wire.clear()
+        self._rx_partial.clear()
+        self._parser.clear()
+        await asyncio.sleep(seconds)
+        self._port.reopen()
+
+    @property
+    def port_open(self) -> bool:
+        """False while the port has vanished."""
+        return self._port.is_open
+
+    def executed_mids(self, session: str | None = None) -> list[int]:
+        """Move ids handed to the backing driver, in order (of ``session`` if given)."""
+        return [e.mid for e in self.executions if session is None or e.session == session]
+
+    # -- receive path -------------------------------------------------------------------------
+    def _on_rx_bytes(self, data: bytes) -> None:
+        self._rx_partial += data
+        while True:
+            i = self._rx_partial.find(b"\n")
+            if i < 0:
+                break
+            line = bytes(self._rx_partial[: i + 1])
+            del self._rx_partial[: i + 1]
+            self._rx_wire.push(line, carries_command=True)
+            cfg = self.fault
+            if cfg.vanish_p and self._vanish_task is None and self._rng.random() < cfg.vanish_p:
+                self.stats.faults.vanish += 1
+                self.stats.faults.on_commands += 1
+                self._vanish_task = asyncio.create_task(self._vanish_once(cfg.vanish_s))
+                return
+        if len(self._rx_partial) > 4096:  # no LF for ages: hand it on, the parser drops it
+            self._rx_wire.push(bytes(self._rx_partial), carries_command=False)
+            self._rx_partial.clear()
+
+    async def _vanish_once(self, seconds: float) -> None:
+        try:
+            await self.vanish(seconds)
+        finally:
+            self._vanish_task = None
+
+    def _on_rx_wire(self, data: bytes) -> None:
+        for frame in self._parser.feed(data):
+            self._on_frame(frame)
+
+    def _on_reject(self, exc: Exception) -> None:
+        self.stats.rx_rejected += 1
+        seq = getattr(exc, "seq", None)
+        if seq is not None and not self.fault.silent:
+            self._send(Nak(seq, "SYNTAX", str(exc)))
+
+    def _on_frame(self, frame: Frame) -> None:
+        if self.fault.silent or not isinstance(frame, Command):
+            return
+        self.stats.rx_frames += 1
+        self.received.append(frame)
+        self._last_rx = time.monotonic()
+        if isinstance(frame, Hello):
+            self._send(self._hello(frame))
+            return
+        if self._session is None:
+            if isinstance(frame, EStop):  # an emergency stop is obeyed in every state
+                self._emergency_stop(frame)
+            else:
+                self._send(Nak(frame.seq, "NOSESSION", "send HELLO first"))
+            return
+        seq = frame.seq
+        if seq in self._cache:
+            self.stats.duplicates += 1
+            cached = self._cache[seq]
+            if cached is not None:
+                self._tx_wire.push(cached, carries_command=True)
+            return  # still being executed: its one reply will follow
+        if seq <= max(self._floor, self._max_seq - self.cache_depth):
+            self.stats.stale += 1
+            self._send(Nak(seq, "STALE", f"seq {seq} is outside the duplicate window"))
+            return
+        self._cache[seq] = None
+        self._max_seq = max(self._max_seq, seq)
+        if len(self._cache) > self.cache_depth:
+            low = max(self._floor, self._max_seq - self.cache_depth)
+            for k in [k for k in self._cache if k <= low]:
+                del self._cache[k]
+        if isinstance(frame, EStop):
+            self._emergency_stop(frame)
+        elif self._queue.qsize() >= self.window + 1:
+            self._finish(seq, Nak(seq, "FULL", f"more than {self.window} commands unanswered"))
+        else:
+            self._queue.put_nowait(frame)
+
+    def _hello(self, cmd: Hello) -> Ack | Nak:
+        if cmd.version != PROTOCOL_VERSION:
+            return Nak(cmd.seq, "VERSION", f"speak version {PROTOCOL_VERSION}")
+        resumed = cmd.session == self._session
+        if not resumed:
+            self._session = cmd.session
+            self.stats.sessions += 1
+            self._cache.clear()
+            self._moves.clear()
+            self._last_mid = 0
+            self._floor = self._max_seq = cmd.seq
+        else:
+            self._max_seq = max(self._max_seq, cmd.seq)
+        info = HelloInfo(
+            PROTOCOL_VERSION, self.boot_id, resumed, self.cache_depth, self.window,
+            self.max_points, self.rate_hz, self.name,
+        )  # fmt: skip
+        return Ack(cmd.seq, "HELLO", tuple(info.to_args()))
+
+    def _emergency_stop(self, cmd: EStop) -> None:
+        self._estopped = True
+        flushed: list[Command] = []
+        while not self._queue.empty():
+            flushed.append(self._queue.get_nowait())
+        for m in self._moves.values():
+            if m.status == "LOADING":
+                self._set_outcome(m, "DISCARDED", "emergency stop")
+
+        async def act() -> None:
+            await self.driver.estop()
+            self._finish(cmd.seq, Ack(cmd.seq, "ESTOP"))
+            for c in flushed:
+                self._finish(c.seq, Nak(c.seq, "ESTOP", "flushed by an emergency stop"))
+
+        task = asyncio.create_task(act(), name="emulator-estop")
+        self._aux.add(task)
+        task.add_done_callback(self._aux.discard)
+
+    def _finish(self, seq: int, reply: Ack | Nak) -> None:
+        wire = encode(reply)
+        if seq in self._cache:
+            self._cache[seq] = wire
+        self.replies.append(reply)
+        self._tx_wire.push(wire, carries_command=True)
+
+    def _send(self, frame: Frame) -> None:
+        if isinstance(frame, Ack | Nak):
+            self.replies.append(frame)
+        self._tx_wire.push(encode(frame), carries_command=not isinstance(frame, StateEvent))
+
+    # -- command execution --------------------------------------------------------------------
+    async def _worker(self) -> None:
+        while True:
+            cmd = await self._queue.get()
+            if self.fault.process_delay_s:
+                await asyncio.sleep(self.fault.process_delay_s)
+            try:
+                reply = await self._execute(cmd)
+            except Exception as exc:  # the backing driver failed: report, keep serving
+                log.exception("emulator: %s failed", cmd.VERB)
+                reply = Nak(cmd.seq, "FAULT", f"{type(exc).__name__}: {exc}")
+            self.stats.executed += 1
+            self._finish(cmd.seq, reply)
+
+    async def _execute(self, cmd: Command) -> Ack | Nak:
+        seq = cmd.seq
+        if isinstance(cmd, Ping):
+            return Ack(seq, "PING", (str(self._ms()),))
+        if isinstance(cmd, GetState):
+            return Ack(seq, "STATE", tuple(self._snapshot().to_args()))
+        if isinstance(cmd, GetLimits):
+            m = self.model
+            info = LimitsInfo(tuple(m.lower), tuple(m.upper), tuple(m.max_velocity_rad_s))
+            return Ack(seq, "LIMITS", tuple(info.to_args()))
+        if isinstance(cmd, SetRate):
+            if not 0 <= cmd.rate_hz <= _MAX_RATE_HZ:
+                return Nak(seq, "SYNTAX", f"rate must be in [0, {_MAX_RATE_HZ:g}] Hz")
+            self.rate_hz = cmd.rate_hz
+            return Ack(seq, "RATE", (SetRate(0, self.rate_hz).args()[0],))
+        if isinstance(cmd, Stop):
+            await self.driver.stop()
+            return Ack(seq, "STOP")
+        if isinstance(cmd, Reset):
+            await self.driver.reset()
+            self._estopped = False
+            return Ack(seq, "RESET")
+        if isinstance(cmd, QueryMove):
+            m = self._moves.get(cmd.mid)
+            if m is None:
+                return Nak(seq, "UNKNOWN_MOVE", f"no move {cmd.mid} in this session")
+            return Ack(seq, "QMV", tuple(self._outcome(m).to_args()))
+        if isinstance(cmd, TrajBegin):
+            return self._traj_begin(cmd)
+        if isinstance(cmd, TrajPoint):
+            return self._traj_point(cmd)
+        if isinstance(cmd, Run):
+            return self._run(cmd)
+        if isinstance(cmd, MoveJoints):
+            return self._move_joints(cmd)
+        return Nak(seq, "SYNTAX", f"{cmd.VERB} not handled here")
+
+    def _refuse_motion(self, seq: int) -> Nak | None:
+        st = self.driver.state
+        if self._estopped or st.estopped:
+            return Nak(seq, "ESTOP", "emergency stop active: RESET first")
+        if self._active is not None:
+            return Nak(seq, "BUSY", f"move {self._active.mid} is executing")
+        if st.fault or not st.connected:
+            return Nak(seq, "FAULT", st.fault or "arm not connected")
+        return None
+
+    def _gate(self, seq: int, q: np.ndarray, what: str) -> tuple[np.ndarray, Nak | None]:
+        lo, hi = self.model.lower, self.model.upper
+        bad = np.argwhere((q < lo - _WIRE_TOL_RAD) | (q > hi + _WIRE_TOL_RAD))
+        if bad.size:
+            idx = tuple(int(v) for v in bad[0])
+            j = idx[-1]
+            return q, Nak(
+                seq,
+                "LIMIT",
+                f"{what} q{j + 1}={float(q[idx]):.6f} outside [{lo[j]:.6f}, {hi[j]:.6f}]",
+            )
+        return np.clip(q, lo, hi), None
+
+    def _traj_begin(self, cmd: TrajBegin) -> Ack | Nak:
+        m = self._moves.get(cmd.mid)
+        if m is not None:
+            if m.status == "LOADING" and m.n_points == cmd.n_points:
+                return Ack(cmd.seq, "TBEGIN", (str(cmd.mid), str(cmd.n_points)))
+            return Nak(cmd.seq, "USED", f"move id {cmd.mid} is {m.status}")
+        if not 1 <= cmd.n_points <= self.max_points:
+            return Nak(cmd.seq, "TRAJ", f"n_points must be in [1, {self.max_points}]")
+        if self._estopped:
+            return Nak(cmd.seq, "ESTOP", "emergency stop active: RESET first")
+        for other in self._moves.values():
+            if other.status == "LOADING":
+                self._set_outcome(other, "DISCARDED", f"replaced by move {cmd.mid}")
+        n = cmd.n_points
+        m = _Move(cmd.mid, n, t=np.zeros(n), q=np.zeros((n, 5)), qd=np.zeros((n, 5)))
+        m.have = np.zeros(n, dtype=bool)
+        self._remember(m)
+        return Ack(cmd.seq, "TBEGIN", (str(cmd.mid), str(n)))
+
+    def _traj_point(self, cmd: TrajPoint) -> Ack | Nak:
+        m = self._moves.get(cmd.mid)
+        if m is None:
+            return Nak(cmd.seq, "UNKNOWN_MOVE", f"no move {cmd.mid}: TBEGIN first")
+        if m.status != "LOADING":
+            return Nak(cmd.seq, "USED", f"move {cmd.mid} is {m.status}")
+        if cmd.index >= m.n_points:
+            return Nak(cmd.seq, "TRAJ", f"index {cmd.index} >= n_points {m.n_points}")
+        q, nak = self._gate(cmd.seq, np.asarray(cmd.q), f"point {cmd.index}")
+        if nak is not None:
+            return nak
+        assert m.t is not None and m.q is not None and m.qd is not None and m.have is not None
+        m.t[cmd.index], m.q[cmd.index], m.qd[cmd.index] = cmd.t_s, q, cmd.qd
+        m.have[cmd.index] = True
+        return Ack(cmd.seq, "TP", (str(cmd.mid), str(cmd.index), str(int(m.have.sum()))))
+
+    def _run(self, cmd: Run) -> Ack | Nak:
+        m = self._moves.get(cmd.mid)
+        if m is None:
+            return Nak(cmd.seq, "UNKNOWN_MOVE", f"no move {cmd.mid} in this session")
+        if m.status != "LOADING":  # already started once: report, never run twice
+            return Ack(cmd.seq, "RUN", tuple(self._outcome(m).to_args()))
+        assert m.have is not None
+        if not m.have.all():
+            missing = int((~m.have).sum())
+            return Nak(cmd.seq, "INCOMPLETE", f"{missing} of {m.n_points} points missing")
+        refused = self._refuse_motion(cmd.seq)
+        if refused is not None:
+            return refused
+        try:
+            if abs(float(m.t[0])) > 1e-9:  # type: ignore[index]
+                raise ValueError("the first point must be at t = 0")
+            traj = JointTrajectory(m.t, m.q, m.qd)  # type: ignore[arg-type]
+        except ValueError as exc:
+            return Nak(cmd.seq, "TRAJ", str(exc))
+        nak = self._check_start(cmd.seq, traj)
+        if nak is not None:
+            return nak
+        self._start(m, traj, "TRAJ")
+        return Ack(cmd.seq, "RUN", tuple(self._outcome(m).to_args()))
+
+    def _move_joints(self, cmd: MoveJoints) -> Ack | Nak:
+        m = self._moves.get(cmd.mid)
+        if m is not None:  # this move id was seen: report it, never run twice
+            return Ack(cmd.seq, "MOVE", tuple(self._outcome(m).to_args()))
+        refused = self._refuse_motion(cmd.seq)
+        if refused is not None:
+            return refused
+        goal, nak = self._gate(cmd.seq, np.asarray(cmd.q), "target")
+        if nak is not None:
+            return nak
+        q0 = np.asarray(self.driver.state.q, dtype=np.float64)
+        try:
+            if cmd.speed is not None:
+                traj = plan_joint_move(q0, goal, speed=cmd.speed, model=self.model)
+            else:
+                traj = plan_joint_move(q0, goal, model=self.model)
+                assert cmd.duration_s is not None
+                if cmd.duration_s < traj.duration_s - 1e-9:
+                    raise ValueError(
+                        f"duration {cmd.duration_s:g} s is shorter than the fastest "
+                        f"synchronised move, {traj.duration_s:.4f} s"
+                    )
+                if traj.t_s.size > 1:  # stretch in time: speeds / k, accelerations / k^2
+                    k = cmd.duration_s / traj.duration_s
+                    traj = JointTrajectory(traj.t_s * k, traj.q, traj.qd / k)
+        except ValueError as exc:
+            return Nak(cmd.seq, "TRAJ", str(exc))
+        m = _Move(cmd.mid, int(traj.t_s.size))
+        self._remember(m)
+        self._start(m, traj, "MOVE")
+        return Ack(cmd.seq, "MOVE", tuple(self._outcome(m).to_args()))
+
+    def _check_start(self, seq: int, traj: JointTrajectory) -> Nak | None:
+        gap = float(np.abs(traj.start - np.asarray(self.driver.state.q)).max())
+        if gap > self.start_tolerance_rad:
+            return Nak(
+                seq, "START", f"first point is {gap:.4g} rad from the arm "
+                f"(tolerance {self.start_tolerance_rad:g} rad)",
+            )  # fmt: skip
+        return None
+
+    def _start(self, m: _Move, traj: JointTrajectory, kind: str) -> None:
+        assert self._session is not None
+        m.status = "RUNNING"
+        m.goal = tuple(float(v) for v in traj.goal)
+        m.started = time.monotonic()
+        self._active = m
+        self.executions.append(
+            ExecutionRecord(self._session, m.mid, kind, int(traj.t_s.size), m.started)
+        )
+        m.task = asyncio.create_task(self._execute_motion(m, traj, self._session))
+
+    async def _execute_motion(self, m: _Move, traj: JointTrajectory, session: str) -> None:
+        try:
+            report = await self.driver.move(traj)
+        except asyncio.CancelledError:
+            self._set_outcome(m, "STOPPED", "controller shut down")
+            raise
+        except Exception as exc:
+            self._set_outcome(m, "FAULT", f"{type(exc).__name__}: {exc}")
+        else:
+            status = {"done": "DONE", "stopped": "STOPPED", "estop": "ESTOP"}.get(
+                report.reason, "FAULT"
+            )
+            reason = report.reason
+            if m.watchdog and status == "STOPPED":
+                status, reason = "WATCHDOG", f"host silent for {self.watchdog_s:g} s"
+            self._set_outcome(m, status, reason, duration_s=report.duration_s, q=report.final_q)
+        finally:
+            if self._active is m:
+                self._active = None
+        if session == self._session and m.outcome is not None:
+            self._eseq += 1
+            self.stats.events += 1
+            self._send(DoneEvent(self._eseq, m.outcome))
+
+    def _set_outcome(
+        self,
+        m: _Move,
+        status: str,
+        reason: str,
+        *,
+        duration_s: float | None = None,
+        q: tuple[float, ...] | None = None,
+    ) -> None:
+        q = q if q is not None else tuple(self.driver.state.q)
+        err = float(np.abs(np.subtract(q, m.goal)).max()) if m.goal else 0.0
+        dur = (
+            duration_s
+            if duration_s is not None
+            else (time.monotonic() - m.started if m.started else 0.0)
+        )
+        m.status = status
+        m.outcome = MoveOutcome(m.mid, status, dur, tuple(q), err, reason)
+
+    def _outcome(self, m: _Move) -> MoveOutcome:
+        if m.outcome is not None:
+            return m.outcome
+        q = tuple(self.driver.state.q)
+        err = float(np.abs(np.subtract(q, m.goal)).max()) if m.goal else 0.0
+        dur = time.monotonic() - m.started if m.started else 0.0
+        return MoveOutcome(m.mid, m.status, dur, q, err, "")
+
+    def _remember(self, m: _Move) -> None:
+        self._moves[m.mid] = m
+        self._last_mid = m.mid
+        if len(self._moves) > _MAX_MOVES:
+            for mid in [
+                k for k, v in self._moves.items() if v.status not in ("LOADING", "RUNNING")
+            ]:
+                del self._moves[mid]
+                if len(self._moves) <= _MAX_MOVES // 2:
+                    break
+
+    # -- state stream and watchdog ------------------------------------------------------------
+    def _ms(self) -> int:
+        return int((time.monotonic() - self._t0) * 1000)
+
+    def _snapshot(self) -> ArmSnapshot:
+        st = self.driver.state
+        m = self._moves.get(self._last_mid)
+        return ArmSnapshot(
+            stamp_ms=self._ms(),
+            q=tuple(st.q),
+            qd=tuple(st.qd),
+            moving=st.moving or self._active is not None,
+            estopped=self._estopped or st.estopped,
+            mid=self._last_mid if m is not None else 0,
+            move_status=m.status if m is not None else "NONE",
+            fault=st.fault,
+        )
+
+    def _host_alive(self) -> bool:
+        return self.watchdog_s == 0 or time.monotonic() - self._last_rx < self.watchdog_s
+
+    async def _stream(self) -> None:
+        loop = asyncio.get_running_loop()
+        next_t = loop.time()
+        while True:
+            period = 1.0 / self.rate_hz if self.rate_hz > 0 else 0.05
+            next_t += period
+            now = loop.time()
+            if next_t < now - period:  # fell behind (a busy loop): do not burst to catch up
+                next_t = now
+            await asyncio.sleep(max(0.0, next_t - now))
+            if self.rate_hz > 0 and self._session is not None and self._host_alive():
+                self._eseq += 1
+                self.stats.events += 1
+                self._send(StateEvent(self._eseq, self._snapshot()))
+
+    async def _watchdog(self) -> None:
+        while True:
+            await asyncio.sleep(0.02)
+            m = self._active
+            if self.watchdog_s and m is not None and not m.watchdog and not self._host_alive():
+                m.watchdog = True
+                self.stats.watchdog_trips += 1
+                log.warning(
+                    "emulator: host silent for %.2f s, stopping move %d", self.watchdog_s, m.mid
+                )
+                await self.driver.stop()
+
+
+async def run_emulator(
+    driver: RobotDriver,
+    *,
+    link: str | None = None,
+    rate_hz: float = 50.0,
+    baud: int | None = None,
+    fault: FaultConfig | None = None,
+    seed: int | None = None,
+    announce: Callable[[str], None] = print,
+    stop: asyncio.Event | None = None,
+) -> Emulator:
+    """Serve the controller protocol for ``driver`` until ``stop`` is set (or cancelled).
+
+    Connects ``driver``, starts an :class:`Emulator`, calls ``announce`` with the device path
+    (the line ``visioncell emulator`` prints), waits, then closes the emulator and the
+    driver.  This is the entry point behind ``visioncell emulator``.
+
+    Parameters
+    ----------
+    driver : RobotDriver
+        Backing arm (``IdealDriver()`` or the simulator's driver).
+    link : str, optional
+        Stable path for the port, e.g. ``var/robot-tty`` (default: a temporary directory).
+    rate_hz, baud, fault, seed
+        As for :class:`Emulator`.
+    announce : callable
+        Receives the device path once the port exists (default: ``print``).
+    stop : asyncio.Event, optional
+        Set it to shut down; without one, runs until the task is cancelled.
+
+    Returns
+    -------
+    Emulator
+        The closed emulator (its ``stats`` and ``executions`` stay readable).
+    """
+    await driver.connect()
+    emu = Emulator(driver, fault=fault, link=link, rate_hz=rate_hz, baud=baud, seed=seed)
+    try:
+        announce(await emu.start())
+        await (stop.wait() if stop is not None else asyncio.Event().wait())
+    finally:
+        await emu.close()
+        await driver.close()
+    return emu
