@@ -14,7 +14,8 @@ The controller's rules (section 5 of the protocol document):
   and move table kept), a new id starts afresh (sequence numbers up to the HELLO's are stale);
 * each command's reply is cached under its sequence number (the last ``cache_depth``
   numbers); a repeated number is answered from the cache and NOT executed again;
-* each move id runs at most once per session, whatever sequence numbers ask for it;
+* each move id runs at most once per session, whatever sequence numbers ask for it (the move
+  table, :class:`~robot.drivers.serial.movetable.MoveTable`);
 * the emergency stop is acted on in the receive path, ahead of queued commands, which are
   answered ``NAK ESTOP`` and not executed;
 * if the host falls silent for ``watchdog_s`` during a move, the arm is stopped (``WATCHDOG``)
@@ -32,8 +33,6 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-
-import numpy as np
 
 from robot.drivers.base import RobotDriver
 from robot.drivers.serial.faults import FaultConfig, FaultStats, FaultyChannel
@@ -65,42 +64,15 @@ from robot.drivers.serial.frames import (
     TrajPoint,
     encode,
 )
+from robot.drivers.serial.movetable import ExecutionRecord, MoveTable
 from robot.drivers.serial.ptyport import PtyPort
 from robot.model import ASEA, ArmModel
-from robot.trajectory import JointTrajectory, plan_joint_move
 
 __all__ = ["Emulator", "EmulatorStats", "ExecutionRecord", "FaultConfig", "run_emulator"]
 
 log = logging.getLogger(__name__)
 
-_WIRE_TOL_RAD = 1e-6  # values travel with six decimals: allow the rounding, then clip
 _MAX_RATE_HZ = 250.0
-_MAX_MOVES = 256
-
-
-@dataclass(frozen=True)
-class ExecutionRecord:
-    """One motion actually handed to the backing driver.
-
-    Attributes
-    ----------
-    session : str
-        Host session id the move belongs to.
-    mid : int
-        Move id chosen by the host.
-    kind : str
-        ``"TRAJ"`` (streamed trajectory) or ``"MOVE"`` (controller-planned joint move).
-    n_points : int
-        Points of the executed trajectory.
-    started_s : float
-        ``time.monotonic()`` when execution began.
-    """
-
-    session: str
-    mid: int
-    kind: str
-    n_points: int
-    started_s: float
 
 
 @dataclass
@@ -116,22 +88,6 @@ class EmulatorStats:
     sessions: int = 0
     watchdog_trips: int = 0
     faults: FaultStats = field(default_factory=FaultStats)
-
-
-@dataclass(eq=False)
-class _Move:
-    mid: int
-    n_points: int
-    status: str = "LOADING"
-    t: np.ndarray | None = None
-    q: np.ndarray | None = None
-    qd: np.ndarray | None = None
-    have: np.ndarray | None = None
-    goal: tuple[float, ...] = ()
-    started: float = 0.0
-    outcome: MoveOutcome | None = None
-    task: asyncio.Task[None] | None = None
-    watchdog: bool = False
 
 
 class Emulator:
@@ -204,11 +160,9 @@ class Emulator:
         self.window = int(window)
         self.max_points = int(max_points)
         self.watchdog_s = float(watchdog_s)
-        self.start_tolerance_rad = float(start_tolerance_rad)
         self.name = name
         self.boot_id = secrets.token_hex(4).upper()
         self.stats = EmulatorStats()
-        self.executions: list[ExecutionRecord] = []
         self.received: deque[Command] = deque(maxlen=4096)
         self.replies: deque[Ack | Nak] = deque(maxlen=4096)
         self._rng = random.Random(seed)
@@ -228,10 +182,18 @@ class Emulator:
         self._floor = 0
         self._max_seq = 0
         self._cache: dict[int, bytes | None] = {}
-        self._moves: dict[int, _Move] = {}
-        self._last_mid = 0
-        self._active: _Move | None = None
         self._estopped = False
+        self.moves = MoveTable(
+            driver,
+            model=model,
+            max_points=self.max_points,
+            start_tolerance_rad=float(start_tolerance_rad),
+            estopped=lambda: self._estopped,
+            on_done=self._on_move_done,
+            watchdog_s=self.watchdog_s,
+        )
+        self.executions = self.moves.executions
+        """Every motion handed to the backing driver, in order (:class:`ExecutionRecord`)."""
         self._eseq = 0
         self._last_rx = 0.0
         self._queue: asyncio.Queue[Command] = asyncio.Queue()
@@ -266,10 +228,7 @@ class Emulator:
             with contextlib.suppress(asyncio.CancelledError):
                 await t
         self._tasks.clear()
-        if self._active is not None and self._active.task is not None:
-            self._active.task.cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await self._active.task
+        await self.moves.close()
         await self._rx_wire.close()
         await self._tx_wire.close()
         self._port.close()
@@ -385,8 +344,7 @@ class Emulator:
             self._session = cmd.session
             self.stats.sessions += 1
             self._cache.clear()
-            self._moves.clear()
-            self._last_mid = 0
+            self.moves.new_session(cmd.session)
             self._floor = self._max_seq = cmd.seq
         else:
             self._max_seq = max(self._max_seq, cmd.seq)
@@ -401,9 +359,7 @@ class Emulator:
         flushed: list[Command] = []
         while not self._queue.empty():
             flushed.append(self._queue.get_nowait())
-        for m in self._moves.values():
-            if m.status == "LOADING":
-                self._set_outcome(m, "DISCARDED", "emergency stop")
+        self.moves.discard_loading("emergency stop")
 
         async def act() -> None:
             await self.driver.estop()
@@ -463,217 +419,15 @@ class Emulator:
             await self.driver.reset()
             self._estopped = False
             return Ack(seq, "RESET")
-        if isinstance(cmd, QueryMove):
-            m = self._moves.get(cmd.mid)
-            if m is None:
-                return Nak(seq, "UNKNOWN_MOVE", f"no move {cmd.mid} in this session")
-            return Ack(seq, "QMV", tuple(self._outcome(m).to_args()))
-        if isinstance(cmd, TrajBegin):
-            return self._traj_begin(cmd)
-        if isinstance(cmd, TrajPoint):
-            return self._traj_point(cmd)
-        if isinstance(cmd, Run):
-            return self._run(cmd)
-        if isinstance(cmd, MoveJoints):
-            return self._move_joints(cmd)
+        if isinstance(cmd, QueryMove | TrajBegin | TrajPoint | Run | MoveJoints):
+            return self.moves.handle(cmd)
         return Nak(seq, "SYNTAX", f"{cmd.VERB} not handled here")
 
-    def _refuse_motion(self, seq: int) -> Nak | None:
-        st = self.driver.state
-        if self._estopped or st.estopped:
-            return Nak(seq, "ESTOP", "emergency stop active: RESET first")
-        if self._active is not None:
-            return Nak(seq, "BUSY", f"move {self._active.mid} is executing")
-        if st.fault or not st.connected:
-            return Nak(seq, "FAULT", st.fault or "arm not connected")
-        return None
-
-    def _gate(self, seq: int, q: np.ndarray, what: str) -> tuple[np.ndarray, Nak | None]:
-        lo, hi = self.model.lower, self.model.upper
-        bad = np.argwhere((q < lo - _WIRE_TOL_RAD) | (q > hi + _WIRE_TOL_RAD))
-        if bad.size:
-            idx = tuple(int(v) for v in bad[0])
-            j = idx[-1]
-            return q, Nak(
-                seq,
-                "LIMIT",
-                f"{what} q{j + 1}={float(q[idx]):.6f} outside [{lo[j]:.6f}, {hi[j]:.6f}]",
-            )
-        return np.clip(q, lo, hi), None
-
-    def _traj_begin(self, cmd: TrajBegin) -> Ack | Nak:
-        m = self._moves.get(cmd.mid)
-        if m is not None:
-            if m.status == "LOADING" and m.n_points == cmd.n_points:
-                return Ack(cmd.seq, "TBEGIN", (str(cmd.mid), str(cmd.n_points)))
-            return Nak(cmd.seq, "USED", f"move id {cmd.mid} is {m.status}")
-        if not 1 <= cmd.n_points <= self.max_points:
-            return Nak(cmd.seq, "TRAJ", f"n_points must be in [1, {self.max_points}]")
-        if self._estopped:
-            return Nak(cmd.seq, "ESTOP", "emergency stop active: RESET first")
-        for other in self._moves.values():
-            if other.status == "LOADING":
-                self._set_outcome(other, "DISCARDED", f"replaced by move {cmd.mid}")
-        n = cmd.n_points
-        m = _Move(cmd.mid, n, t=np.zeros(n), q=np.zeros((n, 5)), qd=np.zeros((n, 5)))
-        m.have = np.zeros(n, dtype=bool)
-        self._remember(m)
-        return Ack(cmd.seq, "TBEGIN", (str(cmd.mid), str(n)))
-
-    def _traj_point(self, cmd: TrajPoint) -> Ack | Nak:
-        m = self._moves.get(cmd.mid)
-        if m is None:
-            return Nak(cmd.seq, "UNKNOWN_MOVE", f"no move {cmd.mid}: TBEGIN first")
-        if m.status != "LOADING":
-            return Nak(cmd.seq, "USED", f"move {cmd.mid} is {m.status}")
-        if cmd.index >= m.n_points:
-            return Nak(cmd.seq, "TRAJ", f"index {cmd.index} >= n_points {m.n_points}")
-        q, nak = self._gate(cmd.seq, np.asarray(cmd.q), f"point {cmd.index}")
-        if nak is not None:
-            return nak
-        assert m.t is not None and m.q is not None and m.qd is not None and m.have is not None
-        m.t[cmd.index], m.q[cmd.index], m.qd[cmd.index] = cmd.t_s, q, cmd.qd
-        m.have[cmd.index] = True
-        return Ack(cmd.seq, "TP", (str(cmd.mid), str(cmd.index), str(int(m.have.sum()))))
-
-    def _run(self, cmd: Run) -> Ack | Nak:
-        m = self._moves.get(cmd.mid)
-        if m is None:
-            return Nak(cmd.seq, "UNKNOWN_MOVE", f"no move {cmd.mid} in this session")
-        if m.status != "LOADING":  # already started once: report, never run twice
-            return Ack(cmd.seq, "RUN", tuple(self._outcome(m).to_args()))
-        assert m.have is not None
-        if not m.have.all():
-            missing = int((~m.have).sum())
-            return Nak(cmd.seq, "INCOMPLETE", f"{missing} of {m.n_points} points missing")
-        refused = self._refuse_motion(cmd.seq)
-        if refused is not None:
-            return refused
-        try:
-            if abs(float(m.t[0])) > 1e-9:  # type: ignore[index]
-                raise ValueError("the first point must be at t = 0")
-            traj = JointTrajectory(m.t, m.q, m.qd)  # type: ignore[arg-type]
-        except ValueError as exc:
-            return Nak(cmd.seq, "TRAJ", str(exc))
-        nak = self._check_start(cmd.seq, traj)
-        if nak is not None:
-            return nak
-        self._start(m, traj, "TRAJ")
-        return Ack(cmd.seq, "RUN", tuple(self._outcome(m).to_args()))
-
-    def _move_joints(self, cmd: MoveJoints) -> Ack | Nak:
-        m = self._moves.get(cmd.mid)
-        if m is not None:  # this move id was seen: report it, never run twice
-            return Ack(cmd.seq, "MOVE", tuple(self._outcome(m).to_args()))
-        refused = self._refuse_motion(cmd.seq)
-        if refused is not None:
-            return refused
-        goal, nak = self._gate(cmd.seq, np.asarray(cmd.q), "target")
-        if nak is not None:
-            return nak
-        q0 = np.asarray(self.driver.state.q, dtype=np.float64)
-        try:
-            if cmd.speed is not None:
-                traj = plan_joint_move(q0, goal, speed=cmd.speed, model=self.model)
-            else:
-                traj = plan_joint_move(q0, goal, model=self.model)
-                assert cmd.duration_s is not None
-                if cmd.duration_s < traj.duration_s - 1e-9:
-                    raise ValueError(
-                        f"duration {cmd.duration_s:g} s is shorter than the fastest "
-                        f"synchronised move, {traj.duration_s:.4f} s"
-                    )
-                if traj.t_s.size > 1:  # stretch in time: speeds / k, accelerations / k^2
-                    k = cmd.duration_s / traj.duration_s
-                    traj = JointTrajectory(traj.t_s * k, traj.q, traj.qd / k)
-        except ValueError as exc:
-            return Nak(cmd.seq, "TRAJ", str(exc))
-        m = _Move(cmd.mid, int(traj.t_s.size))
-        self._remember(m)
-        self._start(m, traj, "MOVE")
-        return Ack(cmd.seq, "MOVE", tuple(self._outcome(m).to_args()))
-
-    def _check_start(self, seq: int, traj: JointTrajectory) -> Nak | None:
-        gap = float(np.abs(traj.start - np.asarray(self.driver.state.q)).max())
-        if gap > self.start_tolerance_rad:
-            return Nak(
-                seq, "START", f"first point is {gap:.4g} rad from the arm "
-                f"(tolerance {self.start_tolerance_rad:g} rad)",
-            )  # fmt: skip
-        return None
-
-    def _start(self, m: _Move, traj: JointTrajectory, kind: str) -> None:
-        assert self._session is not None
-        m.status = "RUNNING"
-        m.goal = tuple(float(v) for v in traj.goal)
-        m.started = time.monotonic()
-        self._active = m
-        self.executions.append(
-            ExecutionRecord(self._session, m.mid, kind, int(traj.t_s.size), m.started)
-        )
-        m.task = asyncio.create_task(self._execute_motion(m, traj, self._session))
-
-    async def _execute_motion(self, m: _Move, traj: JointTrajectory, session: str) -> None:
-        try:
-            report = await self.driver.move(traj)
-        except asyncio.CancelledError:
-            self._set_outcome(m, "STOPPED", "controller shut down")
-            raise
-        except Exception as exc:
-            self._set_outcome(m, "FAULT", f"{type(exc).__name__}: {exc}")
-        else:
-            status = {"done": "DONE", "stopped": "STOPPED", "estop": "ESTOP"}.get(
-                report.reason, "FAULT"
-            )
-            reason = report.reason
-            if m.watchdog and status == "STOPPED":
-                status, reason = "WATCHDOG", f"host silent for {self.watchdog_s:g} s"
-            self._set_outcome(m, status, reason, duration_s=report.duration_s, q=report.final_q)
-        finally:
-            if self._active is m:
-                self._active = None
-        if session == self._session and m.outcome is not None:
+    def _on_move_done(self, session: str, outcome: MoveOutcome) -> None:
+        if session == self._session:
             self._eseq += 1
             self.stats.events += 1
-            self._send(DoneEvent(self._eseq, m.outcome))
-
-    def _set_outcome(
-        self,
-        m: _Move,
-        status: str,
-        reason: str,
-        *,
-        duration_s: float | None = None,
-        q: tuple[float, ...] | None = None,
-    ) -> None:
-        q = q if q is not None else tuple(self.driver.state.q)
-        err = float(np.abs(np.subtract(q, m.goal)).max()) if m.goal else 0.0
-        dur = (
-            duration_s
-            if duration_s is not None
-            else (time.monotonic() - m.started if m.started else 0.0)
-        )
-        m.status = status
-        m.outcome = MoveOutcome(m.mid, status, dur, tuple(q), err, reason)
-
-    def _outcome(self, m: _Move) -> MoveOutcome:
-        if m.outcome is not None:
-            return m.outcome
-        q = tuple(self.driver.state.q)
-        err = float(np.abs(np.subtract(q, m.goal)).max()) if m.goal else 0.0
-        dur = time.monotonic() - m.started if m.started else 0.0
-        return MoveOutcome(m.mid, m.status, dur, q, err, "")
-
-    def _remember(self, m: _Move) -> None:
-        self._moves[m.mid] = m
-        self._last_mid = m.mid
-        if len(self._moves) > _MAX_MOVES:
-            for mid in [
-                k for k, v in self._moves.items() if v.status not in ("LOADING", "RUNNING")
-            ]:
-                del self._moves[mid]
-                if len(self._moves) <= _MAX_MOVES // 2:
-                    break
+            self._send(DoneEvent(self._eseq, outcome))
 
     # -- state stream and watchdog ------------------------------------------------------------
     def _ms(self) -> int:
@@ -681,15 +435,15 @@ class Emulator:
 
     def _snapshot(self) -> ArmSnapshot:
         st = self.driver.state
-        m = self._moves.get(self._last_mid)
+        mid, status = self.moves.latest()
         return ArmSnapshot(
             stamp_ms=self._ms(),
             q=tuple(st.q),
             qd=tuple(st.qd),
-            moving=st.moving or self._active is not None,
+            moving=st.moving or self.moves.moving,
             estopped=self._estopped or st.estopped,
-            mid=self._last_mid if m is not None else 0,
-            move_status=m.status if m is not None else "NONE",
+            mid=mid,
+            move_status=status,
             fault=st.fault,
         )
 
@@ -714,12 +468,13 @@ class Emulator:
     async def _watchdog(self) -> None:
         while True:
             await asyncio.sleep(0.02)
-            m = self._active
-            if self.watchdog_s and m is not None and not m.watchdog and not self._host_alive():
-                m.watchdog = True
+            if not self.watchdog_s or self._host_alive():
+                continue
+            mid = self.moves.trip_watchdog()
+            if mid is not None:
                 self.stats.watchdog_trips += 1
                 log.warning(
-                    "emulator: host silent for %.2f s, stopping move %d", self.watchdog_s, m.mid
+                    "emulator: host silent for %.2f s, stopping move %d", self.watchdog_s, mid
                 )
                 await self.driver.stop()
 

@@ -72,7 +72,7 @@ from robot.drivers.serial.frames import (
     TrajBegin,
     TrajPoint,
 )
-from robot.drivers.serial.transport import SerialLink
+from robot.drivers.serial.supervisor import LinkSupervisor
 from robot.errors import (
     CommandRejected,
     CommandSuperseded,
@@ -80,6 +80,7 @@ from robot.errors import (
     DriverError,
     LinkDown,
     RobotBusy,
+    RobotError,
 )
 from robot.model import ASEA, ArmModel, check_joints
 from robot.trajectory import JointTrajectory
@@ -196,30 +197,34 @@ class SerialDriver:
         """The controller's last ``HELLO`` answer (None before the first connection)."""
         self.limits: LimitsInfo | None = None
         """The controller's joint ranges, read at every connection."""
-        self.outages = 0
-        """Outages seen (each logged once)."""
-        self.last_outage_s = 0.0
-        """Length of the last outage that ended, seconds."""
-        self.connected_at = 0.0
-        """``time.monotonic()`` when the link was last (re-)established."""
         self._rng = random.Random(seed)
         self._device = SerialDevice(self._on_event, window=window, resend_after_s=resend_after_s)
         self._hub = StateHub(
             RobotState(tuple(model.q_home), connected=False, fault="not connected")
         )
-        self._link: SerialLink | None = None
-        self._ready = asyncio.Event()
         self._hint = asyncio.Event()
         self._lock = asyncio.Lock()
         self._waiters: dict[int, asyncio.Future[MoveOutcome]] = {}
         self._epoch = 0
         self._boot_id: str | None = None
         self._last_stamp_ms = -1
+        self._warned_limits: LimitsInfo | None = None
         self._mid = 0
-        self._outage_since: float | None = None
-        self._close_reason: str | None = None
-        self._tasks: list[asyncio.Task[None]] = []
-        self._ping: asyncio.Task[None] | None = None
+        self._background: set[asyncio.Task[None]] = set()
+        self._sup = LinkSupervisor(
+            port,
+            baud=baud,
+            device=self._device,
+            handshake=self._handshake,
+            on_down=self._on_down,
+            heartbeat_s=self.heartbeat_s,
+            silence_timeout_s=self.silence_timeout_s,
+            command_timeout_s=self.command_timeout_s,
+            backoff_initial_s=self.backoff_initial_s,
+            backoff_max_s=self.backoff_max_s,
+            rng=self._rng,
+        )
+        self._ready = self._sup.ready
 
     # -- RobotDriver protocol -----------------------------------------------------------------
     async def connect(self) -> None:
@@ -228,11 +233,7 @@ class SerialDriver:
         Returns even if the controller is not reachable yet (the state then says
         ``connected=False`` and the supervisor keeps trying in the background).
         """
-        if not self._tasks:
-            self._tasks = [
-                asyncio.create_task(self._supervise(), name="serial-supervisor"),
-                asyncio.create_task(self._heartbeat(), name="serial-heartbeat"),
-            ]
+        self._sup.start()
         try:
             async with asyncio.timeout(self.connect_timeout_s):
                 await self._ready.wait()
@@ -241,18 +242,12 @@ class SerialDriver:
 
     async def close(self) -> None:
         """Stop the supervisor, close the port, fail pending commands; idempotent."""
-        tasks = [*self._tasks, *([self._ping] if self._ping else [])]
-        for t in tasks:
+        await self._sup.stop()
+        for t in list(self._background):
             t.cancel()
-        for t in tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await t
-        self._tasks, self._ping = [], None
-        if self._link is not None:
-            self._link.close()
-            self._link = None
-        self._ready.clear()
+        await asyncio.gather(*self._background, return_exceptions=True)
         await self._device.close()
+        self._hint.set()
         last = self._hub.latest
         self._hub.publish(
             replace(
@@ -364,11 +359,31 @@ class SerialDriver:
         return MoveOutcome.from_args(ack.args)
 
     @property
+    def last_move_id(self) -> int:
+        """Move id of the latest ``move``/``move_joints`` that got past the preconditions."""
+        return self._mid
+
+    @property
     def stats(self) -> dict[str, int]:
         """Counters of the command layer plus ``outages``."""
         d = dict(vars(self._device.stats))
-        d["outages"] = self.outages
+        d["outages"] = self._sup.outages
         return d
+
+    @property
+    def outages(self) -> int:
+        """Outages of the link so far (each logged once)."""
+        return self._sup.outages
+
+    @property
+    def connected_at(self) -> float:
+        """``time.monotonic()`` when the link was last (re-)established."""
+        return self._sup.connected_at
+
+    @property
+    def last_outage_s(self) -> float:
+        """Length of the last outage that ended, seconds."""
+        return self._sup.last_outage_s
 
     # -- motion internals ---------------------------------------------------------------------
     @contextlib.asynccontextmanager
@@ -449,7 +464,7 @@ class SerialDriver:
                 if not exc.sent:
                     raise RobotBusy(f"emergency stop before move {mid} started") from exc
                 outcome = await self._resolve(mid, epoch, None)
-            except (CommandTimeout, LinkDown):
+            except DriverError:  # timeout, link lost, unreadable reply: fate unknown
                 outcome = await self._resolve(mid, epoch, make)
             if not outcome.terminal:
                 outcome = await self._follow(mid, epoch)
@@ -474,7 +489,7 @@ class SerialDriver:
     async def _settle(self, outcome: MoveOutcome) -> None:
         """Make :attr:`state` show where the move ended before ``move`` returns."""
         if self._ready.is_set():
-            with contextlib.suppress(DriverError):
+            with contextlib.suppress(RobotError):
                 await self._refresh_state()
                 return
         if math.isfinite(outcome.error_rad):  # a real controller answer, not a lost link
@@ -501,7 +516,7 @@ class SerialDriver:
                 if exc.nak_code != "UNKNOWN_MOVE":
                     continue
                 known = None
-            except DriverError:
+            except RobotError:  # no answer, link lost, overtaken by an e-stop: ask again
                 continue
             if known is not None and known.status != "LOADING":
                 return known
@@ -512,7 +527,7 @@ class SerialDriver:
                 return MoveOutcome.from_args((await self._cmd(reissue)).args)
             except CommandRejected as exc:
                 return self._lost(mid, f"refused: {exc}")
-            except DriverError:
+            except RobotError:
                 continue
         return self._lost(mid, "could not learn the outcome of the move")
 
@@ -538,67 +553,25 @@ class SerialDriver:
                 if exc.nak_code == "UNKNOWN_MOVE":
                     return self._lost(mid, "controller no longer knows the move")
                 continue
-            except DriverError:
+            except RobotError:
                 continue
             if known.terminal:
                 return known
 
     async def _wait_ready(self) -> bool:
-        try:
-            async with asyncio.timeout(self.reconnect_grace_s):
-                await self._ready.wait()
-        except TimeoutError:
-            return False
-        return True
+        return await self._sup.wait_ready(self.reconnect_grace_s)
 
     def _stop_in_background(self) -> None:
         async def stop() -> None:
-            with contextlib.suppress(DriverError):
+            with contextlib.suppress(RobotError):
                 await self.stop()
 
         if self._ready.is_set():
             task = asyncio.get_running_loop().create_task(stop())
-            self._tasks.append(task)
+            self._background.add(task)
+            task.add_done_callback(self._background.discard)
 
     # -- supervisor ---------------------------------------------------------------------------
-    async def _supervise(self) -> None:
-        delay = self.backoff_initial_s
-        while True:
-            try:
-                link = await SerialLink.open(self.port, baud=self.baud, on_bytes=self._device.feed)
-            except LinkDown as exc:
-                self._note_down(str(exc))
-                await asyncio.sleep(delay * self._rng.uniform(0.5, 1.0))
-                delay = min(2.0 * delay, self.backoff_max_s)
-                continue
-            self._link = link
-            self._device.attach(link)
-            handshake = asyncio.create_task(self._handshake())
-            try:
-                await asyncio.wait({handshake, link.closed}, return_when=asyncio.FIRST_COMPLETED)
-                if handshake.done() and handshake.exception() is None:
-                    delay = self.backoff_initial_s
-                    self._note_up()
-                    await link.closed
-                    why = self._close_reason or f"serial link lost ({link.closed.result()})"
-                else:
-                    handshake.cancel()
-                    with contextlib.suppress(asyncio.CancelledError, Exception):
-                        await handshake
-                    exc = handshake.exception() if not handshake.cancelled() else None
-                    why = f"handshake failed: {exc or 'port closed'}"
-            finally:
-                self._ready.clear()
-                self._device.detach()
-                link.close()
-                self._link = None
-                self._hint.set()
-            self._close_reason = None
-            self._note_down(why)
-            if handshake.cancelled() or handshake.exception() is not None:
-                await asyncio.sleep(delay * self._rng.uniform(0.5, 1.0))
-                delay = min(2.0 * delay, self.backoff_max_s)
-
     async def _handshake(self) -> None:
         ack = await self._device.request(
             lambda s: Hello(s, self.session_id), timeout_s=self.command_timeout_s, urgent=True
@@ -626,7 +599,8 @@ class SerialDriver:
         narrower = (np.asarray(limits.lower) > self.model.lower + 1e-6) | (
             np.asarray(limits.upper) < self.model.upper - 1e-6
         )
-        if narrower.any():
+        if narrower.any() and limits != self._warned_limits:
+            self._warned_limits = limits
             log.warning(
                 "controller at %s has narrower joint ranges than the model on %s; "
                 "it will refuse moves outside them",
@@ -634,36 +608,13 @@ class SerialDriver:
                 ", ".join(f"q{j + 1}" for j in np.flatnonzero(narrower)),
             )
         await self._refresh_state()
-        self._ready.set()
-        self.connected_at = time.monotonic()
 
     async def _refresh_state(self) -> None:
         ack = await self._cmd(lambda s: GetState(s))
         self._publish(ArmSnapshot.from_args(ack.args))
 
-    async def _heartbeat(self) -> None:
-        while True:
-            await asyncio.sleep(self.heartbeat_s / 2)
-            if not self._ready.is_set() or self._link is None:
-                continue
-            now = time.monotonic()
-            if now - self._device.last_rx_s > self.silence_timeout_s:
-                self._close_reason = f"controller silent for {self.silence_timeout_s:g} s"
-                self._link.close()
-            elif now - self._device.last_tx_s >= self.heartbeat_s and (
-                self._ping is None or self._ping.done()
-            ):
-                self._ping = asyncio.create_task(self._quiet_ping())
-
-    async def _quiet_ping(self) -> None:
-        with contextlib.suppress(DriverError):
-            await self._cmd(lambda s: Ping(s))
-
-    def _note_down(self, why: str) -> None:
-        if self._outage_since is None:
-            self._outage_since = time.monotonic()
-            self.outages += 1
-            log.warning("serial controller at %s unreachable (%s); reconnecting", self.port, why)
+    def _on_down(self, why: str) -> None:
+        """The supervisor lost the link (or failed to get one): show it, wake waiting moves."""
         last = self._hub.latest
         self._hub.publish(
             RobotState(
@@ -675,16 +626,7 @@ class SerialDriver:
                 fault=f"disconnected: {why}",
             )
         )
-
-    def _note_up(self) -> None:
-        if self._outage_since is not None:
-            self.last_outage_s = time.monotonic() - self._outage_since
-            log.info(
-                "serial controller at %s reachable again after %.2f s",
-                self.port,
-                self.last_outage_s,
-            )
-            self._outage_since = None
+        self._hint.set()
 
     # -- events -------------------------------------------------------------------------------
     def _on_event(self, event: Event) -> None:

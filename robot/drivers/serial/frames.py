@@ -16,12 +16,31 @@ token lists with ``to_args`` / ``from_args``.  Angles are radians with six decim
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import ClassVar
 
 from robot.drivers.serial.framing import MAX_LINE_BYTES, LineReader, seal, unseal
+from robot.drivers.serial.payloads import (
+    HEX8_RE,
+    MOVE_STATUSES,
+    NAK_CODES,
+    PROTOCOL_VERSION,
+    TERMINAL_STATUSES,
+    WORD_RE,
+    ArmSnapshot,
+    HelloInfo,
+    LimitsInfo,
+    MoveOutcome,
+    expect_nargs,
+    fmt,
+    fmt_vec,
+    parse_float,
+    parse_int,
+    parse_vec,
+    parse_word,
+    safe_text,
+)
 from robot.errors import ProtocolError
 
 __all__ = [
@@ -59,290 +78,6 @@ __all__ = [
     "encode",
 ]
 
-PROTOCOL_VERSION = 1
-"""Version number exchanged in ``HELLO``."""
-
-MAX_SEQ = 2**31 - 1
-"""Largest sequence number; a host starts a new session long before reaching it."""
-
-NAK_CODES: dict[str, str] = {
-    "SYNTAX": "frame had a valid checksum but an unknown verb or malformed arguments",
-    "VERSION": "protocol version not supported",
-    "NOSESSION": "command before HELLO opened a session",
-    "STALE": "sequence number older than the duplicate window; not executed now",
-    "FULL": "receive queue full: the host exceeded its window",
-    "LIMIT": "a joint value lies outside the controller's range",
-    "START": "trajectory does not start at the arm's current position",
-    "TRAJ": "malformed trajectory (count, times, duration)",
-    "INCOMPLETE": "RUN before every point of the trajectory arrived",
-    "UNKNOWN_MOVE": "no move with this id in this session",
-    "USED": "move id already used for a different trajectory",
-    "BUSY": "another move is executing",
-    "ESTOP": "emergency stop active (or the command was flushed by one)",
-    "FAULT": "the arm reports a fault",
-}
-"""Negative acknowledgement codes; a NAK always means the command was NOT executed."""
-
-MOVE_STATUSES = (
-    "NONE",
-    "LOADING",
-    "RUNNING",
-    "DONE",
-    "STOPPED",
-    "ESTOP",
-    "WATCHDOG",
-    "FAULT",
-    "DISCARDED",
-)
-"""States of a move id on the controller (``NONE``: no move in this session yet)."""
-
-TERMINAL_STATUSES = frozenset({"DONE", "STOPPED", "ESTOP", "WATCHDOG", "FAULT", "DISCARDED"})
-"""Move states after which the move id never changes again."""
-
-_INT = re.compile(r"\d{1,10}")
-_FLOAT = re.compile(r"-?\d{1,6}(\.\d{1,9})?")
-_HEX8 = re.compile(r"[0-9A-F]{8}")
-_WORD = re.compile(r"[A-Z_]{1,16}")
-
-
-def _int(tok: str, name: str, hi: int = MAX_SEQ) -> int:
-    if not _INT.fullmatch(tok) or int(tok) > hi:
-        raise ProtocolError(f"{name} must be an integer in [0, {hi}], got {tok!r}")
-    return int(tok)
-
-
-def _float(tok: str, name: str) -> float:
-    if not _FLOAT.fullmatch(tok):
-        raise ProtocolError(f"{name} must be a decimal number, got {tok!r}")
-    return float(tok)
-
-
-def _vec(toks: Sequence[str], name: str) -> tuple[float, ...]:
-    if len(toks) != 5:
-        raise ProtocolError(f"{name} needs 5 values, got {len(toks)}")
-    return tuple(_float(t, name) for t in toks)
-
-
-def _word(tok: str, name: str, allowed: Sequence[str]) -> str:
-    if tok not in allowed:
-        raise ProtocolError(f"{name} must be one of {', '.join(allowed)}, got {tok!r}")
-    return tok
-
-
-def fmt(x: float, decimals: int = 6) -> str:
-    """Shortest fixed-point text of ``x`` with at most ``decimals`` decimals ("-0" -> "0")."""
-    s = f"{x:.{decimals}f}".rstrip("0").rstrip(".")
-    return "0" if s in ("-0", "") else s
-
-
-def _fmt_vec(v: Sequence[float]) -> list[str]:
-    return [fmt(float(x)) for x in v]
-
-
-def _text(s: str) -> str:
-    """Free text made safe for a frame body (printable ASCII, no ``*``, single spaces)."""
-    clean = " ".join(s.split()).replace("*", "#")
-    return "".join(c if " " <= c <= "~" else "?" for c in clean)
-
-
-def _nargs(args: Sequence[str], n: int, what: str) -> None:
-    if len(args) != n:
-        raise ProtocolError(f"{what} takes {n} arguments, got {len(args)}")
-
-
-# -- payloads carried by acknowledgements and events -----------------------------------------
-@dataclass(frozen=True)
-class ArmSnapshot:
-    """The arm's state as the controller reports it (``ST`` events, ``STATE`` replies).
-
-    Attributes
-    ----------
-    stamp_ms : int
-        Controller clock, milliseconds since it booted.
-    q, qd : tuple of 5 floats
-        Joint positions (rad) and velocities (rad/s).
-    moving, estopped : bool
-        A move is executing; an emergency stop is active.
-    mid : int
-        Move id of this session's current or latest move, 0 if none.
-    move_status : str
-        Status of ``mid`` (one of :data:`MOVE_STATUSES`).
-    fault : str
-        Empty when healthy, else the controller's fault text.
-    """
-
-    stamp_ms: int
-    q: tuple[float, ...]
-    qd: tuple[float, ...]
-    moving: bool
-    estopped: bool
-    mid: int
-    move_status: str
-    fault: str = ""
-
-    def to_args(self) -> list[str]:
-        flags = ("M" if self.moving else "") + ("E" if self.estopped else "") or "-"
-        out = [str(self.stamp_ms), *_fmt_vec(self.q), *(fmt(v, 4) for v in self.qd), flags]
-        out += [str(self.mid), self.move_status]
-        return out + ([_text(self.fault)] if _text(self.fault) else [])
-
-    @classmethod
-    def from_args(cls, args: Sequence[str]) -> ArmSnapshot:
-        if len(args) < 14:
-            raise ProtocolError(f"state needs at least 14 fields, got {len(args)}")
-        flags = args[11]
-        if not re.fullmatch(r"-|M?E?", flags) or flags == "":
-            raise ProtocolError(f"state flags must be '-', 'M', 'E' or 'ME', got {flags!r}")
-        return cls(
-            stamp_ms=_int(args[0], "stamp_ms", 2**63),
-            q=_vec(args[1:6], "q"),
-            qd=_vec(args[6:11], "qd"),
-            moving="M" in flags,
-            estopped="E" in flags,
-            mid=_int(args[12], "mid"),
-            move_status=_word(args[13], "move status", MOVE_STATUSES),
-            fault=" ".join(args[14:]),
-        )
-
-
-@dataclass(frozen=True)
-class MoveOutcome:
-    """What the controller knows about one move id (``RUN``/``MOVE``/``QMV`` replies, ``DONE``).
-
-    Attributes
-    ----------
-    mid : int
-        Move id chosen by the host.
-    status : str
-        One of :data:`MOVE_STATUSES`.
-    duration_s : float
-        Seconds the move has run (so far, or in total once terminal).
-    q : tuple of 5 floats
-        Joint positions when the move ended (or now, while it runs), radians.
-    error_rad : float
-        Largest joint error to the move's goal at that time, radians.
-    reason : str
-        Free text for the operator (why it stopped, the fault).
-    """
-
-    mid: int
-    status: str
-    duration_s: float
-    q: tuple[float, ...]
-    error_rad: float
-    reason: str = ""
-
-    @property
-    def terminal(self) -> bool:
-        """True once the move can no longer change (done, stopped, faulted...)."""
-        return self.status in TERMINAL_STATUSES
-
-    def to_args(self) -> list[str]:
-        out = [str(self.mid), self.status, fmt(self.duration_s, 4), *_fmt_vec(self.q)]
-        out.append(fmt(self.error_rad))
-        return out + ([_text(self.reason)] if _text(self.reason) else [])
-
-    @classmethod
-    def from_args(cls, args: Sequence[str]) -> MoveOutcome:
-        if len(args) < 9:
-            raise ProtocolError(f"move outcome needs at least 9 fields, got {len(args)}")
-        return cls(
-            mid=_int(args[0], "mid"),
-            status=_word(args[1], "move status", MOVE_STATUSES),
-            duration_s=_float(args[2], "duration_s"),
-            q=_vec(args[3:8], "q"),
-            error_rad=_float(args[8], "error_rad"),
-            reason=" ".join(args[9:]),
-        )
-
-
-@dataclass(frozen=True)
-class HelloInfo:
-    """The controller's answer to ``HELLO``.
-
-    Attributes
-    ----------
-    version : int
-        Protocol version spoken.
-    boot_id : str
-        Eight hex digits, new at every controller start (a change means it rebooted).
-    resumed : bool
-        True if the host's session id was the controller's current session: its duplicate
-        cache and move table are kept, so unanswered commands may be resent with their seq.
-    cache_depth : int
-        How many recent sequence numbers the controller remembers (the duplicate window).
-    window : int
-        How many commands the host may have unanswered at once (receive queue depth).
-    max_points : int
-        Largest trajectory, in points, that the controller buffers.
-    rate_hz : float
-        Current state-event rate.
-    name : str
-        Controller name (one word).
-    """
-
-    version: int
-    boot_id: str
-    resumed: bool
-    cache_depth: int
-    window: int
-    max_points: int
-    rate_hz: float
-    name: str
-
-    def to_args(self) -> list[str]:
-        return [
-            str(self.version),
-            self.boot_id,
-            "RESUMED" if self.resumed else "NEW",
-            str(self.cache_depth),
-            str(self.window),
-            str(self.max_points),
-            fmt(self.rate_hz, 3),
-            _text(self.name).replace(" ", "_") or "controller",
-        ]
-
-    @classmethod
-    def from_args(cls, args: Sequence[str]) -> HelloInfo:
-        _nargs(args, 8, "HELLO reply")
-        if not _HEX8.fullmatch(args[1]):
-            raise ProtocolError(f"boot id must be 8 hex digits, got {args[1]!r}")
-        return cls(
-            version=_int(args[0], "version"),
-            boot_id=args[1],
-            resumed=_word(args[2], "session", ("NEW", "RESUMED")) == "RESUMED",
-            cache_depth=_int(args[3], "cache_depth"),
-            window=_int(args[4], "window"),
-            max_points=_int(args[5], "max_points"),
-            rate_hz=_float(args[6], "rate_hz"),
-            name=args[7],
-        )
-
-
-@dataclass(frozen=True)
-class LimitsInfo:
-    """The controller's joint ranges and speed limits (``LIMITS`` reply), SI units.
-
-    Attributes
-    ----------
-    lower, upper : tuple of 5 floats
-        Joint ranges, radians.
-    max_velocity : tuple of 5 floats
-        Speed limits at full speed, rad/s.
-    """
-
-    lower: tuple[float, ...]
-    upper: tuple[float, ...]
-    max_velocity: tuple[float, ...]
-
-    def to_args(self) -> list[str]:
-        return [*_fmt_vec(self.lower), *_fmt_vec(self.upper), *_fmt_vec(self.max_velocity)]
-
-    @classmethod
-    def from_args(cls, args: Sequence[str]) -> LimitsInfo:
-        _nargs(args, 15, "LIMITS reply")
-        return cls(_vec(args[0:5], "lower"), _vec(args[5:10], "upper"), _vec(args[10:15], "v"))
-
 
 # -- frames ------------------------------------------------------------------------------------
 class Frame:
@@ -370,7 +105,7 @@ class Command(Frame):
     @classmethod
     def from_args(cls, seq: int, args: Sequence[str]) -> Command:
         """Build the command from its argument tokens (none by default)."""
-        _nargs(args, 0, cls.VERB)
+        expect_nargs(args, 0, cls.VERB)
         return cls(seq)
 
 
@@ -387,10 +122,10 @@ class Hello(Command):
 
     @classmethod
     def from_args(cls, seq: int, args: Sequence[str]) -> Hello:
-        _nargs(args, 2, "HELLO")
-        if not _HEX8.fullmatch(args[0]):
+        expect_nargs(args, 2, "HELLO")
+        if not HEX8_RE.fullmatch(args[0]):
             raise ProtocolError(f"session must be 8 upper-case hex digits, got {args[0]!r}")
-        return cls(seq, args[0], _int(args[1], "version"))
+        return cls(seq, args[0], parse_int(args[1], "version"))
 
 
 @dataclass(frozen=True)
@@ -426,8 +161,8 @@ class SetRate(Command):
 
     @classmethod
     def from_args(cls, seq: int, args: Sequence[str]) -> SetRate:
-        _nargs(args, 1, "RATE")
-        return cls(seq, _float(args[0], "rate_hz"))
+        expect_nargs(args, 1, "RATE")
+        return cls(seq, parse_float(args[0], "rate_hz"))
 
 
 @dataclass(frozen=True)
@@ -445,17 +180,17 @@ class MoveJoints(Command):
         if (self.duration_s is None) == (self.speed is None):
             raise ValueError("MOVE needs exactly one of duration_s and speed")
         mode = ["T", fmt(self.duration_s, 4)] if self.speed is None else ["S", fmt(self.speed, 4)]
-        return [str(self.mid), *_fmt_vec(self.q), *mode]
+        return [str(self.mid), *fmt_vec(self.q), *mode]
 
     @classmethod
     def from_args(cls, seq: int, args: Sequence[str]) -> MoveJoints:
-        _nargs(args, 8, "MOVE")
-        mode = _word(args[6], "MOVE mode", ("T", "S"))
-        value = _float(args[7], "duration_s" if mode == "T" else "speed")
-        q = _vec(args[1:6], "q")
+        expect_nargs(args, 8, "MOVE")
+        mode = parse_word(args[6], "MOVE mode", ("T", "S"))
+        value = parse_float(args[7], "duration_s" if mode == "T" else "speed")
+        q = parse_vec(args[1:6], "q")
         if mode == "T":
-            return cls(seq, _int(args[0], "mid"), q, duration_s=value)
-        return cls(seq, _int(args[0], "mid"), q, speed=value)
+            return cls(seq, parse_int(args[0], "mid"), q, duration_s=value)
+        return cls(seq, parse_int(args[0], "mid"), q, speed=value)
 
 
 @dataclass(frozen=True)
@@ -471,8 +206,8 @@ class TrajBegin(Command):
 
     @classmethod
     def from_args(cls, seq: int, args: Sequence[str]) -> TrajBegin:
-        _nargs(args, 2, "TBEGIN")
-        return cls(seq, _int(args[0], "mid"), _int(args[1], "n_points"))
+        expect_nargs(args, 2, "TBEGIN")
+        return cls(seq, parse_int(args[0], "mid"), parse_int(args[1], "n_points"))
 
 
 @dataclass(frozen=True)
@@ -491,20 +226,20 @@ class TrajPoint(Command):
             str(self.mid),
             str(self.index),
             fmt(self.t_s),
-            *_fmt_vec(self.q),
-            *_fmt_vec(self.qd),
+            *fmt_vec(self.q),
+            *fmt_vec(self.qd),
         ]
 
     @classmethod
     def from_args(cls, seq: int, args: Sequence[str]) -> TrajPoint:
-        _nargs(args, 13, "TP")
+        expect_nargs(args, 13, "TP")
         return cls(
             seq,
-            _int(args[0], "mid"),
-            _int(args[1], "index"),
-            _float(args[2], "t_s"),
-            _vec(args[3:8], "q"),
-            _vec(args[8:13], "qd"),
+            parse_int(args[0], "mid"),
+            parse_int(args[1], "index"),
+            parse_float(args[2], "t_s"),
+            parse_vec(args[3:8], "q"),
+            parse_vec(args[8:13], "qd"),
         )
 
 
@@ -521,8 +256,8 @@ class Run(Command):
 
     @classmethod
     def from_args(cls, seq: int, args: Sequence[str]) -> Run:
-        _nargs(args, 1, "RUN")
-        return cls(seq, _int(args[0], "mid"))
+        expect_nargs(args, 1, "RUN")
+        return cls(seq, parse_int(args[0], "mid"))
 
 
 @dataclass(frozen=True)
@@ -537,8 +272,8 @@ class QueryMove(Command):
 
     @classmethod
     def from_args(cls, seq: int, args: Sequence[str]) -> QueryMove:
-        _nargs(args, 1, "QMV")
-        return cls(seq, _int(args[0], "mid"))
+        expect_nargs(args, 1, "QMV")
+        return cls(seq, parse_int(args[0], "mid"))
 
 
 @dataclass(frozen=True)
@@ -594,7 +329,7 @@ class Nak(Frame):
     def __post_init__(self) -> None:
         if self.code not in NAK_CODES:
             raise ValueError(f"code must be one of {sorted(NAK_CODES)}, got {self.code!r}")
-        object.__setattr__(self, "detail", _text(self.detail))
+        object.__setattr__(self, "detail", safe_text(self.detail))
 
     def body(self) -> str:
         return " ".join(["N", str(self.seq), self.code, *([self.detail] if self.detail else [])])
@@ -647,7 +382,7 @@ def decode_body(body: str) -> Frame:
             f"a frame needs kind, number and verb separated by single spaces: {body[:40]!r}"
         )
     kind, num, verb, args = toks[0], toks[1], toks[2], toks[3:]
-    seq = _int(num, "sequence number")
+    seq = parse_int(num, "sequence number")
     try:
         if kind == "C":
             cls = COMMANDS.get(verb)
@@ -655,7 +390,7 @@ def decode_body(body: str) -> Frame:
                 raise ProtocolError(f"unknown command verb {verb!r}")
             return cls.from_args(seq, args)
         if kind == "A":
-            if not _WORD.fullmatch(verb):
+            if not WORD_RE.fullmatch(verb):
                 raise ProtocolError(f"bad acknowledged verb {verb!r}")
             return Ack(seq, verb, tuple(args))
         if kind == "N":
@@ -718,8 +453,3 @@ class FrameParser:
     def clear(self) -> None:
         """Drop any partial line (after the link was re-opened)."""
         self.reader.clear()
-
-
-def frame_fields(frame: Frame) -> dict[str, object]:
-    """The dataclass fields of ``frame`` as a dict (for logs and tests)."""
-    return {f.name: getattr(frame, f.name) for f in fields(frame)}  # type: ignore[arg-type]
