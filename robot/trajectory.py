@@ -168,4 +168,3 @@ def _common_profile(
                 return T, tb
         T *= 1.002
     raise AssertionError("no synchronised profile found")  # unreachable for finite inputs
-

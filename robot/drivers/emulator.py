@@ -523,3 +523,61 @@ async def run_emulator(
         await emu.close()
         await driver.close()
     return emu
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m robot.drivers.emulator``: serve an ideal arm until interrupted.
+
+    Prints the device path on its own line first.  The backend's ``visioncell emulator``
+    command offers the same options (and ``--driver sim`` for the simulator).
+    """
+    import argparse
+    import signal
+
+    from robot.drivers.ideal import IdealDriver
+
+    ap = argparse.ArgumentParser(prog="python -m robot.drivers.emulator", description=main.__doc__)
+    ap.add_argument("--link", help="stable device path to create (default: a temporary one)")
+    ap.add_argument("--rate", type=float, default=50.0, help="state events per second")
+    ap.add_argument("--baud", type=int, default=None, help="pace bytes as on a real line")
+    ap.add_argument("--time-scale", type=float, default=1.0, help="arm seconds per second")
+    ap.add_argument("--seed", type=int, default=None)
+    for knob, kind in (("drop", "p"), ("corrupt", "p"), ("truncate", "p"), ("garbage", "p"),
+                       ("delay", "p"), ("delay-s", "s"), ("vanish", "p"), ("vanish-s", "s")):  # fmt: skip
+        ap.add_argument(f"--fault-{knob}", type=float, default=None, help=f"FaultConfig {kind}")
+    args = ap.parse_args(argv)
+    names = {"drop": "drop_p", "corrupt": "corrupt_p", "truncate": "truncate_p",
+             "garbage": "garbage_p", "delay": "delay_p", "delay_s": "delay_s",
+             "vanish": "vanish_p", "vanish_s": "vanish_s"}  # fmt: skip
+    given = {
+        field_: getattr(args, f"fault_{opt}")
+        for opt, field_ in names.items()
+        if getattr(args, f"fault_{opt}") is not None
+    }
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+
+    def announce(path: str) -> None:
+        print(path, flush=True)
+
+    async def serve() -> None:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):  # clean exit: the link is removed
+            loop.add_signal_handler(sig, stop.set)
+        await run_emulator(
+            IdealDriver(time_scale=args.time_scale, rate_hz=max(50.0, args.rate)),
+            link=args.link,
+            rate_hz=args.rate,
+            baud=args.baud,
+            fault=FaultConfig(**given),
+            seed=args.seed,
+            announce=announce,
+            stop=stop,
+        )
+
+    asyncio.run(serve())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -100,3 +100,15 @@ def test_every_nak_code_is_documented():
         assert f"`{code}`" in doc, code
     for status in fr.MOVE_STATUSES:
         assert f"`{status}`" in doc, status
+
+
+def test_example_exchanges_in_the_protocol_document_are_valid_frames():
+    import re
+    from pathlib import Path
+
+    doc = (Path(__file__).parents[3] / "docs" / "serial-protocol.md").read_text()
+    lines = re.findall(r"^[<>] ([CANE] \d+ [^*\n]*\*[0-9A-F]{4})", doc, flags=re.MULTILINE)
+    assert len(lines) > 30
+    for line in lines:
+        frame = fr.decode(line.encode())
+        assert fr.encode(frame) == line.encode() + b"\n", line
