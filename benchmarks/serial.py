@@ -154,20 +154,40 @@ async def bench_round_trip(n: int, progress: Progress) -> dict[str, object]:
     await arm.close()
     out["direct_call"] = _summary_ms(times)
 
-    async with _Cell() as cell:
+    async with _Cell(time_scale=1000.0) as cell:
         d = await cell.attach()
         times = [await d.ping() for _ in range(n)]
         out["serial_pty"] = _summary_ms(times)
+        out["move_95_points_pty"] = _summary_ms(await _timed_moves(d, 6))
         progress(0.6, "round trip: PTY done")
-    async with _Cell(baud=115200) as cell:
+    async with _Cell(time_scale=1000.0, baud=115200) as cell:
         d = await cell.attach()
         times = [await d.ping() for _ in range(max(50, n // 4))]
         out["serial_115200_model"] = _summary_ms(times)
+        out["move_95_points_115200_model"] = _summary_ms(await _timed_moves(d, 4))
         ping = fr.encode(fr.Ping(123456))
         ack = fr.encode(fr.Ack(123456, "PING", ("1234567",)))
         out["wire_time_115200_ms"] = (len(ping) + len(ack)) * 10 / 115200 * 1e3
     progress(1.0, "round trip done")
     return out
+
+
+async def _timed_moves(d: SerialDriver, n: int) -> list[float]:
+    """Wall time of ``move()`` for the q_home <-> q_ready plan (95 points at 100 Hz).
+
+    The arm runs 1000 times faster than real time (about 1 ms of motion), so this is the
+    cost of the link: upload, RUN, completion report, final state.
+    """
+    times = []
+    for i in range(n):
+        goal = ASEA.q_ready if i % 2 == 0 else ASEA.q_home
+        traj = plan_joint_move(d.state.q, goal, rate_hz=100.0)
+        t0 = time.perf_counter()
+        report = await d.move(traj)
+        times.append(time.perf_counter() - t0)
+        if not report.completed:
+            raise RuntimeError(f"benchmark move failed: {report.reason}")
+    return times
 
 
 # -- 2. state stream -------------------------------------------------------------------------
@@ -550,6 +570,13 @@ def _table(r: dict[str, object]) -> str:
         (
             "  baseline: direct call, no link",
             f"{rt['direct_call']['median_ms']:.4f} / {rt['direct_call']['p95_ms']:.4f} ms",
+            "",
+            None,
+        ),
+        (
+            "move() of a 95-point trajectory, PTY / 115200 model",
+            f"{rt['move_95_points_pty']['median_ms']:.1f} / "
+            f"{rt['move_95_points_115200_model']['median_ms']:.0f} ms",
             "",
             None,
         ),

@@ -12,6 +12,11 @@ from robot.drivers.emulator import Emulator
 from robot.drivers.serial import SerialDriver, SerialLink
 from robot.drivers.serial.frames import Ack, Command, Event, Frame, FrameParser, Nak, encode
 
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "watchdog(seconds): link watchdog of the slow_cell emulator")
+
+
 FAST = {
     "resend_after_s": 0.05,
     "command_timeout_s": 1.0,

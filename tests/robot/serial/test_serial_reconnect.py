@@ -19,17 +19,22 @@ async def _until(pred, timeout_s=5.0):
 
 
 @pytest.fixture
-async def slow_cell(tmp_path):
-    """An emulator whose arm runs in real time (moves last seconds)."""
+async def slow_cell(request, tmp_path):
+    """An emulator whose arm runs in real time (moves last seconds).
+
+    Its link watchdog is 1 s, or the value of ``@pytest.mark.watchdog(seconds)``.
+    """
+    mark = request.node.get_closest_marker("watchdog")
     arm = IdealDriver(time_scale=1.0, rate_hz=100.0)
     await arm.connect()
-    emu = Emulator(arm, link=str(tmp_path / "tty"), watchdog_s=1.0, seed=1)
+    emu = Emulator(arm, link=str(tmp_path / "tty"), watchdog_s=mark.args[0] if mark else 1.0)
     await emu.start()
     yield emu
     await emu.close()
     await arm.close()
 
 
+@pytest.mark.watchdog(2.5)  # well above outage + reconnection, even on a loaded machine
 async def test_short_outage_mid_move_the_move_completes_once(slow_cell, make_driver, caplog):
     emu = slow_cell
     d = make_driver(emu.path)
@@ -44,7 +49,7 @@ async def test_short_outage_mid_move_the_move_completes_once(slow_cell, make_dri
     caplog.set_level(logging.INFO, logger="robot.drivers.serial.driver")
     task = asyncio.create_task(d.move_joints(ASEA.q_ready, duration_s=1.5))
     await _until(lambda: d.state.moving)
-    await emu.vanish(0.3)  # shorter than the controller's 1 s watchdog: the arm keeps going
+    await emu.vanish(0.3)  # shorter than the controller's watchdog: the arm keeps going
     report = await task
     w.cancel()
     assert report.completed and report.reason == "done"
@@ -64,7 +69,7 @@ async def test_long_outage_mid_move_the_watchdog_stops_the_arm(slow_cell, make_d
     await d.connect()
     task = asyncio.create_task(d.move_joints(ASEA.q_ready, duration_s=3.0))
     await _until(lambda: d.state.moving)
-    await emu.vanish(1.4)  # longer than the watchdog
+    await emu.vanish(1.8)  # longer than the 1 s watchdog
     report = await task
     assert not report.completed and "watchdog" in report.reason
     assert emu.stats.watchdog_trips == 1
