@@ -318,7 +318,9 @@ async def bench_campaign(faults: int, progress: Progress) -> dict[str, object]:
         issued: list[tuple[int, str]] = []  # (mid, outcome) per motion command
         t0 = time.perf_counter()
         i = 0
+        stall = _StallGuard(lambda: cell.emu.stats.faults.on_commands)
         while cell.emu.stats.faults.on_commands < faults:
+            stall.check()
             i += 1
             goal = Q_B if i % 2 else Q_A
             mid = d.last_move_id + 1  # the id the driver gives this move if it gets that far
@@ -356,6 +358,21 @@ async def bench_campaign(faults: int, progress: Progress) -> dict[str, object]:
             "outages": d.outages,
         }
     return result
+
+
+class _StallGuard:
+    """Raise if a campaign stops injecting faults (the line went quiet for good)."""
+
+    def __init__(self, count: Callable[[], int], limit_s: float = 60.0) -> None:
+        self._count, self._limit_s = count, limit_s
+        self._last, self._since = count(), time.monotonic()
+
+    def check(self) -> None:
+        now, n = time.monotonic(), self._count()
+        if n != self._last:
+            self._last, self._since = n, now
+        elif now - self._since > self._limit_s:
+            raise RuntimeError(f"campaign stalled: no fault injected for {self._limit_s:g} s")
 
 
 def _executions(emu: Emulator, session: str | None) -> dict[int, int]:
@@ -418,6 +435,8 @@ class NaiveHost:
                     return
             except DriverError:
                 pass
+            if self.link is not None:
+                self.link.close()  # release the port's lock before trying again
             self.link = None
             await asyncio.sleep(0.05)
 
@@ -474,7 +493,9 @@ async def bench_naive_campaign(faults: int, progress: Progress) -> dict[str, obj
         logical: list[tuple[list[int], bool]] = []
         t0 = time.perf_counter()
         i = 0
+        stall = _StallGuard(lambda: cell.emu.stats.faults.on_commands)
         while cell.emu.stats.faults.on_commands < faults:
+            stall.check()
             i += 1
             logical.append(await host.move(Q_B if i % 2 else Q_A))
             progress(

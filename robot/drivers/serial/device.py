@@ -8,7 +8,9 @@ rules in ``docs/serial-protocol.md`` section 5:
   resolves it (a reply nobody waits for any more is counted and dropped);
 * at most ``window`` commands are unanswered at once; later ones wait in a FIFO queue;
 * every command has a timeout (``asyncio.timeout``), counted from its first write;
-* an unanswered command is re-sent with the SAME sequence number every ``resend_after_s``:
+* an unanswered command is re-sent with the SAME sequence number every ``resend_after_s``
+  (counted after the time the line needs, at ``baud``, to carry the unanswered frames ahead
+  of it, the command itself and a reply, so a slow line does not cause needless re-sends):
   the controller answers a repeated number from its reply cache without executing the
   command again, so a re-send is safe for every command, motion included.  A command is
   never re-issued under a new number here; the driver does that only after the controller
@@ -49,6 +51,8 @@ from robot.errors import (
 )
 
 __all__ = ["DeviceStats", "SerialDevice"]
+
+_REPLY_BYTES = 40  # a typical acknowledgement line, for the wire-time allowance
 
 
 @dataclass
@@ -99,6 +103,8 @@ class _Pending:
     resend_after_s: float
     sent: asyncio.Event = field(default_factory=asyncio.Event)
     last_write: float = 0.0
+    writes: int = 0
+    wire_s: float = 0.0
 
 
 def _fail(p: _Pending, exc: Exception) -> None:
@@ -120,6 +126,9 @@ class SerialDevice:
         ``HELLO``; the driver uses the smaller).
     resend_after_s : float
         Default interval after which an unanswered command is re-sent with its number.
+    baud : int, optional
+        Line speed, to add the wire time of the frames ahead to each re-send interval
+        (``None``: no allowance).
     clock : callable
         Monotonic clock in seconds.
     """
@@ -130,6 +139,7 @@ class SerialDevice:
         *,
         window: int = 8,
         resend_after_s: float = 0.2,
+        baud: int | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if window < 1:
@@ -138,6 +148,7 @@ class SerialDevice:
             raise ValueError(f"resend_after_s must be positive, got {resend_after_s!r}")
         self.window = int(window)
         self.resend_after_s = float(resend_after_s)
+        self._byte_s = 0.0 if baud is None else 10.0 / baud  # 8N1: 10 bit times per byte
         self.stats = DeviceStats()
         self._on_event = on_event
         self._clock = clock
@@ -352,6 +363,10 @@ class SerialDevice:
         self._mark_written(p)
 
     def _mark_written(self, p: _Pending) -> None:
+        if p.writes == 0:  # how long the line needs before an answer can be back
+            ahead = sum(len(q.wire) for q in self._inflight.values() if q is not p and q.writes)
+            p.wire_s = (ahead + len(p.wire) + _REPLY_BYTES) * self._byte_s
+        p.writes += 1
         self.stats.writes += 1
         p.last_write = self.last_tx_s = self._clock()
         p.sent.set()
@@ -363,7 +378,7 @@ class SerialDevice:
                 continue
             now = self._clock()
             for p in list(self._inflight.values()):
-                if p.sent.is_set() and now - p.last_write >= p.resend_after_s:
+                if p.sent.is_set() and now - p.last_write >= p.resend_after_s + p.wire_s:
                     self.stats.resends += 1
                     self._write(p)
 

@@ -120,7 +120,8 @@ class SerialDriver:
     window : int
         Most commands unanswered at once (the controller may announce a smaller one).
     resend_after_s : float
-        An unanswered command is re-sent, with the same sequence number, this often.
+        An unanswered command is re-sent, with the same sequence number, this often (plus
+        the time the line needs at ``baud`` for the frames ahead of it and the reply).
     command_timeout_s : float
         Timeout of every command, from its first write.
     estop_timeout_s : float
@@ -198,7 +199,9 @@ class SerialDriver:
         self.limits: LimitsInfo | None = None
         """The controller's joint ranges, read at every connection."""
         self._rng = random.Random(seed)
-        self._device = SerialDevice(self._on_event, window=window, resend_after_s=resend_after_s)
+        self._device = SerialDevice(
+            self._on_event, window=window, resend_after_s=resend_after_s, baud=baud
+        )
         self._hub = StateHub(
             RobotState(tuple(model.q_home), connected=False, fault="not connected")
         )
