@@ -77,7 +77,30 @@ _MAX_RATE_HZ = 250.0
 
 @dataclass
 class EmulatorStats:
-    """Counters of one emulator (mutable)."""
+    """Counters of one emulator (mutable).
+
+    Attributes
+    ----------
+    rx_frames : int
+        Valid command frames received.
+    rx_rejected : int
+        Received lines dropped for a bad checksum or grammar.
+    duplicates : int
+        Commands whose sequence number was already known (answered from the cache or
+        ignored while pending), hence not executed again.
+    stale : int
+        Commands refused as older than the duplicate window.
+    executed : int
+        Commands executed by the worker (the emergency stop not counted).
+    events : int
+        ``ST`` and ``DONE`` events sent.
+    sessions : int
+        Sessions opened (new session ids).
+    watchdog_trips : int
+        Moves stopped because the host fell silent.
+    faults : FaultStats
+        Injected faults by kind.
+    """
 
     rx_frames: int = 0
     rx_rejected: int = 0
