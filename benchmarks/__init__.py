@@ -1,1 +1,1 @@
-"""Benchmarks: scripts that print figures side by side with a baseline, in one process."""
+"""Benchmarks: each prints a table and, with --json, one JSON object on its last line."""

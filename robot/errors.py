@@ -4,7 +4,18 @@ from __future__ import annotations
 
 from vision.errors import VisionCellError
 
-__all__ = ["DriverError", "JointLimitError", "RobotBusy", "RobotError", "Unreachable"]
+__all__ = [
+    "CommandRejected",
+    "CommandSuperseded",
+    "CommandTimeout",
+    "DriverError",
+    "JointLimitError",
+    "LinkDown",
+    "ProtocolError",
+    "RobotBusy",
+    "RobotError",
+    "Unreachable",
+]
 
 
 class RobotError(VisionCellError):
@@ -63,3 +74,65 @@ class RobotBusy(RobotError):
 
     code = "robot_busy"
     http_status = 409
+
+
+class LinkDown(DriverError):
+    """The link to the controller is down (port missing, unplugged, or being re-opened)."""
+
+    code = "link_down"
+
+
+class CommandTimeout(DriverError):
+    """A controller command got no reply in time; whether it ran is unknown."""
+
+    code = "command_timeout"
+
+
+class CommandRejected(DriverError):
+    """The controller answered a command with a negative acknowledgement; it did not run.
+
+    Attributes
+    ----------
+    nak_code : str
+        The protocol's error code (``docs/serial-protocol.md``), e.g. ``"BUSY"``.
+    """
+
+    code = "command_rejected"
+
+    def __init__(self, nak_code: str, detail: str) -> None:
+        super().__init__(f"controller refused the command: {nak_code} {detail}".rstrip())
+        self.nak_code = nak_code
+
+
+class ProtocolError(DriverError):
+    """Bytes on a controller link that do not form a valid frame (checksum, syntax, length).
+
+    Attributes
+    ----------
+    seq : int or None
+        The frame's sequence number where it could be read (so the receiver can answer
+        with a negative acknowledgement), else None.
+    """
+
+    code = "protocol_error"
+
+    def __init__(self, detail: str, *, seq: int | None = None) -> None:
+        super().__init__(detail)
+        self.seq = seq
+
+
+class CommandSuperseded(RobotBusy):
+    """A queued or unanswered command was dropped because an emergency stop overtook it.
+
+    Attributes
+    ----------
+    sent : bool
+        False if the command never left the host (it certainly did not run); True if it
+        was on the wire before the stop (it may have run just before the stop).
+    """
+
+    code = "command_superseded"
+
+    def __init__(self, detail: str, *, sent: bool) -> None:
+        super().__init__(detail)
+        self.sent = sent
