@@ -34,6 +34,12 @@ lint: install-dev
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
+# The whole serial path: an emulated controller on a pseudo-terminal drives the cell.
+demo-serial: install
+	@mkdir -p var
+	@$(BIN)/visioncell emulator --link var/robot-tty & emu=$$!; trap "kill $$emu 2>/dev/null" EXIT INT TERM; \
+	sleep 1; VISIONCELL_DRIVER=serial VISIONCELL_SERIAL_PORT=var/robot-tty $(BIN)/visioncell serve
+
 bench: install-dev
 	@for b in benchmarks/[a-z]*.py; do \
 		m=$$(basename $$b .py); echo "== benchmarks.$$m"; \

@@ -15,6 +15,13 @@ def make_driver(settings: Settings) -> RobotDriver:
         from robot.drivers.ideal import IdealDriver
 
         return IdealDriver(rate_hz=settings.state_rate_hz, time_scale=settings.time_scale)
+    if settings.driver == "serial":
+        from robot.drivers.serial import SerialDriver
+
+        assert settings.serial_port is not None  # the settings validator guarantees it
+        return SerialDriver(
+            settings.serial_port, baud=settings.serial_baud, state_rate_hz=settings.state_rate_hz
+        )
     raise ValueError(f"driver {settings.driver!r} is not available in this build")
 
 
