@@ -71,6 +71,7 @@ class Cell:
         self._jpeg: tuple[int, bytes] | None = None
         self._frames = 0
         self._fps = 0.0
+        self._dt = 0.0
         self._camera_error = ""
         self._camera_task: asyncio.Task[None] | None = None
 
@@ -162,7 +163,9 @@ class Cell:
                 now = time.monotonic()
                 dt = now - t_last
                 t_last = now
-                self._fps = 0.8 * self._fps + 0.2 / dt if dt > 0 else self._fps
+                # Average the interval, not its inverse (an average of 1/dt is biased upward).
+                self._dt = dt if self._dt == 0.0 else 0.9 * self._dt + 0.1 * dt
+                self._fps = 1.0 / self._dt if self._dt > 0 else 0.0
                 await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
             except asyncio.CancelledError:
                 raise
