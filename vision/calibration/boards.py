@@ -190,11 +190,16 @@ class CharucoBoard:
     def object_points(self) -> NDArray[np.float64]:
         """ChArUco corners in the board frame, (n_corners, 3), in id order, metres.
 
-        OpenCV puts the board origin at the outer corner; we shift it to the first inner
-        corner so that both board kinds share one frame convention.
+        Corner ``id`` sits at column ``id % (squares_x - 1)`` and row
+        ``id // (squares_x - 1)``, as in OpenCV, whose board origin is the outer corner;
+        ours is the first inner corner, so both board kinds share one frame convention.
         """
-        pts = np.asarray(self.to_cv().getChessboardCorners(), dtype=np.float64).reshape(-1, 3)
-        return pts - np.array([self.square_m, self.square_m, 0.0])
+        nx, ny = self.squares_x - 1, self.squares_y - 1
+        jj, ii = np.mgrid[0:ny, 0:nx]
+        pts = np.zeros((nx * ny, 3))
+        pts[:, 0] = ii.ravel() * self.square_m
+        pts[:, 1] = jj.ravel() * self.square_m
+        return pts
 
     def to_cv(self) -> Any:
         """The ``cv2.aruco.CharucoBoard`` of this board."""
