@@ -75,7 +75,7 @@ def test_charuco_geometry_and_validation():
     np.testing.assert_allclose(P, cv_pts - [0.04, 0.04, 0.0], atol=1e-7)
     with pytest.raises(ValueError, match="marker_m must be smaller than square_m"):
         CharucoBoard(7, 5, 0.04, 0.04)
-    with pytest.raises(ValueError, match="dictionary must be one of .* got 'DICT_9X9'"):
+    with pytest.raises(ValueError, match=r"dictionary must be one of .* got 'DICT_9X9'"):
         CharucoBoard(7, 5, 0.04, 0.03, "DICT_9X9")
     with pytest.raises(ValueError, match="needs 200 markers but DICT_4X4_50 has 50"):
         CharucoBoard(20, 20, 0.04, 0.03, "DICT_4X4_50")
