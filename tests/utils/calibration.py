@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -99,3 +100,36 @@ def rotation_error_deg(A: NDArray[np.float64], B: NDArray[np.float64]) -> float:
 def translation_error_mm(A: NDArray[np.float64], B: NDArray[np.float64]) -> float:
     """Distance between the translations, millimetres."""
     return float(np.linalg.norm(A[:3, 3] - B[:3, 3]) * 1e3)
+
+
+@dataclass(frozen=True)
+class SyntheticFolder:
+    """Rendered board images written as PNG files, with the robot poses that took them."""
+
+    folder: Path
+    files: list[Path]
+    poses_file: Path
+    data: HandEyeData
+
+
+def write_synthetic_folder(
+    folder: Path, n: int = 8, *, seed: int = 4, blank: int = 1
+) -> SyntheticFolder:
+    """``n`` rendered views of :data:`BOARD` (plus ``blank`` images without a board, last)
+    as ``view_XX.png`` in ``folder``, and ``poses.txt`` with one row-major 4x4
+    ``T_base_ee`` per image (the blank images get the first pose again)."""
+    import cv2
+
+    folder.mkdir(parents=True, exist_ok=True)
+    data = hand_eye_samples(n, seed=seed)
+    images = rendered_views(data.T_cam_board, seed=seed)
+    images += [np.full((TRUE_CAMERA.height, TRUE_CAMERA.width), 128, np.uint8)] * blank
+    files = []
+    for k, img in enumerate(images):
+        path = folder / f"view_{k:02d}.png"
+        cv2.imwrite(str(path), img)
+        files.append(path)
+    poses = list(data.T_base_ee) + [data.T_base_ee[0]] * blank
+    poses_file = folder / "poses.txt"
+    poses_file.write_text("\n".join(" ".join(f"{v:.12g}" for v in T.ravel()) for T in poses) + "\n")
+    return SyntheticFolder(folder, files, poses_file, data)

@@ -242,7 +242,9 @@ def test_kuka_real_data_consistency(kuka_result):
     deg_rms, deg_max = r.consistency_deg
     assert mm_rms <= 2.0 and mm_max <= 2.0
     assert deg_rms <= 0.2
-    assert deg_max <= 0.35  # the worst sample (im_01) misses 0.2 deg; see docs/readme/calibration.md
+    assert (
+        deg_max <= 0.35
+    )  # the worst sample (im_01) misses 0.2 deg; see docs/readme/calibration.md
     best = min(r.candidates, key=lambda c: c.rms_px)
     assert best.spread_mm <= 1.0 and best.spread_deg <= 0.1  # the closed-form answer
     assert r.rms_px < best.rms_px  # the refinement lowers the reprojection error

@@ -17,7 +17,9 @@ R. Y. Tsai, "A versatile camera calibration technique...", IEEE J. Robotics and 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,9 +46,31 @@ __all__ = [
     "calibrate_intrinsics",
     "calibrate_intrinsics_from_detections",
     "pose_from_rvec",
+    "single_threaded_opencv",
 ]
 
 _CRITERIA = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+
+
+_THREADS_LOCK = threading.Lock()
+
+
+@contextmanager
+def single_threaded_opencv() -> Iterator[None]:
+    """Run OpenCV single-threaded inside the block, so that its sums come out in one order.
+
+    ``calibrateCamera`` accumulates its normal equations in parallel; with several threads
+    the last bits of the answer depend on scheduling, and a stored session would not
+    re-solve to exactly the same numbers.  The thread count is process-wide, so blocks are
+    serialised and the previous count is restored.
+    """
+    with _THREADS_LOCK:
+        before = cv2.getNumThreads()
+        cv2.setNumThreads(1)
+        try:
+            yield
+        finally:
+            cv2.setNumThreads(before)
 
 
 def pose_from_rvec(rvec: Any, tvec: Any) -> NDArray[np.float64]:
@@ -324,9 +348,10 @@ def _solve(
 ) -> tuple[
     float, NDArray[np.float64], NDArray[np.float64], list[NDArray[np.float64]], NDArray[np.float64]
 ]:
-    rms, K, dist, rvecs, tvecs, std_in, _std_ex, _per_view = cv2.calibrateCameraExtended(
-        obj, img, size, np.eye(3), np.zeros(5), flags=flags, criteria=_CRITERIA
-    )
+    with single_threaded_opencv():
+        rms, K, dist, rvecs, tvecs, std_in, _std_ex, _per_view = cv2.calibrateCameraExtended(
+            obj, img, size, np.eye(3), np.zeros(5), flags=flags, criteria=_CRITERIA
+        )
     poses = [pose_from_rvec(r, t) for r, t in zip(rvecs, tvecs, strict=True)]
     return (
         float(rms),
