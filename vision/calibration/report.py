@@ -142,8 +142,7 @@ def _consistency(ax: Any, r: HandEyeResult) -> None:
     ax.set_ylabel("y or z offset (mm)")
     mm_rms, mm_max = r.consistency_mm
     ax.set_title(
-        f"Board origin in base predicted per pose: RMS {mm_rms:.2f} mm, max {mm_max:.2f} mm",
-        fontsize=10,
+        f"Board origin in base, per pose:\nRMS {mm_rms:.2f} mm, max {mm_max:.2f} mm", fontsize=10
     )
     ax.legend(fontsize=7)
 
