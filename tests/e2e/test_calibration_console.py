@@ -16,7 +16,10 @@ def test_calibration_tab_lists_sessions_shows_reports_and_activates(browser, ser
     viewer = server.token("e2e-viewer", "viewer")
     h = {"Authorization": f"Bearer {eng}"}
     with httpx.Client(base_url=server.base + "/api/calibration", headers=h, timeout=120) as c:
-        r = c.post("/sessions", json={"kind": "intrinsic", "board": {"cols": 9, "rows": 6, "square_mm": 30}})
+        r = c.post(
+            "/sessions",
+            json={"kind": "intrinsic", "board": {"cols": 9, "rows": 6, "square_mm": 30}},
+        )
         sid = r.json()["session"]["id"]
         files = [("images", (f.name, f.read_bytes(), "image/png")) for f in folder.files]
         assert c.post(f"/sessions/{sid}/samples", files=files).status_code == 201
@@ -45,9 +48,13 @@ def test_calibration_tab_lists_sessions_shows_reports_and_activates(browser, ser
     page.wait_for_selector("#calibration-page:not([hidden])")
     page.click(f"#calib-sessions tbody tr[data-id='{sid}']")
     page.click(f"#calib-calibrations tbody tr:has-text('#{cid}') >> text=Report")
-    page.wait_for_function("() => document.querySelector('#plot-residuals').src.startsWith('blob:')")
+    page.wait_for_function(
+        "() => document.querySelector('#plot-residuals').src.startsWith('blob:')"
+    )
     page.wait_for_function("() => document.querySelector('#plot-coverage').naturalWidth > 200")
-    assert "RMS" in page.inner_text("#calib-summary") and "fx =" in page.inner_text("#calib-summary")
+    assert "RMS" in page.inner_text("#calib-summary") and "fx =" in page.inner_text(
+        "#calib-summary"
+    )
     page.click(f".activate[data-id='{cid}']")
     page.wait_for_selector(f"#calib-sessions tbody tr[data-id='{sid}'] .status-active")
     assert f"intrinsic: #{cid}" in page.inner_text("#calib-active")
