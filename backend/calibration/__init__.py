@@ -2,24 +2,26 @@
 jobs, activation, history and reports (the algorithms live in ``vision.calibration``)."""
 
 from backend.calibration.reports import PLOTS, calibration_public, calibration_report, report_png
-from backend.calibration.service import (
+from backend.calibration.sessions import (
     NotFound,
     SampleIn,
+    add_samples,
+    cell_id_of,
+    create_session,
+    get_session,
+    list_sessions,
+    load_detections,
+    session_summary,
+)
+from backend.calibration.solving import (
     SolveOptions,
     SolveOutcome,
     activate,
     active_calibrations,
-    add_samples,
-    cell_id_of,
     check_solvable,
-    create_session,
     get_calibration,
-    get_session,
     history,
-    list_sessions,
-    load_detections,
     result_of,
-    session_summary,
     solve_session,
 )
 

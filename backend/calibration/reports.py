@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from backend.calibration.service import NotFound, result_of
+from backend.calibration.sessions import NotFound
+from backend.calibration.solving import result_of
 from backend.db.models import Calibration, CalibrationKind
 from vision.calibration import HandEyeResult, IntrinsicsResult
 from vision.calibration import report as plots
