@@ -14,10 +14,12 @@ from backend.calibration.sessions import (
     session_summary,
 )
 from backend.calibration.solving import (
+    CameraCalibration,
     SolveOptions,
     SolveOutcome,
     activate,
     active_calibrations,
+    active_camera_calibration,
     check_solvable,
     get_calibration,
     history,
@@ -27,12 +29,14 @@ from backend.calibration.solving import (
 
 __all__ = [
     "PLOTS",
+    "CameraCalibration",
     "NotFound",
     "SampleIn",
     "SolveOptions",
     "SolveOutcome",
     "activate",
     "active_calibrations",
+    "active_camera_calibration",
     "add_samples",
     "calibration_public",
     "calibration_report",

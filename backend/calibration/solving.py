@@ -39,10 +39,12 @@ from vision.camera import PinholeCamera
 from vision.errors import CalibrationError
 
 __all__ = [
+    "CameraCalibration",
     "SolveOptions",
     "SolveOutcome",
     "activate",
     "active_calibrations",
+    "active_camera_calibration",
     "check_solvable",
     "get_calibration",
     "history",
@@ -360,3 +362,39 @@ async def active_calibrations(
     for r in rows:
         out[r.kind] = r
     return out
+
+
+@dataclass(frozen=True)
+class CameraCalibration:
+    """What the rest of the cell needs from the active calibrations.
+
+    Attributes
+    ----------
+    camera : PinholeCamera or None
+        The active intrinsics (eqs. 1-5), None if none is active.
+    T_ee_cam : ndarray of shape (4, 4) or None
+        The active hand-eye transform (inverse of eq. 12's H), metres.
+    intrinsic_id, hand_eye_id : int or None
+        The calibration rows they come from.
+    """
+
+    camera: PinholeCamera | None
+    T_ee_cam: NDArray[np.float64] | None
+    intrinsic_id: int | None
+    hand_eye_id: int | None
+
+
+async def active_camera_calibration(session: AsyncSession, cell_id: int) -> CameraCalibration:
+    """The cell's active camera model and ``T_ee_cam`` (for recognition and pose estimation)."""
+    act = await active_calibrations(session, cell_id)
+    intr, he = act[CalibrationKind.intrinsic], act[CalibrationKind.hand_eye]
+    camera = None
+    if intr is not None:
+        w, h = intr.parameters["image_size"]
+        camera = PinholeCamera(
+            intr.parameters["K"], intr.parameters["dist"], width=int(w), height=int(h)
+        )
+    T = None if he is None else np.asarray(he.parameters["T_ee_cam"], dtype=np.float64)
+    return CameraCalibration(
+        camera, T, None if intr is None else intr.id, None if he is None else he.id
+    )

@@ -130,6 +130,8 @@ async def test_one_active_calibration_per_kind(db, synthetic_folder):
     async with db.session() as s:
         act = await svc.active_calibrations(s, await svc.cell_id_of(s))
         assert act[CalibrationKind.intrinsic].id == b.id and act[CalibrationKind.hand_eye] is None
+        cam = await svc.active_camera_calibration(s, await svc.cell_id_of(s))
+        assert cam.intrinsic_id == b.id and cam.T_ee_cam is None and cam.hand_eye_id is None
         assert not (await svc.get_calibration(s, a.id)).active
         row = await svc.get_session(s, sid)
         assert svc.session_summary(row)["status"] == "active"
