@@ -1,4 +1,5 @@
-"""The ``visioncell`` command line: serve the cell, migrate the database, manage users."""
+"""The ``visioncell`` command line: serve the cell, migrate the database, manage users,
+calibrate offline (``visioncell calibrate``, in :mod:`backend.cli_calibrate`)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from pydantic import ValidationError
 from rich.console import Console
 
 from backend import __version__
+from backend.cli_calibrate import calibrate_app
 from backend.settings import Settings
 
 __all__ = ["app", "main"]
@@ -27,6 +29,7 @@ db_app = typer.Typer(help="Database migrations (Alembic).", no_args_is_help=True
 user_app = typer.Typer(help="Users and API tokens.", no_args_is_help=True)
 app.add_typer(db_app, name="db")
 app.add_typer(user_app, name="user")
+app.add_typer(calibrate_app, name="calibrate")
 
 out = Console()
 err = Console(stderr=True)

@@ -4,6 +4,7 @@
 const $ = (sel) => document.querySelector(sel);
 const deg = (rad) => (rad * 180 / Math.PI).toFixed(2);
 let token = sessionStorage.getItem("visioncell-token") || "";
+let role = "";
 let ws = null;
 let cameraTimer = null;
 
@@ -31,11 +32,12 @@ async function signIn(candidate) {
   token = candidate;
   const me = await api("GET", "/users/me");
   sessionStorage.setItem("visioncell-token", token);
+  role = me.role;
   $("#who").textContent = `${me.name} (${me.role})`;
   $("#login-page").hidden = true;
-  $("#cell-page").hidden = false;
   $("#nav").hidden = false;
   $("#logout").hidden = false;
+  showPage(location.hash === "#calibration" ? "calibration" : "cell");
   await startCell();
 }
 
@@ -101,7 +103,10 @@ function connectLive() {
     const msg = JSON.parse(ev.data);
     if (msg.type === "hello") { $("#conn").textContent = "live"; $("#conn").className = "badge on"; }
     else if (msg.type === "state") renderState(msg.state, msg.speed);
-    else if (msg.type === "job") renderJob(msg.job);
+    else if (msg.type === "job") {
+      renderJob(msg.job);
+      if (msg.job.kind === "calibrate" && msg.job.state !== "running" && !$("#calibration-page").hidden) loadSessions();
+    }
   };
   ws.onclose = (ev) => {
     $("#conn").textContent = "offline";
@@ -134,6 +139,138 @@ async function command(method, path, body) {
   catch (e) { showMessage(`${e.message}`); return null; }
 }
 
+// -- pages ----------------------------------------------------------------------------
+function showPage(name) {
+  document.querySelectorAll("#nav .tab").forEach((a) => a.classList.toggle("active", a.dataset.page === name));
+  $("#cell-page").hidden = name !== "cell";
+  $("#calibration-page").hidden = name !== "calibration";
+  if (name === "calibration") loadSessions();
+}
+
+// -- calibration ----------------------------------------------------------------------
+let calibSession = null;
+
+function el(tag, text, cls) {
+  const e = document.createElement(tag);
+  if (text !== undefined) e.textContent = text;
+  if (cls) e.className = cls;
+  return e;
+}
+
+function messageRow(text, span) {
+  const tr = el("tr");
+  const td = el("td", text, "small");
+  td.colSpan = span;
+  tr.append(td);
+  return tr;
+}
+
+function boardText(b) {
+  if (b.type === "charuco") return `ChArUco ${b.squares_x}x${b.squares_y}, ${(b.square_m * 1000).toFixed(1)} mm`;
+  return `${b.cols}x${b.rows}, ${(b.square_m * 1000).toFixed(1)} mm`;
+}
+
+async function loadSessions() {
+  try {
+    const [list, active] = await Promise.all([api("GET", "/calibration/sessions"), api("GET", "/calibration/active")]);
+    const body = $("#calib-sessions tbody");
+    body.replaceChildren();
+    list.data.forEach((s) => {
+      const tr = el("tr");
+      tr.dataset.id = s.id;
+      if (calibSession === s.id) tr.classList.add("selected");
+      tr.append(el("td", String(s.id)), el("td", s.kind), el("td", boardText(s.board)),
+        el("td", `${s.accepted_count} / ${s.sample_count}`), el("td", s.status, `status-${s.status}`),
+        el("td", s.created_at.slice(0, 19).replace("T", " ")));
+      tr.addEventListener("click", () => selectSession(s.id));
+      body.append(tr);
+    });
+    if (!list.count) body.append(messageRow("No calibration sessions yet.", 6));
+    const parts = Object.entries(active).map(([k, v]) => `${k}: ${v ? `#${v.id} (${v.rms_px.toFixed(3)} px)` : "none"}`);
+    $("#calib-active").textContent = `Active: ${parts.join(", ")}`;
+    if (calibSession !== null) await selectSession(calibSession);
+  } catch (e) { $("#calib-active").textContent = e.message; }
+}
+
+function calibSummary(c) {
+  const p = c.parameters;
+  if (c.kind === "intrinsic") return `fx ${p.K[0][0].toFixed(1)}, fy ${p.K[1][1].toFixed(1)} px`;
+  const t = p.T_ee_cam.slice(0, 3).map((r) => (r[3] * 1000).toFixed(1));
+  return `t_ee_cam (${t.join(", ")}) mm`;
+}
+
+async function selectSession(id) {
+  calibSession = id;
+  document.querySelectorAll("#calib-sessions tbody tr").forEach((tr) => tr.classList.toggle("selected", Number(tr.dataset.id) === id));
+  const d = await api("GET", `/calibration/sessions/${id}`);
+  $("#calib-detail").hidden = false;
+  $("#calib-detail-title").textContent = `Session ${id}: ${d.session.kind}, ${boardText(d.session.board)} (${d.session.status})`;
+  const body = $("#calib-calibrations tbody");
+  body.replaceChildren();
+  d.calibrations.forEach((c) => {
+    const tr = el("tr");
+    const view = el("button", "Report", "small-button");
+    view.addEventListener("click", () => showReport(c.id));
+    const cell = el("td");
+    cell.append(view);
+    if (role === "engineer" && !c.active) {
+      const act = el("button", "Activate", "small-button activate");
+      act.dataset.id = c.id;
+      act.addEventListener("click", () => activateCalibration(c.id));
+      cell.append(act);
+    }
+    tr.append(el("td", `#${c.id} ${c.kind}`), el("td", c.rms_px === null ? "-" : c.rms_px.toFixed(3)),
+      el("td", calibSummary(c)), el("td", c.active ? "active" : "", c.active ? "status-active" : ""), cell);
+    body.append(tr);
+  });
+  if (!d.calibrations.length) body.append(messageRow("Not solved yet.", 5));
+  const ul = $("#calib-samples");
+  ul.replaceChildren();
+  d.samples.forEach((s) => ul.append(el("li", `${s.index} ${s.name}: ${s.accepted ? "" : "rejected, "}${s.reason}`, s.accepted ? "" : "rejected")));
+}
+
+async function authImage(img, url) {
+  const res = await fetch(url, { headers: { Authorization: `Bearer ${token}` } });
+  if (!res.ok) { img.hidden = true; return; }
+  const old = img.src;
+  img.src = URL.createObjectURL(await res.blob());
+  img.hidden = false;
+  if (old.startsWith("blob:")) URL.revokeObjectURL(old);
+}
+
+async function showReport(id) {
+  const r = await api("GET", `/calibration/calibrations/${id}/report`);
+  const s = r.summary;
+  $("#calib-report").hidden = false;
+  $("#calib-report-title").textContent = `Report of calibration ${id} (${r.calibration.kind})`;
+  const lines = [];
+  if (r.calibration.kind === "intrinsic") {
+    lines.push(`RMS ${s.rms_px.toFixed(3)} px, model ${s.model}, ${s.views_used} images used, ${s.views_rejected} rejected`);
+    for (const [k, v] of Object.entries(s.intrinsics)) lines.push(`${k} = ${v.value.toFixed(2)} ± ${v.std.toFixed(2)} px`);
+    for (const [k, v] of Object.entries(s.distortion)) lines.push(`${k} = ${v.value.toFixed(5)} ± ${v.std.toFixed(5)}`);
+  } else {
+    const c = s.consistency;
+    lines.push(`T_ee_cam by ${s.method}${s.refined ? " + refinement" : ""}: t = (${s.translation_mm.map((v) => v.toFixed(2)).join(", ")}) mm`);
+    lines.push(`board pose consistency: RMS ${c.translation_rms_mm.toFixed(3)} mm (max ${c.translation_max_mm.toFixed(3)}), RMS ${c.rotation_rms_deg.toFixed(4)} deg (max ${c.rotation_max_deg.toFixed(4)})`);
+    lines.push(`reprojection RMS ${s.rms_px.toFixed(3)} px`);
+    s.warnings.forEach((w) => lines.push(`warning: ${w}`));
+  }
+  s.rejected.forEach((x) => lines.push(`rejected ${x.name}: ${x.reason}`));
+  $("#calib-summary").textContent = lines.join("\n");
+  await authImage($("#plot-residuals"), r.plots.residuals);
+  await authImage($("#plot-coverage"), r.plots.coverage);
+  if (r.plots.consistency) await authImage($("#plot-consistency"), r.plots.consistency);
+  else $("#plot-consistency").hidden = true;
+}
+
+async function activateCalibration(id) {
+  $("#calib-message").textContent = "";
+  try {
+    await api("POST", `/calibration/calibrations/${id}/activate`);
+    await loadSessions();
+  } catch (e) { $("#calib-message").textContent = e.message; }
+}
+
 $("#login-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();
   $("#login-error").textContent = "";
@@ -141,6 +278,8 @@ $("#login-form").addEventListener("submit", async (ev) => {
   catch (e) { $("#login-error").textContent = e.status === 401 ? "That token is not valid." : e.message; }
 });
 $("#logout").addEventListener("click", signOut);
+document.querySelectorAll("#nav .tab").forEach((a) => a.addEventListener("click", () => showPage(a.dataset.page)));
+$("#calib-refresh").addEventListener("click", loadSessions);
 $("#estop").addEventListener("click", () => command("POST", "/robot/estop"));
 $("#home").addEventListener("click", () => command("POST", "/robot/home", { speed: Number($("#speed").value) }));
 $("#stop").addEventListener("click", () => command("POST", "/robot/stop"));

@@ -2,10 +2,20 @@
 
 from fastapi import APIRouter
 
-from backend.api.routes import camera, cells, health, jobs, live, recognition, robot, users
+from backend.api.routes import (
+    calibration,
+    camera,
+    cells,
+    health,
+    jobs,
+    live,
+    recognition,
+    robot,
+    users,
+)
 
 __all__ = ["api_router"]
 
 api_router = APIRouter(prefix="/api")
-for _r in (health, robot, jobs, users, cells, camera, recognition, live):
+for _r in (health, robot, jobs, users, cells, camera, recognition, calibration, live):
     api_router.include_router(_r.router)

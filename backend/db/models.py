@@ -228,6 +228,7 @@ class CalibrationSample(Base):
         ForeignKey("calibration_sessions.id", ondelete="CASCADE"), index=True
     )
     index: Mapped[int] = mapped_column(Integer)
+    name: Mapped[str] = mapped_column(String(255), default="", server_default="")
     image_png: Mapped[bytes] = mapped_column(LargeBinary)
     joints: Mapped[list[Any] | None] = mapped_column(JSON, default=None)
     T_base_ee: Mapped[list[Any] | None] = mapped_column(JSON, default=None)

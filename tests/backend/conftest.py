@@ -33,3 +33,11 @@ def client(settings, tokens) -> Iterator[TestClient]:
 def headers(tokens) -> dict[str, Any]:
     """``headers["viewer"]`` etc.: Authorization headers per role."""
     return {role: {"Authorization": f"Bearer {tok}"} for role, tok in tokens.items()}
+
+
+@pytest.fixture(scope="session")
+def synthetic_folder(tmp_path_factory):
+    """Rendered calibration images (8 views + 1 blank) and their robot poses, written once."""
+    from tests.utils.calibration import write_synthetic_folder
+
+    return write_synthetic_folder(tmp_path_factory.mktemp("calib") / "views")

@@ -1,0 +1,406 @@
+"""Calibration: sessions and their samples (uploads), solve jobs, reports, activation, history.
+
+Reading needs the viewer role; uploading, solving and activating need the engineer role.
+The work itself is in :mod:`backend.calibration`.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import PurePath
+from typing import Annotated, Any, Literal
+
+import cv2
+import numpy as np
+from fastapi import APIRouter, File, Form, Query, UploadFile, status
+from fastapi.responses import JSONResponse, Response
+from pydantic import BaseModel, Field, model_validator
+
+from backend import calibration as svc
+from backend.api.deps import CellDep, DatabaseDep, EngineerUser, SessionDep, ViewerUser
+from backend.api.errors import ApiError, error_body
+from backend.db.models import CalibrationKind
+from backend.jobs import Job, JobState
+from vision.calibration import (
+    ALL_METHODS,
+    ARUCO_DICTIONARIES,
+    Board,
+    CharucoBoard,
+    Chessboard,
+    HandEyeOptions,
+    IntrinsicsOptions,
+)
+from vision.calibration.io import parse_poses
+
+router = APIRouter(prefix="/calibration", tags=["calibration"])
+
+#: File types an upload may contain (by suffix; the content must decode as an image too).
+IMAGE_TYPES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+MAX_IMAGES_PER_UPLOAD = 200
+
+
+class BoardIn(BaseModel):
+    """A calibration target; lengths in millimetres."""
+
+    type: Literal["chessboard", "charuco"] = "chessboard"
+    cols: int | None = Field(None, ge=3, description="Chessboard: inner corners per row")
+    rows: int | None = Field(None, ge=3, description="Chessboard: inner corners per column")
+    squares_x: int | None = Field(None, ge=3, description="ChArUco: squares along x")
+    squares_y: int | None = Field(None, ge=3, description="ChArUco: squares along y")
+    square_mm: float = Field(gt=0, description="Side of one square, mm")
+    marker_mm: float | None = Field(None, gt=0, description="ChArUco: marker side, mm")
+    dictionary: str = Field("DICT_5X5_100", description=f"ChArUco: one of {ARUCO_DICTIONARIES}")
+    legacy: bool = False
+
+    def to_board(self) -> Board:
+        if self.type == "chessboard":
+            if self.cols is None or self.rows is None:
+                raise ValueError("board: a chessboard needs cols and rows (inner corners)")
+            return Chessboard(self.cols, self.rows, self.square_mm / 1e3)
+        if self.squares_x is None or self.squares_y is None or self.marker_mm is None:
+            raise ValueError("board: a ChArUco board needs squares_x, squares_y and marker_mm")
+        return CharucoBoard(
+            self.squares_x,
+            self.squares_y,
+            self.square_mm / 1e3,
+            self.marker_mm / 1e3,
+            self.dictionary,
+            self.legacy,
+        )
+
+
+class SessionIn(BaseModel):
+    kind: CalibrationKind
+    board: BoardIn
+    note: str = Field("", max_length=2000)
+
+
+class SolveIn(BaseModel):
+    """Options of a solve (see ``IntrinsicsOptions`` and ``HandEyeOptions``)."""
+
+    radial_only: bool = Field(False, description="Hold p1 = p2 = 0 (chapter: radial only)")
+    k3: bool = Field(False, description="Also estimate k3")
+    fix_aspect_ratio: bool = Field(False, description="fx = fy")
+    reject_outliers: bool = True
+    min_views: int = Field(4, ge=3)
+    methods: list[str] = Field(list(ALL_METHODS), description=f"Hand-eye solvers, of {ALL_METHODS}")
+    refine: bool = Field(True, description="Hand-eye: refine by reprojection error")
+    loss: Literal["linear", "huber", "soft_l1", "cauchy"] = "linear"
+    intrinsics: Literal["session", "active"] | int = Field(
+        "session",
+        description="Hand-eye: intrinsics from this session's images, the active ones, or a calibration id",
+    )
+    activate: bool = Field(False, description="Activate the result at once")
+
+    @model_validator(mode="after")
+    def _known_methods(self) -> SolveIn:
+        bad = [m for m in self.methods if m not in ALL_METHODS]
+        if bad or not self.methods:
+            raise ValueError(
+                f"methods must be a non-empty subset of {list(ALL_METHODS)}, got {self.methods}"
+            )
+        return self
+
+    def to_options(self) -> svc.SolveOptions:
+        return svc.SolveOptions(
+            intrinsics=IntrinsicsOptions(
+                radial_only=self.radial_only,
+                k3=self.k3,
+                fix_aspect_ratio=self.fix_aspect_ratio,
+                reject_outliers=self.reject_outliers,
+                min_views=self.min_views,
+            ),
+            hand_eye=HandEyeOptions(
+                methods=tuple(self.methods), refine=self.refine, loss=self.loss
+            ),
+            intrinsics_source=self.intrinsics,
+            activate=self.activate,
+        )
+
+
+def _decode(name: str, data: bytes) -> np.ndarray:
+    suffix = PurePath(name).suffix.lower()
+    if suffix not in IMAGE_TYPES:
+        raise ApiError(
+            415,
+            "unsupported_media_type",
+            f"file {name!r} is not an image: upload PNG, JPEG, BMP or TIFF files",
+        )
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) if data else None
+    if img is None:
+        raise ApiError(415, "unsupported_media_type", f"file {name!r} does not decode as an image")
+    if img.dtype != np.uint8:
+        raise ApiError(
+            422, "bad_image", f"image {name!r} must have 8 bits per channel, got {img.dtype}"
+        )
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
+    elif img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    return img
+
+
+def _joints(text: str | None, n: int) -> list[list[float] | None]:
+    if not text:
+        return [None] * n
+    import json
+
+    try:
+        rows = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"joints must be a JSON list of joint vectors (radians): {exc}") from None
+    if not isinstance(rows, list) or len(rows) != n:
+        raise ValueError(f"joints must list one joint vector per image ({n}), got {text[:80]!r}")
+    out: list[list[float] | None] = []
+    for k, q in enumerate(rows):
+        if not isinstance(q, list) or not all(isinstance(v, int | float) for v in q):
+            raise ValueError(f"joints[{k}] must be a list of numbers, got {q!r}")
+        if not all(math.isfinite(v) for v in q):
+            raise ValueError(f"joints[{k}] must be finite, got {q!r}")
+        out.append([float(v) for v in q])
+    return out
+
+
+# -- sessions -----------------------------------------------------------------------------
+
+
+@router.post(
+    "/sessions", status_code=status.HTTP_201_CREATED, summary="Start a calibration session"
+)
+async def create_calibration_session(
+    _: EngineerUser, session: SessionDep, body: SessionIn
+) -> dict[str, Any]:
+    board = body.board.to_board()
+    cell_id = await svc.cell_id_of(session)
+    row = await svc.create_session(
+        session, kind=body.kind, board=board, cell_id=cell_id, note=body.note
+    )
+    row = await svc.get_session(session, row.id)
+    return {"session": svc.session_summary(row)}
+
+
+@router.get("/sessions", summary="Calibration sessions, newest first")
+async def read_calibration_sessions(
+    _: ViewerUser,
+    session: SessionDep,
+    limit: Annotated[int, Query(ge=1, le=500)] = 100,
+    offset: Annotated[int, Query(ge=0)] = 0,
+) -> dict[str, Any]:
+    rows = await svc.list_sessions(session, limit=limit, offset=offset)
+    data = [svc.session_summary(r) for r in rows]
+    return {"data": data, "count": len(data)}
+
+
+def _sample_public(s: Any) -> dict[str, Any]:
+    return {
+        "index": s.index,
+        "name": s.name,
+        "accepted": s.accepted,
+        "reason": s.reason,
+        "corner_count": len(s.corners) if s.corners else 0,
+        "joints": s.joints,
+        "T_base_ee": s.T_base_ee,
+        "created_at": s.created_at.isoformat(),
+    }
+
+
+@router.get("/sessions/{session_id}", summary="One session with its samples and calibrations")
+async def read_calibration_session(
+    _: ViewerUser, session: SessionDep, session_id: int
+) -> dict[str, Any]:
+    row = await svc.get_session(session, session_id)
+    cals = sorted(row.calibrations, key=lambda c: c.id, reverse=True)
+    return {
+        "session": svc.session_summary(row),
+        "samples": [_sample_public(s) for s in sorted(row.samples, key=lambda s: s.index)],
+        "calibrations": [svc.calibration_public(c) for c in cals],
+    }
+
+
+@router.post(
+    "/sessions/{session_id}/samples",
+    status_code=status.HTTP_201_CREATED,
+    summary="Upload images (and robot poses for hand-eye) to a session",
+)
+async def create_calibration_samples(
+    _: EngineerUser,
+    session: SessionDep,
+    session_id: int,
+    images: Annotated[list[UploadFile], File(description="PNG, JPEG, BMP or TIFF images")],
+    poses: Annotated[
+        UploadFile | None,
+        File(description="Text file: one row-major 4x4 T_base_ee per line (metres), one per image"),
+    ] = None,
+    poses_unit: Annotated[Literal["m", "mm"], Form()] = "m",
+    joints: Annotated[
+        str | None, Form(description="JSON list of joint vectors (radians), one per image")
+    ] = None,
+) -> dict[str, Any]:
+    cal = await svc.get_session(session, session_id)
+    if not images:
+        raise ApiError(422, "validation_error", "images: upload at least one image")
+    if len(images) > MAX_IMAGES_PER_UPLOAD:
+        raise ApiError(
+            413,
+            "too_large",
+            f"at most {MAX_IMAGES_PER_UPLOAD} images per upload, got {len(images)}",
+        )
+    decoded = []
+    for f in images:
+        name = PurePath(f.filename or "image").name
+        decoded.append((name, _decode(name, await f.read())))
+    T: list[np.ndarray | None] = [None] * len(decoded)
+    if poses is not None:
+        text = (await poses.read()).decode("utf-8", errors="replace")
+        P = parse_poses(
+            text, unit_m=1e-3 if poses_unit == "mm" else 1.0, source=poses.filename or "poses"
+        )
+        if P.shape[0] != len(decoded):
+            raise ValueError(
+                f"poses has {P.shape[0]} poses but {len(decoded)} images were uploaded: "
+                "give one pose per image, in the same order"
+            )
+        T = list(P)
+    q = _joints(joints, len(decoded))
+    rows = await svc.add_samples(
+        session,
+        cal,
+        [
+            svc.SampleIn(name=n, image=img, joints=q[k], T_base_ee=T[k])
+            for k, (n, img) in enumerate(decoded)
+        ],
+    )
+    data = [_sample_public(r) for r in rows]
+    accepted = sum(1 for r in rows if r.accepted)
+    return {
+        "data": data,
+        "count": len(data),
+        "accepted": accepted,
+        "rejected": len(data) - accepted,
+    }
+
+
+@router.get(
+    "/sessions/{session_id}/samples/{index}/image.png",
+    summary="The stored image of a sample",
+    response_class=Response,
+)
+async def read_calibration_sample_image(
+    _: ViewerUser, session: SessionDep, session_id: int, index: int
+) -> Response:
+    row = await svc.get_session(session, session_id)
+    for s in row.samples:
+        if s.index == index:
+            return Response(s.image_png, media_type="image/png")
+    raise ApiError(404, "not_found", f"session {session_id} has no sample {index}")
+
+
+@router.post(
+    "/sessions/{session_id}/solve",
+    summary="Solve the session as a job (202 with the job, or 200/422 with ?wait=true)",
+)
+async def create_calibration_solve(
+    _: EngineerUser,
+    session: SessionDep,
+    db: DatabaseDep,
+    cell: CellDep,
+    session_id: int,
+    body: SolveIn | None = None,
+    wait: Annotated[bool, Query(description="Answer when the solve has ended")] = False,
+) -> JSONResponse:
+    req = body or SolveIn()
+    options = req.to_options()
+    cal = await svc.get_session(session, session_id)
+    warnings = svc.check_solvable(cal, options)  # CalibrationError -> 422 at once
+
+    async def solve(job: Job) -> dict[str, Any]:
+        job.report(0.0, f"solving session {session_id}")
+        async with db.session() as s:
+            out = await svc.solve_session(s, session_id, options, progress=job.report)
+            result: dict[str, Any] = {
+                "calibration_id": out.calibration.id,
+                "kind": out.calibration.kind.value,
+                "rms_px": out.calibration.rms_px,
+                "active": out.calibration.active,
+                "warnings": warnings,
+            }
+            if out.intrinsic is not None:
+                result["intrinsic_calibration_id"] = out.intrinsic.id
+        job.report(1.0, f"calibration {result['calibration_id']}: RMS {result['rms_px']:.3f} px")
+        return result
+
+    job = cell.jobs.start(
+        "calibrate", solve, params={"session_id": session_id, "options": req.model_dump()}
+    )
+    if not wait:
+        return JSONResponse({"job": job.public()}, status_code=status.HTTP_202_ACCEPTED)
+    await cell.jobs.wait(job)
+    if job.state is JobState.failed and job.error is not None:
+        code = 422 if job.error["error"] == "calibration_failed" else 500
+        return JSONResponse(
+            {**error_body(job.error["error"], job.error["detail"]), "job": job.public()},
+            status_code=code,
+        )
+    return JSONResponse({"job": job.public()}, status_code=status.HTTP_200_OK)
+
+
+# -- calibrations -------------------------------------------------------------------------
+
+
+@router.get("/calibrations", summary="Calibration history, newest first")
+async def read_calibrations(
+    _: ViewerUser,
+    session: SessionDep,
+    kind: CalibrationKind | None = None,
+    session_id: int | None = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 100,
+) -> dict[str, Any]:
+    rows = await svc.history(session, kind=kind, session_id=session_id, limit=limit)
+    data = [svc.calibration_public(r) for r in rows]
+    return {"data": data, "count": len(data)}
+
+
+@router.get("/active", summary="The active calibration of each kind in this cell")
+async def read_active_calibrations(_: ViewerUser, session: SessionDep) -> dict[str, Any]:
+    cell_id = await svc.cell_id_of(session)
+    act = await svc.active_calibrations(session, cell_id)
+    return {k.value: (svc.calibration_public(v) if v else None) for k, v in act.items()}
+
+
+@router.get("/calibrations/{calibration_id}", summary="One calibration")
+async def read_calibration(
+    _: ViewerUser, session: SessionDep, calibration_id: int
+) -> dict[str, Any]:
+    return {
+        "calibration": svc.calibration_public(await svc.get_calibration(session, calibration_id))
+    }
+
+
+@router.get("/calibrations/{calibration_id}/report", summary="Report: summary and plot links")
+async def read_calibration_report(
+    _: ViewerUser, session: SessionDep, calibration_id: int
+) -> dict[str, Any]:
+    return svc.calibration_report(await svc.get_calibration(session, calibration_id))
+
+
+@router.get(
+    "/calibrations/{calibration_id}/report/{plot}.png",
+    summary="Report plot: residuals, coverage or consistency (hand-eye)",
+    response_class=Response,
+)
+async def read_calibration_plot(
+    _: ViewerUser, session: SessionDep, calibration_id: int, plot: str
+) -> Response:
+    import asyncio
+
+    cal = await svc.get_calibration(session, calibration_id)
+    png = await asyncio.to_thread(svc.report_png, cal, plot)
+    return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
+
+
+@router.post("/calibrations/{calibration_id}/activate", summary="Make this calibration active")
+async def update_calibration_activate(
+    _: EngineerUser, session: SessionDep, calibration_id: int
+) -> dict[str, Any]:
+    cal = await svc.activate(session, calibration_id)
+    return {"calibration": svc.calibration_public(cal)}
