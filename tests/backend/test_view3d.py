@@ -32,9 +32,11 @@ def test_link_poses_follow_the_kinematic_chain():
 
 @pytest.fixture
 async def cell(tmp_path):
+    # Real-time moves (about 1 s) so the 30 Hz view has many updates to count.
+
     settings = make_settings(tmp_path)
     c = Cell(
-        settings, IdealDriver(time_scale=20.0), ImageFolderCamera(settings.resolved_camera_folder())
+        settings, IdealDriver(time_scale=1.0), ImageFolderCamera(settings.resolved_camera_folder())
     )
     await c.start()
     yield c
@@ -52,7 +54,8 @@ async def test_view_starts_on_its_pinned_port_and_tracks_the_arm(cell):
         job = cell.move_joints(ASEA.q_ready, speed=1.0)
         await cell.jobs.wait(job)
         await asyncio.sleep(0.1)
-        assert view.updates > before + 2
+        assert job.state.value == "done", job.public()
+        assert view.updates > before + 2, (view.updates, before, job.result)
         ee = view._handles[-1]
         np.testing.assert_allclose(ee.position, T_base_ee(ASEA.q_ready)[:3, 3], atol=1e-6)
         # The panel's buttons run on viser's thread and reach the cell through the loop.
