@@ -29,7 +29,7 @@ from robot.model import ASEA, ArmModel, check_joints
 
 __all__ = [
     "JointTrajectory",
-    "plan_cartesian_line",
+    "plan_cartesian_line",  # noqa: F822 (resolved lazily by __getattr__ below)
     "plan_joint_move",
     "quintic",
     "sample_at_rate",
@@ -283,4 +283,11 @@ def sample_at_rate(traj: JointTrajectory, rate_hz: float) -> JointTrajectory:
     return JointTrajectory(t, check_joints(cols[0]), cols[1], cols[2])
 
 
-from robot.trajectory_cartesian import plan_cartesian_line  # noqa: E402  (needs JointTrajectory)
+def __getattr__(name: str) -> object:
+    # plan_cartesian_line lives in robot.trajectory_cartesian, which imports this module;
+    # resolving it lazily (PEP 562) lets either module be imported first.
+    if name == "plan_cartesian_line":
+        from robot.trajectory_cartesian import plan_cartesian_line
+
+        return plan_cartesian_line
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

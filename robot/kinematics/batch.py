@@ -140,12 +140,24 @@ class _Fitter:
         self, j: int, v: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         lo, hi = self.lo[j], self.hi[j]
-        # The smallest representative >= lo; the joint is within its range iff it is <= hi.
-        v = v + TAU * np.ceil((lo - v) * (1.0 / TAU))
-        inside = v <= hi
+        inside = (v >= lo) & (v <= hi)
+        if not inside.all():
+            # The smallest representative >= lo; within the range iff it is <= hi.
+            t = lo - v
+            t *= 1.0 / TAU
+            np.ceil(t, out=t)
+            t *= TAU
+            t += v
+            v = t
+            inside = v <= hi
         if self.full[j]:  # a second representative may be in range: take the nearer one
-            alt = v + TAU
-            v = np.where((alt <= hi) & (np.abs(alt - self.Sj[j]) < np.abs(v - self.Sj[j])), alt, v)
+            near_end = np.flatnonzero((v <= hi - TAU) | (v >= lo + TAU))
+            if near_end.size:
+                v = v.copy()
+                s = self.Sj[j] if self.Sj.shape[1] == 1 else self.Sj[j, near_end]
+                cur = v[near_end]
+                alt = np.where(cur <= hi - TAU, cur + TAU, cur - TAU)
+                v[near_end] = np.where(np.abs(alt - s) < np.abs(cur - s), alt, cur)
         return v, inside
 
 
