@@ -172,10 +172,16 @@ def check_pose(pose: Sequence[float] | ArrayLike) -> tuple[float, float, float, 
 def _unpack_seed(seed: ArrayLike | None, c: ArmConstants) -> tuple[float, ...]:
     if seed is None:
         return c.q_home
-    s = np.asarray(seed, dtype=np.float64)
-    if s.shape != (5,) or not np.all(np.isfinite(s)):
+    try:
+        vals = seed.tolist() if isinstance(seed, np.ndarray) else list(seed)  # type: ignore[arg-type]
+        if len(vals) != 5:
+            raise ValueError
+        s = (float(vals[0]), float(vals[1]), float(vals[2]), float(vals[3]), float(vals[4]))
+    except (TypeError, ValueError):
+        raise ValueError(f"seed must be 5 finite joint values (radians), got {seed!r}") from None
+    if not all(map(math.isfinite, s)):
         raise ValueError(f"seed must be 5 finite joint values (radians), got {seed!r}")
-    return tuple(s.tolist())
+    return s
 
 
 def _check_roll(roll: float) -> float:
