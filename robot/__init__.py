@@ -1,6 +1,15 @@
 """The arm: model, kinematics, trajectories, drivers and the simulated cell."""
 
-from robot.errors import DriverError, JointLimitError, RobotBusy, RobotError, Unreachable
+from robot.errors import (
+    DriverError,
+    JointLimitError,
+    JointLimitsBlock,
+    OrientationNotAchievable,
+    OutOfReach,
+    RobotBusy,
+    RobotError,
+    Unreachable,
+)
 from robot.model import ASEA, ArmModel, check_joints
 
 __all__ = [
@@ -8,6 +17,9 @@ __all__ = [
     "ArmModel",
     "DriverError",
     "JointLimitError",
+    "JointLimitsBlock",
+    "OrientationNotAchievable",
+    "OutOfReach",
     "RobotBusy",
     "RobotError",
     "Unreachable",

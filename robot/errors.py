@@ -10,7 +10,10 @@ __all__ = [
     "CommandTimeout",
     "DriverError",
     "JointLimitError",
+    "JointLimitsBlock",
     "LinkDown",
+    "OrientationNotAchievable",
+    "OutOfReach",
     "ProtocolError",
     "RobotBusy",
     "RobotError",
@@ -26,10 +29,54 @@ class RobotError(VisionCellError):
 
 
 class Unreachable(RobotError, ValueError):
-    """A Cartesian target has no inverse-kinematics solution; ``detail`` says why."""
+    """A Cartesian target has no inverse-kinematics solution; ``detail`` says why.
+
+    The subclasses below say which of the three reasons applies (``reason`` is a stable
+    short name); all share the API error code ``"unreachable"`` (HTTP 422).
+    """
 
     code = "unreachable"
     http_status = 422
+    reason = "unreachable"
+
+
+class OutOfReach(Unreachable):
+    """The target position lies outside the arm's reach, whatever the joint ranges."""
+
+    reason = "out_of_reach"
+
+
+class JointLimitsBlock(Unreachable):
+    """Every inverse-kinematics branch needs a joint outside its range.
+
+    Attributes
+    ----------
+    joints : tuple of int
+        1-based numbers of the joints that block every branch (may be empty when the
+        branches are blocked by different joints; ``detail`` then lists each branch).
+    """
+
+    reason = "joint_limit"
+
+    def __init__(self, detail: str, joints: tuple[int, ...] = ()) -> None:
+        super().__init__(detail)
+        self.joints = joints
+
+
+class OrientationNotAchievable(Unreachable):
+    """A 6-DOF target orientation is farther than allowed from what the 5-DOF arm can reach.
+
+    Attributes
+    ----------
+    residual_rad : float
+        Smallest rotation angle between the target orientation and a reachable one.
+    """
+
+    reason = "orientation"
+
+    def __init__(self, detail: str, residual_rad: float) -> None:
+        super().__init__(detail)
+        self.residual_rad = residual_rad
 
 
 class JointLimitError(RobotError, ValueError):
