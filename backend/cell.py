@@ -21,8 +21,10 @@ from backend.jobs import Job, JobManager
 from backend.settings import Settings
 from robot.drivers.base import MoveReport, RobotDriver
 from robot.errors import RobotBusy
+from robot.kinematics import ik
 from robot.model import ASEA, ArmModel, check_joints
-from robot.trajectory import plan_joint_move
+from robot.trajectory import JointTrajectory, plan_joint_move
+from robot.trajectory_cartesian import plan_cartesian_line
 from vision.errors import CameraError
 from vision.sources import Camera, Frame
 
@@ -99,15 +101,12 @@ class Cell:
             raise ValueError(f"speed must be in (0, 1], got {speed!r}")
         return s
 
-    def move_joints(self, q: ArrayLike, *, speed: float | None = None, kind: str = "move") -> Job:
-        """Start a joint move job to ``q`` (radians); the limit gate runs before anything moves."""
-        goal = check_joints(np.asarray(q, dtype=np.float64).reshape(-1), self.model)
-        s = self._check_speed(speed)
+    def _start_motion(self, kind: str, traj: JointTrajectory, params: dict[str, Any]) -> Job:
+        """Run ``traj`` as a motion job (the motion lock refuses a second one)."""
         if self.driver.state.estopped:
             raise RobotBusy("emergency stop is active: reset before moving")
 
         async def body(job: Job) -> dict[str, Any]:
-            traj = plan_joint_move(self.driver.state.q, goal, speed=s, model=self.model)
             job.report(0.0, f"moving for {traj.duration_s:.2f} s")
             report: MoveReport = await self.driver.move(traj)
             job.report(1.0, report.reason)
@@ -121,9 +120,41 @@ class Cell:
                 "max_tracking_error_rad": report.max_tracking_error_rad,
             }
 
-        return self.jobs.start(
-            kind, body, motion=True, params={"joints": goal.tolist(), "speed": s}
-        )
+        return self.jobs.start(kind, body, motion=True, params=params)
+
+    def move_joints(self, q: ArrayLike, *, speed: float | None = None, kind: str = "move") -> Job:
+        """Start a joint move job to ``q`` (radians); the limit gate runs before anything moves."""
+        goal = check_joints(np.asarray(q, dtype=np.float64).reshape(-1), self.model)
+        s = self._check_speed(speed)
+        traj = plan_joint_move(self.driver.state.q, goal, speed=s, model=self.model)
+        return self._start_motion(kind, traj, {"joints": goal.tolist(), "speed": s})
+
+    def move_pose(
+        self, pose: ArrayLike, *, roll: float = 0.0, speed: float | None = None, path: str = "joint"
+    ) -> Job:
+        """Move the flange to the chapter pose ``(x, y, z, u, w)`` with ``roll`` about the approach axis.
+
+        ``path="joint"`` solves IK (the branch nearest the current configuration) and makes a
+        synchronised joint move; ``path="line"`` moves the flange along a straight line, checked
+        for limits and branch continuity along the whole path.  Unreachable targets raise
+        :class:`~robot.errors.Unreachable` before anything moves.
+        """
+        s = self._check_speed(speed)
+        params = {
+            "pose": [float(v) for v in np.asarray(pose, dtype=np.float64).ravel()],
+            "roll": roll,
+            "speed": s,
+            "path": path,
+        }
+        q_now = np.asarray(self.driver.state.q)
+        if path == "joint":
+            goal = ik(pose, roll=roll, seed=q_now, model=self.model)
+            traj = plan_joint_move(q_now, goal, speed=s, model=self.model)
+            return self._start_motion("move_pose", traj, {**params, "joints": goal.tolist()})
+        if path == "line":
+            traj = plan_cartesian_line(q_now, pose, roll=roll, speed=s, model=self.model)
+            return self._start_motion("move_line", traj, params)
+        raise ValueError(f"path must be 'joint' or 'line', got {path!r}")
 
     def home(self, *, speed: float | None = None) -> Job:
         """Move to ``q_home``."""

@@ -8,6 +8,7 @@ from backend.api.routes import (
     cells,
     health,
     jobs,
+    kinematics,
     live,
     recognition,
     robot,
@@ -17,5 +18,5 @@ from backend.api.routes import (
 __all__ = ["api_router"]
 
 api_router = APIRouter(prefix="/api")
-for _r in (health, robot, jobs, users, cells, camera, recognition, calibration, live):
+for _r in (health, robot, kinematics, jobs, users, cells, camera, recognition, calibration, live):
     api_router.include_router(_r.router)

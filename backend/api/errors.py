@@ -48,7 +48,12 @@ def error_body(code: str, detail: str) -> dict[str, str]:
 
 
 def _loc(loc: tuple[object, ...]) -> str:
-    parts = [str(p) for p in loc if p not in ("body", "query", "path")]
+    # The first element says where the value came from (body, query, path, header).
+    parts = (
+        [str(p) for p in loc[1:]]
+        if loc and loc[0] in ("body", "query", "path", "header")
+        else [str(p) for p in loc]
+    )
     return ".".join(parts) or "request"
 
 

@@ -92,7 +92,16 @@ def test_out_of_range_joint_is_422_naming_joint_and_limit(
             "speed: Input should be less than or equal to 1",
         ),
         ({"joints": ["a", 1.5, -1.5, 0, 0]}, "joints.0: Input should be a valid number"),
-        ({}, "joints: Field required"),
+        ({}, "give exactly one of 'joints' and 'pose'"),
+        (
+            {"joints": [0, 1.5, -1.5, 0, 0], "pose": {"x": 0.8, "y": 0, "z": 1, "u": 0, "w": -1}},
+            "give exactly one",
+        ),
+        ({"pose": {"x": 0.8, "y": 0, "z": 1, "u": 0}}, "pose.w: Field required"),
+        (
+            {"pose": {"x": 0.8, "y": 0, "z": 1, "u": 0, "w": -1}, "path": "curve"},
+            "path: Input should be 'joint' or 'line'",
+        ),
     ],
 )
 def test_malformed_move_is_422_with_reason(client, headers, body, fragment):

@@ -3,23 +3,34 @@
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, status
 from fastapi.responses import JSONResponse
-from pydantic import BaseModel, Field, field_validator
+from pydantic import BaseModel, Field, field_validator, model_validator
 
 from backend.api.deps import CellDep, OperatorUser, ViewerUser
+from backend.api.schemas import PoseIn, check_joint_list
 from backend.jobs import Job
 
 router = APIRouter(prefix="/robot", tags=["robot"])
 
 
 class MoveIn(BaseModel):
-    """A joint-space target; radians, speed as a fraction of the joint speed limits."""
+    """A joint target, or a Cartesian target in the chapter's pose form (solved by IK).
 
-    joints: list[float] = Field(
-        description="q1..q5 in radians", examples=[[0.0, 1.5708, -1.5708, 0.0, 0.0]]
+    Exactly one of ``joints`` and ``pose`` must be given.
+    """
+
+    joints: list[float] | None = Field(
+        None, description="q1..q5 in radians", examples=[[0.0, 1.5708, -1.5708, 0.0, 0.0]]
+    )
+    pose: PoseIn | None = Field(
+        None, description="Flange target (x, y, z in metres, u = cos phi, w = sin phi)"
+    )
+    roll: float = Field(0.0, description="With pose: rotation about the approach axis, radians")
+    path: Literal["joint", "line"] = Field(
+        "joint", description="With pose: joint-space move or straight line"
     )
     speed: float | None = Field(
         None, gt=0.0, le=1.0, description="0 < speed <= 1 (default: the cell's speed)"
@@ -27,13 +38,21 @@ class MoveIn(BaseModel):
 
     @field_validator("joints")
     @classmethod
-    def _five_finite(cls, v: list[float]) -> list[float]:
-        if len(v) != 5:
-            raise ValueError(f"joints must have 5 values (q1..q5), got {len(v)}")
-        bad = [f"q{i + 1}={x!r}" for i, x in enumerate(v) if not math.isfinite(x)]
-        if bad:
-            raise ValueError(f"joints must be finite, got {', '.join(bad)}")
+    def _five_finite(cls, v: list[float] | None) -> list[float] | None:
+        return None if v is None else check_joint_list(v)
+
+    @field_validator("roll")
+    @classmethod
+    def _finite_roll(cls, v: float) -> float:
+        if not math.isfinite(v):
+            raise ValueError(f"roll must be finite, got {v!r}")
         return v
+
+    @model_validator(mode="after")
+    def _one_target(self) -> MoveIn:
+        if (self.joints is None) == (self.pose is None):
+            raise ValueError("give exactly one of 'joints' and 'pose'")
+        return self
 
 
 class SpeedIn(BaseModel):
@@ -55,11 +74,16 @@ async def read_state(_: ViewerUser, cell: CellDep) -> dict[str, Any]:
     return {"state": cell.driver.state.as_dict(), "speed": cell.speed, "driver": cell.driver.name}
 
 
-@router.post("/move", summary="Move to a joint target (202 with a job, or 200 with ?wait=true)")
+@router.post(
+    "/move", summary="Move to a joint or Cartesian target (202 with a job, or 200 with ?wait=true)"
+)
 async def create_move(
     _: OperatorUser, cell: CellDep, body: MoveIn, wait: WaitQuery = False
 ) -> JSONResponse:
-    job = cell.move_joints(body.joints, speed=body.speed)
+    if body.pose is not None:
+        job = cell.move_pose(body.pose.as_tuple(), roll=body.roll, speed=body.speed, path=body.path)
+    else:
+        job = cell.move_joints(body.joints, speed=body.speed)
     return await _answer(cell, job, wait)
 
 
