@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from vision.errors import VisionCellError
 
-__all__ = ["DriverError", "JointLimitError", "RobotBusy", "RobotError", "Unreachable"]
+__all__ = ["DriverError", "JointLimitError", "RobotBusy", "RobotError", "SimError", "Unreachable"]
 
 
 class RobotError(VisionCellError):
@@ -62,4 +62,11 @@ class RobotBusy(RobotError):
     """Another job holds the motion lock, or the arm is emergency-stopped."""
 
     code = "robot_busy"
+    http_status = 409
+
+
+class SimError(RobotError):
+    """The simulated cell cannot do what was asked (no free slot, unknown object or board)."""
+
+    code = "sim_error"
     http_status = 409

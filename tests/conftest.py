@@ -7,6 +7,10 @@ from pathlib import Path
 
 import pytest
 
+# MuJoCo picks its OpenGL back end when it is first imported: render headless (EGL), as
+# `make test` and .ci/run do.
+os.environ.setdefault("MUJOCO_GL", "egl")
+
 REPO = Path(__file__).resolve().parents[1]
 
 
