@@ -8,6 +8,7 @@ inverse kinematics (``robot.kinematics.ik``).
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -27,7 +28,12 @@ VIEWS = {"top": -90.0, "inner": -60.0, "outer": -120.0}
 
 
 def flange_config(
-    position: ArrayLike, phi_rad: float, *, q5: float = 0.0, seed: ArrayLike | None = None, model: ArmModel = ASEA
+    position: ArrayLike,
+    phi_rad: float,
+    *,
+    q5: float = 0.0,
+    seed: ArrayLike | None = None,
+    model: ArmModel = ASEA,
 ) -> NDArray[np.float64]:
     """Joints putting the flange at ``position`` (base frame) with approach angle ``phi_rad``.
 
@@ -45,16 +51,30 @@ def flange_config(
         f = fk(q, model)
         return np.concatenate([f[:3] - p, [math.cos(phi_rad) - f[3], math.sin(phi_rad) - f[4]]])
 
-    sol = least_squares(residual, q0[1:4], bounds=(model.lower[1:4], model.upper[1:4]), xtol=1e-14, ftol=1e-14, gtol=1e-14)
+    sol = least_squares(
+        residual,
+        q0[1:4],
+        bounds=(model.lower[1:4], model.upper[1:4]),
+        xtol=1e-14,
+        ftol=1e-14,
+        gtol=1e-14,
+    )
     q = np.array([q1, *sol.x, q5])
     miss = float(np.abs(residual(sol.x)).max())
     if miss > 1e-4 or not model.within_limits(q):
-        raise Unreachable(f"no configuration puts the flange at {p.tolist()} with phi = {math.degrees(phi_rad):.1f} deg (miss {miss:.3g})")
+        raise Unreachable(
+            f"no configuration puts the flange at {p.tolist()} with phi = {math.degrees(phi_rad):.1f} deg (miss {miss:.3g})"
+        )
     return check_joints(q, model)
 
 
 def viewpoint(
-    target: ArrayLike, view: str, *, distance_m: float = 0.42, q5: float = 0.0, model: ArmModel = ASEA
+    target: ArrayLike,
+    view: str,
+    *,
+    distance_m: float = 0.42,
+    q5: float = 0.0,
+    model: ArmModel = ASEA,
 ) -> NDArray[np.float64]:
     """Joints that aim the approach axis at ``target`` from ``distance_m`` away.
 
@@ -70,7 +90,9 @@ def viewpoint(
     return flange_config(t - distance_m * approach, phi, q5=q5, model=model)
 
 
-def standard_configurations(conveyor: ConveyorSpec | None = None, model: ArmModel = ASEA) -> dict[str, NDArray[np.float64]]:
+def standard_configurations(
+    conveyor: ConveyorSpec | None = None, model: ArmModel = ASEA
+) -> dict[str, NDArray[np.float64]]:
     """Named configurations: home, the three station viewpoints, an upstream look, the table."""
     c = conveyor or ConveyorSpec()
     station = c.station_point + np.array([0.0, 0.0, 0.1])  # top of a typical object
@@ -94,5 +116,5 @@ def standard_moves(
     tour = ["home", "top", "inner", "outer", "top", "upstream", "table", "home"]
     return [
         (f"{a}->{b}", plan_joint_move(cfg[a], cfg[b], speed=speed, model=model))
-        for a, b in zip(tour[:-1], tour[1:], strict=True)
+        for a, b in itertools.pairwise(tour)
     ]

@@ -213,7 +213,7 @@ def tyre_image(
 
     def rows(v0: float, v1: float) -> tuple[int, int]:
         # Image row 0 is v = 1 (see png_bytes).
-        return int(round((1.0 - v1) * H)), int(round((1.0 - v0) * H))
+        return round((1.0 - v1) * H), round((1.0 - v0) * H)
 
     s0, s1 = rows(*bands[0])
     band_h = s1 - s0
@@ -225,7 +225,16 @@ def tyre_image(
         scale *= min(1.0, 0.9 * (W // 2) / max(tw, 1))
         (tw, th), _ = cv2.getTextSize(sidewall_text, cv2.FONT_HERSHEY_DUPLEX, scale, 2)
         org = ((W // 2 - tw) // 2, (band_h + th) // 2)
-        cv2.putText(strip, sidewall_text, org, cv2.FONT_HERSHEY_DUPLEX, scale, (150, 150, 150), 2, cv2.LINE_AA)
+        cv2.putText(
+            strip,
+            sidewall_text,
+            org,
+            cv2.FONT_HERSHEY_DUPLEX,
+            scale,
+            (150, 150, 150),
+            2,
+            cv2.LINE_AA,
+        )
         # u runs counter-clockwise seen from above, so text written left to right would
         # read backwards: mirror it along u.  Image rows already run outwards (v up), so the
         # letters' tops point to the tread, as on real tyres.
@@ -277,8 +286,14 @@ def tread_image(
         (_, text_h), _ = cv2.getTextSize(tread_text, cv2.FONT_HERSHEY_DUPLEX, scale, 2)
         for x in range(0, W, W // 4):
             cv2.putText(
-                img, tread_text, (x + 20, (H + text_h) // 2), cv2.FONT_HERSHEY_DUPLEX, scale,
-                (240, 240, 240), 2, cv2.LINE_AA,
+                img,
+                tread_text,
+                (x + 20, (H + text_h) // 2),
+                cv2.FONT_HERSHEY_DUPLEX,
+                scale,
+                (240, 240, 240),
+                2,
+                cv2.LINE_AA,
             )
     return _finish(img)[::-1].copy()  # rows: v grows downwards on the mesh
 

@@ -49,10 +49,16 @@ def _chessboard_errors(engine: SimEngine, q, board) -> np.ndarray:
     ok, corners = cv2.findChessboardCorners(grey, (board.spec.cols, board.spec.rows))
     assert ok, f"chessboard not found from {np.degrees(q).round(1).tolist()}"
     corners = cv2.cornerSubPix(
-        grey, corners, (5, 5), (-1, -1), (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4)
+        grey,
+        corners,
+        (5, 5),
+        (-1, -1),
+        (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4),
     ).reshape(-1, 2)
     cam = engine.truth.camera
-    pred = PinholeCamera(cam.K, cam.dist).project_world(board.corners_base, np.linalg.inv(engine.truth.T_base_cam(q)))
+    pred = PinholeCamera(cam.K, cam.dist).project_world(
+        board.corners_base, np.linalg.inv(engine.truth.T_base_cam(q))
+    )
     # Detection order may start at either end: pair each corner with its prediction.
     d = np.linalg.norm(corners[:, None] - pred[None], axis=2)
     assert len(set(d.argmin(axis=1))) == len(pred)
@@ -81,7 +87,9 @@ def test_tilted_charuco_corners_land_where_predicted(engine):
         engine.remove_board("charuco")
     assert ids is not None and len(ids) >= 30
     cam = engine.truth.camera
-    pred = PinholeCamera(cam.K, cam.dist).project_world(board.corners_base[ids.ravel()], np.linalg.inv(engine.truth.T_base_cam(q)))
+    pred = PinholeCamera(cam.K, cam.dist).project_world(
+        board.corners_base[ids.ravel()], np.linalg.inv(engine.truth.T_base_cam(q))
+    )
     err = np.linalg.norm(corners.reshape(-1, 2) - pred, axis=1)
     assert err.max() <= 0.5
     assert err.mean() <= 0.2
@@ -122,8 +130,16 @@ def test_lens_canvas_covers_every_distorted_pixel():
         # A point seen by the ideal canvas at pixel p appears where the camera projects it.
         pts = np.array([[0.1, -0.05, 1.0], [-0.3, 0.2, 1.0], [0.45, 0.3, 1.0]])
         uv = spec.pinhole.project(pts)
-        src = np.stack([mx[np.round(uv[:, 1]).astype(int), np.round(uv[:, 0]).astype(int)], my[np.round(uv[:, 1]).astype(int), np.round(uv[:, 0]).astype(int)]], axis=1)
-        ideal = PinholeCamera(lens.K_ideal, None, width=lens.ideal_width, height=lens.ideal_height).project(pts)
+        src = np.stack(
+            [
+                mx[np.round(uv[:, 1]).astype(int), np.round(uv[:, 0]).astype(int)],
+                my[np.round(uv[:, 1]).astype(int), np.round(uv[:, 0]).astype(int)],
+            ],
+            axis=1,
+        )
+        ideal = PinholeCamera(
+            lens.K_ideal, None, width=lens.ideal_width, height=lens.ideal_height
+        ).project(pts)
         # Sampling at the rounded pixel moves the source by at most ~0.75 px.
         assert np.abs(src - ideal).max() < 1.0
 
@@ -158,8 +174,10 @@ def test_motion_blur_follows_the_arm_speed():
     # Turning the base at 0.5 rad/s sweeps the image sideways during 10 ms.
     fast = motion_blur(img, depth, lens.K_ideal, *exposure_end_poses(spec, q, [0.5, 0, 0, 0, 0]))
     slow = motion_blur(img, depth, lens.K_ideal, *exposure_end_poses(spec, q, [0.12, 0, 0, 0, 0]))
+
     def sharpness(a):
         return float(np.abs(np.diff(a.astype(float), axis=1)).mean())
+
     assert sharpness(fast) < 0.5 * sharpness(img)
     assert sharpness(fast) < sharpness(slow) < sharpness(img)
 

@@ -66,7 +66,9 @@ def views(engine: SimEngine):
         for view, q in qs.items():
             engine.set_joints(q)
             snap = engine.snapshot()
-            out[(name, view)] = engine.renderer().submit(lambda w, s=snap: imager.render(w, s)).result().rgb
+            out[(name, view)] = (
+                engine.renderer().submit(lambda w, s=snap: imager.render(w, s)).result().rgb
+            )
     engine.clear_objects()
     return out
 
@@ -82,6 +84,7 @@ def test_look_alike_wheels_differ_from_the_side(views):
     b = views[("wheel-5spoke-redband", "side")]
     diff = np.abs(a.astype(float) - b.astype(float)).sum(axis=2)
     assert (diff > 60).sum() > 500  # the red band and its lettering on the near tread
+
     def red(im: np.ndarray) -> int:  # the band is dark red at this grazing angle
         r, g = im[..., 0].astype(int), im[..., 1].astype(int)
         return int(((r > 2 * g + 20) & (r > 60)).sum())

@@ -86,7 +86,9 @@ def test_objects_on_the_engine_belt_ride_at_the_set_speed(engine: SimEngine):
     finally:
         engine.configure_conveyor(running=False)
     now = engine.truth.object(o.id)
-    np.testing.assert_allclose(now.T_base_obj[:3, 3] - o.T_base_obj[:3, 3], [0.0, 0.3, 0.0], atol=1e-9)
+    np.testing.assert_allclose(
+        now.T_base_obj[:3, 3] - o.T_base_obj[:3, 3], [0.0, 0.3, 0.0], atol=1e-9
+    )
     np.testing.assert_allclose(now.T_base_obj[:3, :3], o.T_base_obj[:3, :3], atol=1e-12)
     assert now.T_base_obj[2, 3] == SPEC.surface_z_m
     # The snapshot (what the camera draws) puts the object's body at its true pose.
@@ -99,11 +101,15 @@ def test_objects_on_the_engine_belt_ride_at_the_set_speed(engine: SimEngine):
 
 def test_spawning_is_validated_and_slots_are_reused(engine: SimEngine):
     engine.clear_objects()
-    with pytest.raises(ValueError, match="unknown catalogue name 'wheel-nope'; valid names: wheel-5spoke"):
+    with pytest.raises(
+        ValueError, match="unknown catalogue name 'wheel-nope'; valid names: wheel-5spoke"
+    ):
         engine.spawn("wheel-nope")
     with pytest.raises(ValueError, match="position along the belt"):
         engine.spawn("wheel-steel", s_m=-1.0)
-    ids = [engine.spawn("oil-filter", s_m=0.3 * i).id for i in range(engine.config.slots_per_object)]
+    ids = [
+        engine.spawn("oil-filter", s_m=0.3 * i).id for i in range(engine.config.slots_per_object)
+    ]
     with pytest.raises(SimError, match="slots for 'oil-filter' are in use"):
         engine.spawn("oil-filter")
     engine.remove(ids[0])

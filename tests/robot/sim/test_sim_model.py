@@ -79,7 +79,10 @@ def test_arm_is_torque_driven_with_plausible_dynamics(engine):
         assert m.actuator_gaintype[i] == mujoco.mjtGain.mjGAIN_FIXED
         assert m.actuator_biastype[i] == mujoco.mjtBias.mjBIAS_NONE  # a plain motor: torque in
         assert m.actuator_gear[i, 0] == 1.0
-    masses = [m.body_mass[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b)] for b in ("column", "upper_arm", "forearm", "wrist", "flange")]
+    masses = [
+        m.body_mass[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b)]
+        for b in ("column", "upper_arm", "forearm", "wrist", "flange")
+    ]
     assert all(mass > 0.5 for mass in masses)
     assert sum(masses) > 40.0  # an industrial arm, not a toy
     d = mujoco.MjData(m)
@@ -101,7 +104,9 @@ def test_camera_is_mounted_at_T_ee_cam(engine):
         T_cv = cam.T_base_cam(q)
         # MuJoCo's camera looks along its -z with y up: same centre, y and z flipped.
         np.testing.assert_allclose(d.cam_xpos[cid], T_cv[:3, 3], atol=1e-9)
-        np.testing.assert_allclose(d.cam_xmat[cid].reshape(3, 3), T_cv[:3, :3] @ np.diag([1, -1, -1]), atol=1e-9)
+        np.testing.assert_allclose(
+            d.cam_xmat[cid].reshape(3, 3), T_cv[:3, :3] @ np.diag([1, -1, -1]), atol=1e-9
+        )
     # The mounting is documented as 50 mm off the axis, 40 mm past the flange, tilted ~3 deg.
     T = cam.T_ee_cam
     assert np.linalg.norm(T[:3, 3] - (0.05, 0.0, 0.04)) < 1e-12
