@@ -11,6 +11,7 @@ from robot.sim.camera import DEFAULT_DIST, DEFAULT_T_EE_CAM, CameraSpec, Lens
 from robot.sim.catalogue import CATALOGUE, CatalogueEntry, catalogue_names
 from robot.sim.config import SimConfig
 from robot.sim.controller import ControllerGains, JointController
+from robot.sim.demo import DEMO_OBJECTS, populate_demo
 from robot.sim.driver import SimCamera, SimDriver
 from robot.sim.engine import ArmSample, SimEngine, Snapshot
 from robot.sim.mjcf import ArmDynamics, build_cell
@@ -22,6 +23,7 @@ __all__ = [
     "CATALOGUE",
     "DEFAULT_DIST",
     "DEFAULT_T_EE_CAM",
+    "DEMO_OBJECTS",
     "ArmDynamics",
     "ArmSample",
     "BoardSpec",
@@ -46,4 +48,5 @@ __all__ = [
     "build_cell",
     "catalogue_names",
     "default_boards",
+    "populate_demo",
 ]
