@@ -67,6 +67,12 @@ class Settings(BaseSettings):
     camera_fps: float = Field(
         10.0, gt=0, le=120, description="Acquisition rate of the camera task, frames/s."
     )
+    camera_idle_fps: float = Field(
+        1.0,
+        gt=0,
+        le=120,
+        description="Acquisition rate while nobody has asked for a frame for 2 s (a rendered camera costs CPU).",
+    )
     data_dir: Path = Field(Path("../shared/data"), description="Public test data (see its README).")
     var_dir: Path = Field(
         Path("var"), description="Writable directory for the SQLite file, logs and job output."

@@ -297,7 +297,12 @@ class View3D:
             await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
 
     def _update_image(self) -> None:
-        """Show the newest camera frame in the frustum (only the latest; never a backlog)."""
+        """Show the newest camera frame in the frustum (only the latest; never a backlog).
+
+        Nothing is read while no browser is connected, so the camera may idle.
+        """
+        if self.client_count() == 0:
+            return
         frame = self.cell.latest_frame
         if frame is None or frame.index == self._image_index or self._frustum is None:
             return
