@@ -46,6 +46,10 @@ class ControllerGains:
         "Still": every joint speed below this.
     settle_timeout_s : float
         A move ends at the latest this long after its trajectory.
+    law : {"computed_torque", "pd_gravity"}
+        ``"computed_torque"`` (the default, see the module doc) or the simpler
+        ``"pd_gravity"`` baseline: ``tau = diag(M) (Kp e + Kd e_dot + Ki int(e)) + b`` with
+        no acceleration feed-forward and no coupling through ``M``.
     """
 
     omega_rad_s: float = 30.0
@@ -53,8 +57,11 @@ class ControllerGains:
     settle_tolerance_rad: float = 1e-4
     settle_speed_rad_s: float = 2e-3
     settle_timeout_s: float = 1.0
+    law: str = "computed_torque"
 
     def __post_init__(self) -> None:
+        if self.law not in ("computed_torque", "pd_gravity"):
+            raise ValueError(f"law must be 'computed_torque' or 'pd_gravity', got {self.law!r}")
         if not self.omega_rad_s > 0:
             raise ValueError(f"omega_rad_s must be positive, got {self.omega_rad_s!r}")
         for name in (
@@ -150,6 +157,7 @@ class JointController:
         self.gains = gains
         w = gains.omega_rad_s
         self.kp, self.kd, self.ki = 3.0 * w * w, 3.0 * w, w**3
+        self._computed_torque = gains.law == "computed_torque"
         self.tau_max = np.asarray(torque_limits, dtype=np.float64)
         self.amax = np.asarray(max_acceleration_rad_s2, dtype=np.float64)
         self._ie = np.zeros(5)
@@ -215,8 +223,11 @@ class JointController:
         qr, qdr, qddr = self._ref.at(t)
         e = qr - q
         self._ie = np.clip(self._ie + e * self.dt, -self._ie_max, self._ie_max)
-        a = qddr + self.kp * e + self.kd * (qdr - qd) + self.ki * self._ie
-        tau = M @ a + bias
+        fb = self.kp * e + self.kd * (qdr - qd) + self.ki * self._ie
+        if self._computed_torque:
+            tau = M @ (qddr + fb) + bias
+        else:
+            tau = np.diag(M) * fb + bias
         clipped = np.clip(tau, -self.tau_max, self.tau_max)
         self.saturated = bool(np.any(clipped != tau))
         self.last_tau = clipped
