@@ -39,6 +39,8 @@ class SimConfig:
         Multisampling of the offscreen render (0 = none; costs CPU with software GL).
     state_rate_hz : float
         How often the arm's state is published to listeners.
+    belt_end : {"recycle", "remove"}
+        What happens to objects that run off the end of the belt.
     seed : int
         Seeds object yaw on spawning and the camera's noise.
     """
@@ -53,6 +55,7 @@ class SimConfig:
     shadow_size: int = 1024
     offsamples: int = 0
     state_rate_hz: float = 50.0
+    belt_end: str = "recycle"
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -67,5 +70,7 @@ class SimConfig:
             raise ValueError(f"at most one board per kind, got {kinds}")
         if self.offsamples not in (0, 2, 4, 8):
             raise ValueError(f"offsamples must be 0, 2, 4 or 8, got {self.offsamples!r}")
+        if self.belt_end not in ("recycle", "remove"):
+            raise ValueError(f"belt_end must be 'recycle' or 'remove', got {self.belt_end!r}")
         if not 1.0 <= self.state_rate_hz <= 1000.0:
             raise ValueError(f"state_rate_hz must be in [1, 1000], got {self.state_rate_hz!r}")

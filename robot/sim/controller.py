@@ -224,10 +224,8 @@ class JointController:
         e = qr - q
         self._ie = np.clip(self._ie + e * self.dt, -self._ie_max, self._ie_max)
         fb = self.kp * e + self.kd * (qdr - qd) + self.ki * self._ie
-        if self._computed_torque:
-            tau = M @ (qddr + fb) + bias
-        else:
-            tau = np.diag(M) * fb + bias
+        # Computed torque decouples the joints through M; the baseline uses M's diagonal.
+        tau = M @ (qddr + fb) + bias if self._computed_torque else np.diag(M) * fb + bias
         clipped = np.clip(tau, -self.tau_max, self.tau_max)
         self.saturated = bool(np.any(clipped != tau))
         self.last_tau = clipped

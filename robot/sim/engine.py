@@ -136,7 +136,7 @@ class SimEngine:
             self.config.gains,
             q,
         )
-        self.conveyor = Conveyor(self.config.layout.conveyor)
+        self.conveyor = Conveyor(self.config.layout.conveyor, at_end=self.config.belt_end)
         self._estopped = False
         self._time_scale = 1.0
         self.time_scale = time_scale

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from robot.model import ASEA
-from robot.sim import SimEngine
+from robot.sim import ControllerGains, SimConfig, SimEngine
 from robot.sim.controller import stop_trajectory
 from robot.sim.poses import standard_configurations, standard_moves
 from robot.trajectory import plan_joint_move
@@ -107,3 +107,17 @@ def test_brake_holds_at_once(engine: SimEngine):
     assert np.abs(s.qd).max() < 1e-3
     assert np.abs(s.q - q_brake).max() < 0.05  # braked within a few centimetres of travel
     engine.clear_estop()
+
+
+def test_pd_gravity_baseline_tracks_worse_than_computed_torque():
+    rms = {}
+    for law in ("computed_torque", "pd_gravity"):
+        e = SimEngine(SimConfig(gains=ControllerGains(law=law)))
+        try:
+            _, traj = standard_moves()[0]
+            rms[law] = _run(e, traj).rms_tracking_error_rad
+        finally:
+            e.stop()
+    assert rms["computed_torque"] < 0.5 * rms["pd_gravity"]
+    with pytest.raises(ValueError, match="law"):
+        ControllerGains(law="bang-bang")

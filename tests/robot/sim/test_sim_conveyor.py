@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from robot.errors import SimError
-from robot.sim import ConveyorSpec, SimEngine
+from robot.sim import ConveyorSpec, SimConfig, SimEngine
 from robot.sim.world import BeltItem, Conveyor, cleat_positions
 
 SPEC = ConveyorSpec()
@@ -119,6 +119,21 @@ def test_spawning_is_validated_and_slots_are_reused(engine: SimEngine):
         engine.remove(12345)
     engine.clear_objects()
     assert engine.objects() == []
+
+
+def test_engine_removes_objects_at_the_end_when_configured():
+    e = SimEngine(SimConfig(belt_end="remove"))
+    try:
+        o = e.spawn("wheel-steel", s_m=SPEC.length_m - 0.01)
+        e.configure_conveyor(running=True, speed_m_s=0.5)
+        e.advance(0.1)
+        assert e.objects() == []
+        again = e.spawn("wheel-steel")  # its slot is free again
+        assert again.id != o.id
+    finally:
+        e.stop()
+    with pytest.raises(ValueError, match="belt_end"):
+        SimConfig(belt_end="drop")
 
 
 def test_yaw_of_spawned_objects_is_seeded():
