@@ -9,11 +9,13 @@ handed over through a queue; results come back as ``concurrent.futures.Future``.
 
 from __future__ import annotations
 
+import atexit
 import concurrent.futures
 import copy
 import logging
 import queue
 import threading
+import weakref
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -25,6 +27,17 @@ __all__ = ["OffscreenRenderer", "RenderWorker"]
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
+
+# Render threads still running at interpreter exit are closed before MuJoCo's EGL module
+# terminates the display (its own exit hook); atexit runs hooks in reverse order of
+# registration, so ours is registered after the first context exists.
+_LIVE: weakref.WeakSet[RenderWorker] = weakref.WeakSet()
+_exit_hook_registered = False
+
+
+def _close_all() -> None:
+    for worker in list(_LIVE):
+        worker.close(timeout=2.0)
 
 
 class OffscreenRenderer:
@@ -122,6 +135,11 @@ class RenderWorker:
         self._ready.wait(timeout=60.0)
         if self._error is not None:
             raise RuntimeError(f"cannot start the MuJoCo renderer: {self._error}") from self._error
+        global _exit_hook_registered
+        if not _exit_hook_registered:
+            atexit.register(_close_all)
+            _exit_hook_registered = True
+        _LIVE.add(self)
 
     def _run(self) -> None:
         try:
