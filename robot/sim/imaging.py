@@ -11,14 +11,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from robot.model import ASEA, ArmModel
 from robot.sim.camera import CameraSpec, Lens, Sensor, exposure_end_poses, motion_blur
 from robot.sim.engine import SimEngine, Snapshot
 from robot.sim.render import RenderWorker
 
-__all__ = ["CameraImage", "Imager"]
+__all__ = ["CameraImage", "Imager", "capture"]
 
 _STILL_RAD_S = 1e-3  # below this joint speed the exposure is treated as still
 
@@ -76,3 +76,19 @@ class Imager:
             ideal = out
         rgb = self.sensor.apply(self.lens.distort(ideal), spec)
         return CameraImage(rgb, snap, blurred)
+
+
+def capture(
+    engine: SimEngine, q: ArrayLike | None = None, *, spec: CameraSpec | None = None
+) -> CameraImage:
+    """Put the arm at ``q`` (if given, at rest) and take one picture, synchronously.
+
+    For tests, benchmarks and calibration studies that do not run an event loop; the
+    product grabs frames through :class:`~robot.sim.driver.SimCamera`.  ``spec`` overrides
+    the sensor settings (noise, exposure, gain, blur) of the engine's camera.
+    """
+    if q is not None:
+        engine.set_joints(q)
+    imager = Imager(spec or engine.config.camera, model=engine.arm_model)
+    snap = engine.snapshot()
+    return engine.renderer().submit(lambda w: imager.render(w, snap)).result()

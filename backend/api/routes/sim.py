@@ -64,7 +64,9 @@ class ConveyorIn(BaseModel):
 class ObjectIn(BaseModel):
     """An object to put on the belt."""
 
-    name: str = Field(description="Catalogue name (GET /api/sim/catalogue)", examples=["wheel-5spoke"])
+    name: str = Field(
+        description="Catalogue name (GET /api/sim/catalogue)", examples=["wheel-5spoke"]
+    )
     position_along_belt_m: float | None = Field(
         None, description="Distance from the belt's entry, m (default: the entry)"
     )
@@ -166,7 +168,11 @@ async def read_object(_: EngineerUser, sim: SimDep, obj_id: int) -> dict[str, An
     raise ApiError(404, "not_found", f"no object with id {obj_id} on the belt")
 
 
-@router.delete("/objects/{obj_id}", status_code=status.HTTP_204_NO_CONTENT, summary="Take an object off the belt")
+@router.delete(
+    "/objects/{obj_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    summary="Take an object off the belt",
+)
 async def delete_object(_: EngineerUser, sim: SimDep, obj_id: int) -> Response:
     if obj_id not in {o.id for o in sim.objects()}:
         raise ApiError(404, "not_found", f"no object with id {obj_id} on the belt")
@@ -184,7 +190,9 @@ async def read_lights(_: EngineerUser, sim: SimDep) -> dict[str, Any]:
 @router.put("/lights/{name}", summary="Set a light's intensity (1 = default, 0 = off)")
 async def update_light(_: EngineerUser, sim: SimDep, name: str, body: LightIn) -> dict[str, Any]:
     if name not in sim.lights():
-        raise ApiError(404, "not_found", f"no light named {name!r}; lights: {', '.join(sim.lights())}")
+        raise ApiError(
+            404, "not_found", f"no light named {name!r}; lights: {', '.join(sim.lights())}"
+        )
     sim.set_light(name, body.intensity)
     return {"name": name, "intensity": sim.lights()[name]}
 
@@ -228,10 +236,16 @@ async def delete_board(_: EngineerUser, sim: SimDep, kind: str) -> Response:
 
 # -- camera sensor ---------------------------------------------------------------------------
 @router.put("/camera", summary="Exposure, gain, noise and motion blur of the simulated camera")
-async def update_camera(_: EngineerUser, sim: SimDep, cell: CellDep, body: CameraIn) -> dict[str, Any]:
+async def update_camera(
+    _: EngineerUser, sim: SimDep, cell: CellDep, body: CameraIn
+) -> dict[str, Any]:
     configure = getattr(cell.camera, "configure", None)
     if cell.camera.name != "sim" or configure is None:
-        raise ApiError(409, "not_simulated", f"the cell's camera is {cell.camera.name!r}, not the simulated one")
+        raise ApiError(
+            409,
+            "not_simulated",
+            f"the cell's camera is {cell.camera.name!r}, not the simulated one",
+        )
     spec = configure(**body.model_dump(exclude_none=True))
     return {
         "exposure_s": spec.exposure_s,

@@ -11,7 +11,7 @@ import pytest
 
 from robot.sim import CameraSpec, Lens, SimConfig, SimEngine
 from robot.sim.camera import Sensor, exposure_end_poses, motion_blur
-from robot.sim.imaging import Imager
+from robot.sim.imaging import Imager, capture
 from robot.sim.poses import standard_configurations
 from vision.camera import PinholeCamera
 
@@ -37,10 +37,7 @@ def _board_on_table(tilt_deg: float = 0.0) -> np.ndarray:
 
 
 def _render(engine: SimEngine, q, spec: CameraSpec | None = None) -> np.ndarray:
-    engine.set_joints(q)
-    snap = engine.snapshot()
-    imager = Imager(spec or engine.config.camera.with_(noise_std_dn=0.0))
-    return engine.renderer().submit(lambda w: imager.render(w, snap)).result().rgb
+    return capture(engine, q, spec=spec or engine.config.camera.with_(noise_std_dn=0.0)).rgb
 
 
 def _chessboard_errors(engine: SimEngine, q, board) -> np.ndarray:
