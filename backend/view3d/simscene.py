@@ -1,5 +1,7 @@
 """The simulated cell in the viser view: conveyor, objects riding it, calibration boards.
 
+``robot.sim`` (and with it MuJoCo) is imported only when a simulation is drawn.
+
 Everything is drawn from the simulation's state (``SimEngine``): the static conveyor and
 table from its layout, the objects and boards from their true poses, refreshed by
 :meth:`SimScene.update` at the view's rate.  Updates are sent only for what changed, so a
@@ -14,9 +16,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import viser
 import viser.transforms as vtf
-
-from robot.sim.catalogue import CATALOGUE
-from robot.sim.world import cleat_positions
 
 if TYPE_CHECKING:
     from robot.sim import SimEngine
@@ -97,6 +96,8 @@ class SimScene:
         )
 
     def _add_object(self, obj_id: int, name: str) -> Any:
+        from robot.sim.catalogue import CATALOGUE
+
         frame = self.server.scene.add_frame(f"/sim/objects/{obj_id}", show_axes=False)
         geo = CATALOGUE[name].geometry()
         for i, piece in enumerate(geo.pieces):
@@ -163,6 +164,8 @@ class SimScene:
                 self._boards.pop(kind)[0].remove()
                 changed = True
             if travel != self._travel:
+                from robot.sim.world import cleat_positions
+
                 self._travel = travel
                 pos = cleat_positions(self.engine.config.layout.conveyor, travel, len(self._cleats))
                 for handle, p in zip(self._cleats, pos, strict=True):
