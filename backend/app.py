@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 from collections.abc import AsyncIterator
@@ -19,7 +20,7 @@ from backend.cell import Cell
 from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Cell as CellRow
 from backend.db.session import Database
-from backend.hardware import make_camera, make_driver
+from backend.hardware import make_hardware
 from backend.settings import Settings
 
 __all__ = ["WEB_DIR", "StartupError", "create_app"]
@@ -70,13 +71,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         try:
             await _check_database(db)
             await _ensure_cell_row(db)
-            cell = Cell(settings, make_driver(settings), make_camera(settings))
+            hardware = await asyncio.to_thread(make_hardware, settings)
+            app.state.sim = hardware.sim
+            cell = Cell(settings, hardware.driver, hardware.camera)
             await cell.start()
             app.state.cell = cell
             if settings.view3d_enabled:
                 from backend.view3d import View3D
 
-                view = View3D(cell, host=settings.viser_host, port=settings.viser_port)
+                view = View3D(
+                    cell, host=settings.viser_host, port=settings.viser_port, sim=hardware.sim
+                )
                 await view.start()
                 app.state.view3d = view
             yield
@@ -86,6 +91,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 await view.stop()
             if cell is not None:
                 await cell.stop()
+            sim = getattr(app.state, "sim", None)
+            if sim is not None:
+                await asyncio.to_thread(sim.stop)
+                app.state.sim = None
             await db.dispose()
 
     app = FastAPI(
@@ -98,6 +107,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     app.state.cell = None
     app.state.view3d = None
+    app.state.sim = None
     install_error_handlers(app)
     app.include_router(api_router)
 

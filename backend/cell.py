@@ -76,6 +76,9 @@ class Cell:
         self._dt = 0.0
         self._camera_error = ""
         self._camera_task: asyncio.Task[None] | None = None
+        # Frames are acquired at camera_fps while someone reads them, else at camera_idle_fps.
+        self._demand_until = 0.0
+        self._wake = asyncio.Event()
 
     # -- life cycle ----------------------------------------------------------------------
     async def start(self) -> None:
@@ -175,8 +178,14 @@ class Cell:
         await self.driver.reset()
 
     # -- camera --------------------------------------------------------------------------
+    def _note_demand(self) -> None:
+        """Someone reads frames: acquire at the full rate for the next 2 s."""
+        now = time.monotonic()
+        if now >= self._demand_until:
+            self._wake.set()  # end an idle wait at once
+        self._demand_until = now + 2.0
+
     async def _acquire(self) -> None:
-        period = 1.0 / self.settings.camera_fps
         backoff = 0.5
         opened = False
         t_last = time.monotonic()
@@ -197,7 +206,13 @@ class Cell:
                 # Average the interval, not its inverse (an average of 1/dt is biased upward).
                 self._dt = dt if self._dt == 0.0 else 0.9 * self._dt + 0.1 * dt
                 self._fps = 1.0 / self._dt if self._dt > 0 else 0.0
-                await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
+                busy = time.monotonic() < self._demand_until
+                fps = self.settings.camera_fps if busy else self.settings.camera_idle_fps
+                self._wake.clear()
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(
+                        self._wake.wait(), max(0.0, 1.0 / fps - (time.monotonic() - t0))
+                    )
             except asyncio.CancelledError:
                 raise
             except (CameraError, OSError) as exc:
@@ -212,11 +227,17 @@ class Cell:
 
     @property
     def latest_frame(self) -> Frame | None:
-        """The newest camera frame (None before the first one)."""
+        """The newest camera frame (None before the first one).
+
+        Reading it keeps acquisition at ``camera_fps`` for 2 s; unread, the camera task
+        slows to ``camera_idle_fps``.
+        """
+        self._note_demand()
         return self._frame
 
     def latest_jpeg(self, *, quality: int = 80) -> bytes | None:
         """The newest frame as JPEG, encoded once per frame."""
+        self._note_demand()
         frame = self._frame
         if frame is None:
             return None

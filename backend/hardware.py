@@ -1,15 +1,50 @@
-"""Build the robot driver and the camera that the settings ask for."""
+"""Build the robot driver and the camera that the settings ask for.
+
+With ``driver="sim"`` or ``camera="sim"`` one :class:`robot.sim.SimEngine` (one per process)
+backs both: the simulated arm and the eye-in-hand camera on its flange.  A simulated camera
+with another driver draws the arm where that driver reports it.
+"""
 
 from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from backend.settings import Settings
 from robot.drivers.base import RobotDriver
 from vision.sources import Camera
 
-__all__ = ["make_camera", "make_driver"]
+if TYPE_CHECKING:
+    from robot.sim import SimEngine
+
+__all__ = ["Hardware", "make_camera", "make_driver", "make_hardware", "make_sim_engine"]
 
 
-def make_driver(settings: Settings) -> RobotDriver:
+@dataclass(frozen=True)
+class Hardware:
+    """The driver, the camera and, when simulated, the engine behind them."""
+
+    driver: RobotDriver
+    camera: Camera
+    sim: SimEngine | None = None
+
+
+def make_sim_engine(settings: Settings) -> SimEngine:
+    """The simulated cell for ``settings`` (demo objects on the belt if ``sim_demo``)."""
+    # MuJoCo chooses its OpenGL back end at import: render headless unless told otherwise.
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    from robot.sim import SimConfig, SimEngine, populate_demo
+
+    engine = SimEngine(
+        SimConfig(state_rate_hz=settings.state_rate_hz), time_scale=settings.time_scale
+    )
+    if settings.sim_demo:
+        populate_demo(engine)
+    return engine
+
+
+def make_driver(settings: Settings, sim: SimEngine | None = None) -> RobotDriver:
     """The :class:`RobotDriver` named by ``settings.driver``."""
     if settings.driver == "ideal":
         from robot.drivers.ideal import IdealDriver
@@ -22,13 +57,32 @@ def make_driver(settings: Settings) -> RobotDriver:
         return SerialDriver(
             settings.serial_port, baud=settings.serial_baud, state_rate_hz=settings.state_rate_hz
         )
+    if settings.driver == "sim":
+        from robot.sim import SimDriver
+
+        return SimDriver(sim if sim is not None else make_sim_engine(settings))
     raise ValueError(f"driver {settings.driver!r} is not available in this build")
 
 
-def make_camera(settings: Settings) -> Camera:
+def make_camera(
+    settings: Settings, sim: SimEngine | None = None, driver: RobotDriver | None = None
+) -> Camera:
     """The :class:`Camera` named by ``settings.camera``."""
     if settings.camera == "folder":
         from vision.sources import ImageFolderCamera
 
         return ImageFolderCamera(settings.resolved_camera_folder(), loop=True)
+    if settings.camera == "sim":
+        from robot.sim import SimCamera
+
+        engine = sim if sim is not None else make_sim_engine(settings)
+        follow = None if driver is None or settings.driver == "sim" else (lambda: driver.state)
+        return SimCamera(engine, arm_state=follow)
     raise ValueError(f"camera {settings.camera!r} is not available in this build")
+
+
+def make_hardware(settings: Settings) -> Hardware:
+    """Driver and camera for ``settings``, sharing one simulation engine where both are simulated."""
+    sim = make_sim_engine(settings) if "sim" in (settings.driver, settings.camera) else None
+    driver = make_driver(settings, sim)
+    return Hardware(driver, make_camera(settings, sim, driver), sim)

@@ -51,8 +51,14 @@ class Settings(BaseSettings):
     http_port: int = Field(8000, ge=1, le=65535, description="Port of the console and REST API.")
     viser_host: str = Field("127.0.0.1", description="Address of the viser 3D view.")
     viser_port: int = Field(8080, ge=1, le=65535, description="Port of the viser 3D view (pinned).")
-    driver: Literal["sim", "serial", "ideal"] = Field("ideal", description="Robot driver.")
-    camera: Literal["sim", "opencv", "folder"] = Field("folder", description="Image source.")
+    driver: Literal["sim", "serial", "ideal"] = Field(
+        "sim",
+        description="Robot driver: the MuJoCo cell, the serial controller or the ideal follower.",
+    )
+    camera: Literal["sim", "opencv", "folder"] = Field(
+        "sim",
+        description="Image source: the simulated eye-in-hand camera, OpenCV, or an image folder.",
+    )
     camera_device: str = Field("0", description="OpenCV camera: V4L2 index or a video/stream URL.")
     camera_folder: Path | None = Field(
         None,
@@ -60,6 +66,12 @@ class Settings(BaseSettings):
     )
     camera_fps: float = Field(
         10.0, gt=0, le=120, description="Acquisition rate of the camera task, frames/s."
+    )
+    camera_idle_fps: float = Field(
+        1.0,
+        gt=0,
+        le=120,
+        description="Acquisition rate while nobody has asked for a frame for 2 s (a rendered camera costs CPU).",
     )
     data_dir: Path = Field(Path("../shared/data"), description="Public test data (see its README).")
     var_dir: Path = Field(
@@ -89,6 +101,10 @@ class Settings(BaseSettings):
         description="At start-up, issue a fresh token for the built-in 'operator' user and print it.",
     )
     view3d_enabled: bool = Field(True, description="Start the viser 3D view.")
+    sim_demo: bool = Field(
+        True,
+        description="Simulator: start with a few catalogue objects on the belt, indexing at the station.",
+    )
     log_level: Literal["debug", "info", "warning", "error"] = "info"
 
     @field_validator("http_host", "viser_host")

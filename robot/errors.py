@@ -17,6 +17,7 @@ __all__ = [
     "ProtocolError",
     "RobotBusy",
     "RobotError",
+    "SimError",
     "Unreachable",
 ]
 
@@ -183,3 +184,10 @@ class CommandSuperseded(RobotBusy):
     def __init__(self, detail: str, *, sent: bool) -> None:
         super().__init__(detail)
         self.sent = sent
+
+
+class SimError(RobotError):
+    """The simulated cell cannot do what was asked (no free slot, unknown object or board)."""
+
+    code = "sim_error"
+    http_status = 409

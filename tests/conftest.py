@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
+
+# MuJoCo picks its OpenGL back end when it is first imported: render headless (EGL), as
+# `make test` and .ci/run do.
+os.environ.setdefault("MUJOCO_GL", "egl")
 
 from backend.settings import Settings
 

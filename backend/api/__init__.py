@@ -12,11 +12,24 @@ from backend.api.routes import (
     live,
     recognition,
     robot,
+    sim,
     users,
 )
 
 __all__ = ["api_router"]
 
 api_router = APIRouter(prefix="/api")
-for _r in (health, robot, kinematics, jobs, users, cells, camera, recognition, calibration, live):
+for _r in (
+    health,
+    robot,
+    kinematics,
+    jobs,
+    users,
+    cells,
+    camera,
+    recognition,
+    calibration,
+    sim,
+    live,
+):
     api_router.include_router(_r.router)

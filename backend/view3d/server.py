@@ -1,4 +1,5 @@
-"""The viser 3D view: the arm drawn from the model, the camera frustum, a control panel.
+"""The viser 3D view: the arm drawn from the model, the camera frustum with the live image,
+the simulated conveyor and objects, a control panel.
 
 viser runs its own web server (own port, own thread).  Its GUI callbacks run on viser's
 thread; they hand work to the application's event loop with
@@ -14,7 +15,7 @@ import logging
 import math
 import time
 from collections.abc import Coroutine
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -23,7 +24,11 @@ import viser.transforms as vtf
 
 from backend.cell import Cell
 from backend.view3d.arm import arm_shapes, link_poses
+from backend.view3d.simscene import SimScene
 from vision.errors import VisionCellError
+
+if TYPE_CHECKING:
+    from robot.sim import SimEngine
 
 __all__ = ["T_EE_CAM_PLACEHOLDER", "View3D"]
 
@@ -50,20 +55,77 @@ class View3D:
     host, port : str, int
         Where viser listens; the port is pinned (start fails if it is taken).
     rate_hz : float
-        Scene update rate.
+        Scene update rate of the arm.
+    sim : SimEngine, optional
+        The simulated cell: its conveyor, objects and boards are drawn, and the frustum sits
+        at the simulated camera's true mounting with its field of view.
+    image_rate_hz : float
+        How often the frustum's image is refreshed with the newest camera frame.
+    sim_rate_hz : float
+        How often the simulated objects' poses are refreshed.
     """
 
-    def __init__(self, cell: Cell, *, host: str, port: int, rate_hz: float = 30.0) -> None:
+    def __init__(
+        self,
+        cell: Cell,
+        *,
+        host: str,
+        port: int,
+        rate_hz: float = 30.0,
+        sim: SimEngine | None = None,
+        image_rate_hz: float = 5.0,
+        sim_rate_hz: float = 10.0,
+    ) -> None:
         self.cell = cell
         self.host = host
         self.requested_port = port
         self.rate_hz = rate_hz
+        self.image_rate_hz = image_rate_hz
+        self.sim_rate_hz = sim_rate_hz
+        self.sim = sim
         self.server: viser.ViserServer | None = None
         self._task: asyncio.Task[None] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._handles: list[Any] = []
+        self._frustum: Any = None
+        self._sim_scene: SimScene | None = None
         self.updates = 0
-        self.T_ee_cam = T_EE_CAM_PLACEHOLDER
+        self.image_updates = 0
+        self._fov_rad = math.radians(50.0)
+        self._aspect = 4 / 3
+        self._T_ee_cam = T_EE_CAM_PLACEHOLDER
+        if sim is not None:
+            # Until a hand-eye calibration is active, show the simulated camera where it is
+            # truly mounted (the simulator's ground truth, shown to people, not used by
+            # any algorithm).
+            cam = sim.config.camera
+            self._T_ee_cam = np.array(cam.T_ee_cam)
+            self._fov_rad = math.radians(cam.fovy_deg)
+            self._aspect = cam.width / cam.height
+
+    @property
+    def T_ee_cam(self) -> np.ndarray:
+        """Where the frustum is drawn on the flange (4x4, OpenCV camera frame)."""
+        return self._T_ee_cam
+
+    @T_ee_cam.setter
+    def T_ee_cam(self, T: np.ndarray) -> None:
+        Ta = np.asarray(T, dtype=np.float64)
+        if Ta.shape != (4, 4) or not np.allclose(Ta[:3, :3] @ Ta[:3, :3].T, np.eye(3), atol=1e-6):
+            raise ValueError(f"T_ee_cam must be a 4x4 rigid transform, got {Ta.tolist()}")
+        self._T_ee_cam = Ta
+        if self._frustum is not None:
+            self._frustum.wxyz = _wxyz(Ta[:3, :3])
+            self._frustum.position = Ta[:3, 3]
+
+    def set_camera_model(self, *, fov_rad: float, aspect: float) -> None:
+        """Vertical field of view and aspect ratio of the drawn frustum."""
+        if not (0.0 < fov_rad < math.pi) or not aspect > 0:
+            raise ValueError(f"need 0 < fov_rad < pi and aspect > 0, got {fov_rad!r}, {aspect!r}")
+        self._fov_rad, self._aspect = float(fov_rad), float(aspect)
+        if self._frustum is not None:
+            self._frustum.fov = self._fov_rad
+            self._frustum.aspect = self._aspect
 
     @property
     def port(self) -> int:
@@ -137,8 +199,8 @@ class View3D:
         self._handles.append(ee)
         self._frustum = scene.add_camera_frustum(
             "/arm/ee/camera",
-            fov=math.radians(50.0),
-            aspect=4 / 3,
+            fov=self._fov_rad,
+            aspect=self._aspect,
             scale=0.08,
             color=(40, 120, 220),
             format="jpeg",
@@ -147,6 +209,8 @@ class View3D:
             position=self.T_ee_cam[:3, 3],
         )
         self._image_index = -1
+        if self.sim is not None:
+            self._sim_scene = SimScene(server, self.sim)
 
     def _build_panel(self, server: viser.ViserServer) -> None:
         gui = server.gui
@@ -206,7 +270,7 @@ class View3D:
     # -- updates -------------------------------------------------------------------------
     async def _update_loop(self) -> None:
         period = 1.0 / self.rate_hz
-        last_panel = 0.0
+        last_panel = last_image = last_sim = 0.0
         last_q: tuple[float, ...] | None = None
         while True:
             t0 = time.monotonic()
@@ -224,7 +288,30 @@ class View3D:
                 if t0 - last_panel > 0.2:
                     last_panel = t0
                     self._update_panel(state)
+                if t0 - last_image >= 1.0 / self.image_rate_hz:
+                    last_image = t0
+                    self._update_image()
+                if self._sim_scene is not None and t0 - last_sim >= 1.0 / self.sim_rate_hz:
+                    last_sim = t0
+                    self._sim_scene.update()
             await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
+
+    def _update_image(self) -> None:
+        """Show the newest camera frame in the frustum (only the latest; never a backlog).
+
+        Nothing is read while no browser is connected, so the camera may idle.
+        """
+        if self.client_count() == 0:
+            return
+        frame = self.cell.latest_frame
+        if frame is None or frame.index == self._image_index or self._frustum is None:
+            return
+        self._image_index = frame.index
+        small = cv2.resize(frame.rgb, (320, 240), interpolation=cv2.INTER_AREA)
+        self._frustum.image = small
+        h, w = frame.rgb.shape[:2]
+        self._frustum.aspect = w / h
+        self.image_updates += 1
 
     def _update_panel(self, state: Any) -> None:
         flags = []
@@ -240,10 +327,3 @@ class View3D:
             deg = round(math.degrees(value), 2)
             if number.value != deg:
                 number.value = deg
-        frame = self.cell.latest_frame
-        if frame is not None and frame.index != self._image_index:
-            self._image_index = frame.index
-            small = cv2.resize(frame.rgb, (320, 240), interpolation=cv2.INTER_AREA)
-            self._frustum.image = small
-            h, w = frame.rgb.shape[:2]
-            self._frustum.aspect = w / h

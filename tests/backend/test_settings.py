@@ -11,6 +11,7 @@ def test_defaults_are_safe_and_local():
     assert s.database_url == "sqlite+aiosqlite:///var/visioncell.db"
     assert s.auth_enabled and s.secret_key.get_secret_value() == DEV_SECRET
     assert str(s.data_dir) == "../shared/data"
+    assert s.driver == "sim" and s.camera == "sim"  # `make run` starts the simulated cell
 
 
 def test_environment_prefix_is_read(monkeypatch):

@@ -80,6 +80,10 @@ def start_server(tmp_path: Path, **extra_env: str) -> Server:
         "VISIONCELL_VISER_PORT": str(viser_port),
         "VISIONCELL_SECRET_KEY": TEST_SECRET,
         "VISIONCELL_CAMERA_FOLDER": str(make_image_folder(tmp_path / "images", size=(320, 240))),
+        # The quick console test runs the ideal arm and the image folder; the simulated
+        # cell (the product's default) has its own test, which overrides these.
+        "VISIONCELL_DRIVER": "ideal",
+        "VISIONCELL_CAMERA": "folder",
         "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
         **extra_env,
     }

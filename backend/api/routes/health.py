@@ -73,6 +73,7 @@ async def read_status(
         "view3d": {
             "port": view.port if view else None,
             "clients": view.client_count() if view else 0,
+            "frames_shown": view.image_updates if view else 0,
         },
         "jobs": {"running": [j.public() for j in cell.jobs.running()]},
         "versions": _versions(),
