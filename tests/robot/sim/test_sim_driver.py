@@ -122,11 +122,15 @@ async def test_cancelled_move_stops_the_arm(driver: SimDriver, engine: SimEngine
     traj = plan_joint_move(driver.state.q, CFG["table"], speed=1.0)
     task = asyncio.create_task(driver.move(traj))
     await asyncio.sleep(0.1)
+    # Planned before the cancel so that the refusal is checked while the arm still brakes
+    # (braking lasts about 60 ms of wall time at time_scale 8; planning under load could
+    # outlast it).  The busy check comes before the start-point check in move().
+    again = plan_joint_move(engine.arm_state().q, ASEA.q_home)
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
         await task
     with pytest.raises(RobotBusy, match="still executing or stopping"):
-        await driver.move(plan_joint_move(engine.arm_state().q, ASEA.q_home))
+        await driver.move(again)
     await _settle(engine)
     assert np.abs(engine.arm_state().qd).max() < 2e-3
 
