@@ -64,19 +64,19 @@ def figure_scale(records: list[dict[str, Any]], methods: list[str], path: Path) 
 def figure_viewpoint(records: list[dict[str, Any]], methods: list[str], path: Path) -> Path:
     """Figure 14: best recall and recall at 1-precision 0.1 vs graf viewpoint angle."""
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
-    for i, m in enumerate(methods):
+    for m in methods:
         rs = sorted(_by(records, method=m, sequence="graf"), key=lambda r: r["param"])
         if not rs:
             continue
         x = [r["param"] for r in rs]
         line = ax.plot(x, [r["best_recall"] for r in rs], "o-", label=f"{m} best")[0]
         ax.plot(x, [r["recall_at_01"] for r in rs], "x--", color=line.get_color(), alpha=0.6)
-        del i
     ax.set_xlabel("viewpoint angle (deg), graf img1 vs img2..6")
     ax.set_ylabel("recall (solid: best; dashed: at 1-p = 0.1)")
     ax.set_ylim(0, 1)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    if ax.lines:
+        ax.legend(fontsize=7)
     return _save(fig, path)
 
 
