@@ -159,12 +159,12 @@ def correspondences(overlaps: Overlaps, strategy: str = "nndr") -> int:
     """Number of ground-truth correspondences for a strategy (eq. 24's denominator).
 
     ``"threshold"`` may match a region several times: every overlapping pair counts. The
-    nearest-neighbour strategies match each ``a`` region once: the count is the smaller of the
-    numbers of ``a`` regions and of ``b`` regions that have an overlapping partner.
+    nearest-neighbour strategies match each ``a`` region once: the count is the number of ``a``
+    regions that have an overlapping partner.
     """
     if strategy == "threshold":
         return len(overlaps.index_a)
-    return min(len(np.unique(overlaps.index_a)), len(np.unique(overlaps.index_b)))
+    return len(np.unique(overlaps.index_a))
 
 
 def curve_from_matches(
