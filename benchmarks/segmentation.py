@@ -474,10 +474,16 @@ def main(argv: list[str] | None = None) -> int:
             bar.update(task, description="figures")
             from benchmarks.segmentation_figures import comparison_figure, evolution_figure
 
-            for provider, stem in (("skimage", "segmentation"), ("sim", "segmentation_wheels")):
+            # (The wheel renders carry sensor noise, which PNG compresses badly: lower dpi.)
+            for provider, stem, dpi in (
+                ("skimage", "segmentation", 90),
+                ("sim", "segmentation_wheels", 64),
+            ):
                 mine = [r for r in rows if r["case"].provider == provider]
                 if mine:
-                    comparison_figure(mine, OUT_DIR / f"{stem}.png", DOCS_IMG / f"{stem}.png")
+                    comparison_figure(
+                        mine, OUT_DIR / f"{stem}.png", DOCS_IMG / f"{stem}.png", dpi=dpi
+                    )
             if any(c.name == "coins" for c in cases):
                 evolution_figure(
                     cases, OUT_DIR / "levelset_evolution.png", DOCS_IMG / "levelset_evolution.png"
