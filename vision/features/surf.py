@@ -31,8 +31,8 @@ from vision.features.surf_detect import BASE_SCALE, detect_hessian, integral_ima
 from vision.features.types import Features, Keypoints
 
 __all__ = [
-    "SURF_VERSION",
     "DEFAULT_THRESHOLD",
+    "SURF_VERSION",
     "surf_describe",
     "surf_features",
     "surf_orientation",
@@ -236,10 +236,7 @@ def surf_features(
 
     xy = pts[:, :2]
     scales = BASE_SCALE * pts[:, 2] / 9.0
-    if upright or len(pts) == 0:
-        theta = np.zeros(len(pts))
-    else:
-        theta = orientation_integral(ii, xy, scales)
+    theta = np.zeros(len(pts)) if upright or len(pts) == 0 else orientation_integral(ii, xy, scales)
     desc = describe_integral(ii, xy, scales, theta, extended=extended)
     kp = Keypoints(xy, WINDOW_IN_S * scales, -theta + 0.0, pts[:, 3], octave)
     return Features(kp, desc, "surf", SURF_VERSION, False, grey.shape)
