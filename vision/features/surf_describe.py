@@ -166,7 +166,7 @@ def _accumulate(acc, base, tx, ty, w, extended):
 
 
 @numba.njit(cache=True)
-def _descriptors(ii, xs, ys, scales, thetas, extended, offs, weights, cell, cell_w):
+def _descriptors(ii, xs, ys, scales, thetas, extended, offs, weights, cell, cell_w, floor):
     n = xs.shape[0]
     per_cell = 8 if extended else 4
     dim = 16 * per_cell
@@ -202,7 +202,7 @@ def _descriptors(ii, xs, ys, scales, thetas, extended, offs, weights, cell, cell
         norm = 0.0
         for d in range(dim):
             norm += acc[d] * acc[d]
-        if norm > 0.0:
+        if norm > floor * floor:  # below: rounding noise of a constant window, left at 0
             inv = 1.0 / math.sqrt(norm)
             for d in range(dim):
                 out[p, d] = acc[d] * inv
@@ -224,6 +224,14 @@ def _cell_weights() -> tuple[np.ndarray, np.ndarray]:
 
 
 _CELL, _CELL_W = _cell_weights()
+
+
+def _noise_floor(ii: np.ndarray) -> float:
+    """Descriptor length below which the Haar sums are floating-point noise: integral-image
+    values are exact to about 1e-16 of their largest magnitude, a Haar response combines 9 of
+    them and a descriptor sums 400 weighted responses; 1e-12 of that keeps a wide margin and
+    is still far below any real texture (a one-level step gives lengths of order 100)."""
+    return 1e-12 * float(np.abs(ii).max()) * float(_DESC_W.sum())
 
 
 def orientation_integral(ii: np.ndarray, xy: np.ndarray, scales: np.ndarray) -> np.ndarray:
@@ -270,4 +278,5 @@ def describe_integral(
         _DESC_W,
         _CELL,
         _CELL_W,
+        _noise_floor(ii),
     )
