@@ -82,9 +82,7 @@ def test_upright_descriptor_tolerates_a_small_rotation_and_oriented_one_a_large_
     rot40, A40 = rotated(40.0)
     n, ok = nn_correct(surf_features(img), surf_features(rot40), A40)
     assert n > 50 and ok > 0.7  # measured 0.84 (upright at 5 deg: 0.99, upright at 40: 0.02)
-    _, ok_up = nn_correct(
-        surf_features(img, upright=True), surf_features(rot40, upright=True), A40
-    )
+    _, ok_up = nn_correct(surf_features(img, upright=True), surf_features(rot40, upright=True), A40)
     assert ok_up < ok - 0.3  # U-SURF is not rotation invariant: the orientation does matter
 
 
