@@ -7,7 +7,8 @@
   correct matches, precision (correct / matches) and recall = correct / correspondences, where
   a correspondence is a keypoint of image 1 whose projection has a keypoint of image 3 within
   3 px (positions only; the full Mikolajczyk-Schmid protocol with region overlap is
-  ``benchmarks.registration``).
+  ``benchmarks.registration``). A plot of recall against 1 - precision as the ratio threshold
+  sweeps 0.5..0.95 goes to ``benchmarks/out/surf-matching.png``.
 
 Run ``python -m benchmarks.surf [--json] [--data-dir DIR] [--repeat N]``.
 """
@@ -34,6 +35,8 @@ DATA = REPO.parent / "shared" / "data" / "registration" / "oxford"
 RATIO = 0.8
 TOL_PX = 3.0
 METHODS = ("sift", "surf")
+SWEEP = (RATIO, *np.round(np.arange(0.5, 0.951, 0.05), 2))
+OUT = REPO / "benchmarks" / "out"
 
 out = Console()
 err = Console(stderr=True)
@@ -51,27 +54,66 @@ def _project(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return p[:, :2] / p[:, 2:]
 
 
-def match_proxy(a: Features, b: Features, H: np.ndarray, shape_b: tuple[int, int]) -> dict:
-    """Ratio-test matches of ``a`` in ``b`` scored against the homography ``H`` (a -> b)."""
+def _ratio_matches(a: Features, b: Features) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Nearest neighbour in ``b`` of every descriptor of ``a`` and Lowe's distance ratio."""
+    knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(a.descriptors, b.descriptors, k=2)
+    knn = [m for m in knn if len(m) == 2]
+    q = np.array([m.queryIdx for m, _ in knn], dtype=np.int64)
+    t = np.array([m.trainIdx for m, _ in knn], dtype=np.int64)
+    r = np.array([m.distance / max(n.distance, 1e-12) for m, n in knn])
+    return q, t, r
+
+
+def match_proxy(
+    a: Features, b: Features, H: np.ndarray, shape_b: tuple[int, int], ratios=(RATIO,)
+) -> dict:
+    """Ratio-test matches of ``a`` in ``b`` scored against the homography ``H`` (a -> b); the
+    figures are for ``ratios[0]``, ``curve`` holds (ratio, matches, correct) for every ratio."""
     proj = _project(H, a.keypoints.xy)
     h, w = shape_b
     inside = (proj[:, 0] >= 0) & (proj[:, 0] < w) & (proj[:, 1] >= 0) & (proj[:, 1] < h)
     d_all = np.linalg.norm(proj[:, None, :] - b.keypoints.xy[None], axis=2)
     n_corr = int(np.sum(inside & (d_all.min(axis=1) < TOL_PX)))
-    knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(a.descriptors, b.descriptors, k=2)
-    pairs = [(m.queryIdx, m.trainIdx) for m, n in knn if m.distance < RATIO * n.distance]
-    q = np.array([p[0] for p in pairs], dtype=np.int64)
-    t = np.array([p[1] for p in pairs], dtype=np.int64)
-    ok = np.linalg.norm(proj[q] - b.keypoints.xy[t], axis=1) < TOL_PX if len(q) else q
-    n_ok = int(np.sum(ok))
+    q, t, r = _ratio_matches(a, b)
+    ok = np.linalg.norm(proj[q] - b.keypoints.xy[t], axis=1) < TOL_PX
+    curve = [(float(x), int(np.sum(r < x)), int(np.sum(ok & (r < x)))) for x in ratios]
+    _, n_match, n_ok = curve[0]
     return {
         "keypoints": [len(a), len(b)],
         "correspondences": n_corr,
-        "matches": len(pairs),
+        "matches": n_match,
         "correct": n_ok,
-        "precision": n_ok / max(len(pairs), 1),
+        "precision": n_ok / max(n_match, 1),
         "recall": n_ok / max(n_corr, 1),
+        "curve": curve,
     }
+
+
+def plot_curves(rows: list[dict], path: Path) -> None:
+    """Recall (correct / correspondences) against 1 - precision as the ratio threshold sweeps."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    seqs = sorted({r["sequence"] for r in rows})
+    fig, axes = plt.subplots(1, len(seqs), figsize=(4.2 * len(seqs), 3.4), squeeze=False)
+    for ax, seq in zip(axes[0], seqs, strict=True):
+        for r in rows:
+            if r["sequence"] != seq:
+                continue
+            c = np.array(r["curve"][1:], dtype=float)  # skip the headline ratio
+            prec = c[:, 2] / np.maximum(c[:, 1], 1)
+            ax.plot(1 - prec, c[:, 2] / max(r["correspondences"], 1), "o-", ms=3, label=r["method"])
+        ax.set_title(f"{seq} (ratio 0.5..0.95)")
+        ax.set_xlabel("1 - precision")
+        ax.set_ylabel("recall")
+        ax.grid(alpha=0.3)
+        ax.legend()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
 
 
 def bench_time(img: np.ndarray, method: str, repeat: int) -> dict[str, Any]:
@@ -95,7 +137,7 @@ def run(data_dir: Path, repeat: int) -> dict[str, Any]:
         H = np.loadtxt(data_dir / seq / "H1to3p")
         for m in METHODS:
             err.log(f"{seq} 1->3 {m}")
-            r = match_proxy(extract(a_img, m), extract(b_img, m), H, b_img.shape)
+            r = match_proxy(extract(a_img, m), extract(b_img, m), H, b_img.shape, SWEEP)
             rows.append({"sequence": f"{seq} 1-3", "method": m, **r})
     return {"timing": timing, "matching": rows}
 
@@ -110,6 +152,8 @@ def main(argv: list[str] | None = None) -> int:
         err.print(f"[red]Oxford data not found in {args.data_dir}[/red]")
         return 2
     res = run(args.data_dir, args.repeat)
+    plot_curves(res["matching"], OUT / "surf-matching.png")
+    err.log(f"plot: {OUT / 'surf-matching.png'}")
 
     t = Table(title="Extraction, 640x480 (graf img1 resized), best of runs")
     for c in ("method", "time ms", "keypoints"):

@@ -106,7 +106,7 @@ def test_gaussian_blob_gives_its_scale(sigma_px):
     """A Gaussian blob of std sigma centred at (100.3, 99.6): the strongest keypoint sits on it
     and its scale s = size_px / 20 is 0.72 sigma (the box filters' scale, s = 1.2 L / 9, is
     0.72 times the Gaussian scale at which a continuous det-of-Hessian would peak; measured
-    0.70-0.75 over sigma = 3..12 px, see docs/readme/features-surf.md)."""
+    0.69-0.75 over sigma = 3..12 px, see docs/readme/features-surf.md)."""
     y, x = np.mgrid[0:200, 0:200]
     img = 40 + 180 * np.exp(-((x - 100.3) ** 2 + (y - 99.6) ** 2) / (2 * sigma_px**2))
     f = surf_features(img.astype(np.uint8), threshold=1.0)

@@ -111,6 +111,9 @@ def _orientations(ii, xs, ys, scales, pu, pv, pw, n_steps, window):
     rx = np.empty(m)
     ry = np.empty(m)
     ang = np.empty(m)
+    sa = np.empty(2 * m)
+    cx = np.zeros(2 * m + 1)
+    cy = np.zeros(2 * m + 1)
     two_pi = 2.0 * math.pi
     for p in range(n):
         s = scales[p]
@@ -120,20 +123,28 @@ def _orientations(ii, xs, ys, scales, pu, pv, pw, n_steps, window):
             rx[q] = pw[q] * dx
             ry[q] = pw[q] * dy
             ang[q] = math.atan2(dy, dx)
+        # sliding window over the sorted directions, the list doubled (+2 pi) to wrap around;
+        # window sums as differences of running sums
+        order = np.argsort(ang)
+        for k in range(2 * m):
+            q = order[k % m]
+            sa[k] = ang[q] + (two_pi if k >= m else 0.0)
+            cx[k + 1] = cx[k] + rx[q]
+            cy[k + 1] = cy[k] + ry[q]
         best = -1.0
         bx = 0.0
         by = 0.0
+        lo = 0
+        hi = 0
         for w in range(n_steps):
             a0 = -math.pi + w * two_pi / n_steps
-            sx = 0.0
-            sy = 0.0
-            for q in range(m):
-                d = ang[q] - a0
-                if d < 0.0:
-                    d += two_pi
-                if d < window:
-                    sx += rx[q]
-                    sy += ry[q]
+            while lo < m and sa[lo] < a0:
+                lo += 1
+            hi = max(hi, lo)
+            while hi < 2 * m and sa[hi] < a0 + window:
+                hi += 1
+            sx = cx[hi] - cx[lo]
+            sy = cy[hi] - cy[lo]
             mag = sx * sx + sy * sy
             if mag > best:
                 best = mag
