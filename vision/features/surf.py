@@ -163,7 +163,7 @@ def surf_features(
         The default, 40, gives about as many keypoints as OpenCV's SIFT on the Oxford images;
         OpenCV's old ``hessianThreshold`` used the same unit (its usual 100..500 keep fewer).
     n_octaves : int
-        Octaves of the scale space, 1.._MAX_OCTAVES (filter sizes 9..27, 15..51, 27..99,
+        Octaves of the scale space, 1..6 (filter sizes 9..27, 15..51, 27..99,
         51..195, ...); octaves whose filters do not fit in the image are skipped.
     upright : bool
         U-SURF: no orientation assignment, descriptors in the image axes, ``angle_rad = 0``.
