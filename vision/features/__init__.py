@@ -6,6 +6,7 @@
 
 from vision.features.extract import COLOUR_METHODS, METHODS, extract, grey_from_image
 from vision.features.opencv import keypoints_from_cv, keypoints_to_cv
+from vision.features.surf import surf_describe, surf_features, surf_orientation
 from vision.features.types import Features, Keypoints
 
 __all__ = [
@@ -17,4 +18,7 @@ __all__ = [
     "grey_from_image",
     "keypoints_from_cv",
     "keypoints_to_cv",
+    "surf_describe",
+    "surf_features",
+    "surf_orientation",
 ]
