@@ -132,6 +132,7 @@ def test_sift_on_oxford_graf_1_2_is_above_floor(data_dir):
     ev = evaluate_pair(
         extract(a, "sift", max_features=2000), extract(b, "sift", max_features=2000), H
     )
-    # Measured 0.88 (OpenCV 4.14, 2000 features); the floor leaves room for OpenCV versions.
-    assert ev.recall_at_01 > 0.7
-    assert ev.n_correspondences > 500
+    # Measured 0.53 (OpenCV 4.14, 2000 features, regions normalised to 30 px); the floor
+    # leaves room for other OpenCV versions.
+    assert ev.recall_at_01 > 0.4
+    assert ev.n_correspondences > 1000

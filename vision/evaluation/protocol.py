@@ -218,8 +218,8 @@ def evaluate_pair(
     strategy: str = "nndr",
     mask_a: np.ndarray | None = None,
     max_error: float = 0.5,
-    region_scale: float = 3.0,
-    normalise_px: float | None = None,
+    region_scale: float = 1.0,
+    normalise_px: float | None = 30.0,
 ) -> PairEvaluation:
     """Recall versus 1-precision of descriptors ``a``/``b`` under the ground truth ``H``.
 
