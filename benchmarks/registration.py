@@ -329,9 +329,11 @@ def _f(v: float, nd: int = 3) -> str:
     return "-" if v is None or not np.isfinite(v) else f"{v:.{nd}f}"
 
 
-def write_plots(rows, labels, plot_dir: Path, docs_img: Path | None) -> list[str]:
+def write_plots(rows, labels, pairs, plot_dir: Path, docs_img: Path | None) -> list[str]:
     grey = [m for m in labels if not m.endswith(FULL_SUFFIX)]
+    sim = [p for p in pairs if p.sequence == "sim-wheel"]
     paths = [
+        figs.figure_pairs(sim, plot_dir / "fig15_sim_wheel.png"),
         figs.figure_scale(rows, grey, plot_dir / "fig12_scale.png"),
         figs.figure_viewpoint(rows, grey, plot_dir / "fig14_viewpoint.png"),
         figs.figure_colour(
@@ -434,7 +436,7 @@ def main(argv: list[str] | None = None) -> int:
     for x in tgt:
         t3.add_row(x["target"], x["status"], x["figure"])
     out.print(t3)
-    plots = [] if args.no_plots else write_plots(rows, run, args.plots, args.docs_img)
+    plots = [] if args.no_plots else write_plots(rows, run, pairs, args.plots, args.docs_img)
     if plots:
         out.print(f"plots: {', '.join(plots)}")
     if args.json:

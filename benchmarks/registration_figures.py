@@ -39,8 +39,10 @@ def _by(records: list[dict[str, Any]], **match: Any) -> list[dict[str, Any]]:
     return [r for r in records if all(r.get(k) == v for k, v in match.items())]
 
 
-def figure_scale(records: list[dict[str, Any]], methods: list[str], path: Path) -> Path:
+def figure_scale(records: list[dict[str, Any]], methods: list[str], path: Path) -> Path | None:
     """Figure 12: (a) recall vs 1-precision at scale factor 2; (b) best recall vs scale."""
+    if not _by(records, sequence="scale"):
+        return None
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 3.8))
     for m in methods:
         rs = sorted(_by(records, method=m, sequence="scale"), key=lambda r: r["param"])
@@ -61,8 +63,10 @@ def figure_scale(records: list[dict[str, Any]], methods: list[str], path: Path) 
     return _save(fig, path)
 
 
-def figure_viewpoint(records: list[dict[str, Any]], methods: list[str], path: Path) -> Path:
+def figure_viewpoint(records: list[dict[str, Any]], methods: list[str], path: Path) -> Path | None:
     """Figure 14: best recall and recall at 1-precision 0.1 vs graf viewpoint angle."""
+    if not _by(records, sequence="graf"):
+        return None
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
     for m in methods:
         rs = sorted(_by(records, method=m, sequence="graf"), key=lambda r: r["param"])
@@ -130,4 +134,18 @@ def figure_sequence(
     for ax in list(axes.flat)[len(names) :]:
         ax.axis("off")
     axes.flat[0].legend(fontsize=6)
+    return _save(fig, path)
+
+
+def figure_pairs(pairs: list[Any], path: Path) -> Path | None:
+    """Figure 15 style: image ``a`` of the first pair, then image ``b`` of each pair, with the
+    pair names."""
+    if not pairs:
+        return None
+    images = [("a", pairs[0].a)] + [(p.name, p.b) for p in pairs]
+    fig, axes = plt.subplots(1, len(images), figsize=(2.4 * len(images), 2.1))
+    for ax, (name, img) in zip(axes, images, strict=True):
+        ax.imshow(img)
+        ax.set_title(name, fontsize=9)
+        ax.axis("off")
     return _save(fig, path)
