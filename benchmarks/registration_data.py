@@ -248,8 +248,8 @@ def sim_wheel_pairs(
     ``z = bounds[1, 2]`` in the object frame), ``H = G_b G_a^-1`` with ``G = K [r1 r2 z r3 + t]``
     from the true ``T_cam_obj`` of each view. It is exact on that plane; wheel points below it
     (the recessed rim face, the tyre shoulders) are off by their parallax, reported in ``note``
-    as the largest shift over the wheel's disc of a point 3 cm lower. ``mask_a`` is the wheel's
-    disc in ``a`` (the belt is another plane and does not follow ``H``).
+    as the largest shift over the wheel's disc of a point 3 cm lower. ``mask_a`` is the disc of
+    0.9 times the wheel's radius in ``a`` (the belt is another plane and does not follow ``H``).
     """
     os.environ.setdefault("MUJOCO_GL", "egl")
     from robot.sim import CATALOGUE, CameraSpec, SimConfig, SimEngine
@@ -274,12 +274,12 @@ def sim_wheel_pairs(
     try:
         a, T_a = shot(0.0, 0.0, 0.42)
         G_a = _plane_map(spec.K, T_a, top_z)
-        circle = np.c_[
-            radius * np.cos(np.linspace(0, 2 * np.pi, 90)),
-            radius * np.sin(np.linspace(0, 2 * np.pi, 90)),
-            np.ones(90),
-        ]
-        px = circle @ G_a.T
+        # The mask is the disc of 0.9 R on the top plane: the tyre's rounded shoulder leaves
+        # the belt visible just inside the full radius, and the belt does not follow H.
+        t = np.linspace(0, 2 * np.pi, 90)
+        circle = np.c_[radius * np.cos(t), radius * np.sin(t), np.ones(90)]
+        inner = np.c_[0.9 * circle[:, :2], np.ones(90)]
+        px = inner @ G_a.T
         mask = np.zeros(a.shape[:2], np.uint8)
         cv2.fillPoly(mask, [np.rint(px[:, :2] / px[:, 2:]).astype(np.int32)], 1)
         pairs = []
