@@ -88,7 +88,8 @@ def figure_colour(
     records: list[dict[str, Any]], pairs: list[tuple[str, str]], path: Path
 ) -> Path | None:
     """Figure 16: recall vs 1-precision of each colour descriptor and its grey base, on the
-    illumination pairs (first photo) and the simulated wheel pairs."""
+    illumination pairs (first photo) and the simulated wheel pairs: solid colour, dashed grey
+    base, one colour per pair of methods."""
     sequences = [("illumination", None), ("sim-wheel", None)]
     panels = []
     for seq, _ in sequences:
@@ -103,11 +104,11 @@ def figure_colour(
     rows = (len(panels) + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(3.0 * cols, 2.9 * rows), squeeze=False)
     for ax, (seq, name) in zip(axes.flat, panels, strict=False):
-        for colour, grey in pairs:
+        for k, (colour, grey) in enumerate(pairs):
             for m, style in ((colour, "-"), (grey, "--")):
                 rs = _by(records, method=m, sequence=seq, pair=name)
                 if rs:
-                    _curve(ax, rs[0], m, linestyle=style)
+                    _curve(ax, rs[0], m, linestyle=style, color=f"C{k}")
         _finish(ax, f"{seq} {name}")
     for ax in list(axes.flat)[len(panels) :]:
         ax.axis("off")
