@@ -371,7 +371,7 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
         crit.min_axis_spread_deg,
     )
 
-    current = {"camera": cam, "T_ee_cam": Tec, "margin_px": 20.0}
+    current: dict[str, Any] = {"camera": cam, "T_ee_cam": Tec, "margin_px": 20.0}
 
     def plan(B: NDArray[np.float64], n_poses: int | None = None) -> AutoPlan:
         return _plan(
@@ -417,9 +417,6 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
         )
     views = list((await asyncio.to_thread(plan, B)).views)
     n_primary = min(options.n_poses, len(views))
-    pending: list[tuple[str, NDArray[np.uint8], NDArray[np.float64]]] = [
-        ("auto-00.png", frame.rgb, q_seen)
-    ]
     points: list[NDArray[np.float64]] = []
     dets: list[Detection] = []
     poses: list[NDArray[np.float64]] = []
@@ -438,10 +435,9 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
                 dets.append(_detection(rows[0].corners, (w, h)))
                 points.append(np.asarray(rows[0].corners, dtype=np.float64).reshape(-1, 3)[:, 1:3])
                 poses.append(T_be)
-        log.add(T_be @ Tec, ok)
+        log.add(T_be @ current["T_ee_cam"], ok)
 
-    for name, image, q in pending:
-        await store(name, image, q)
+    await store("auto-00.png", frame.rgb, q_seen)  # the survey view is a sample too
     k = 0
     updated = False
     while k < len(views):
