@@ -210,6 +210,8 @@ async def _fresh_frame(cell: Cell, after_s: float, timeout_s: float = 10.0) -> A
         await asyncio.sleep(0.02)
 
 
+#: Survey views tried before the run gives up on finding the board.
+SURVEY_TRIES = 3
 #: Accepted views after which the planning model is replaced by a quick calibration.
 UPDATE_AFTER_VIEWS = 6
 
@@ -399,21 +401,28 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
         session_id = row.id
     job.params["session_id"] = session_id
 
-    # The survey view: the planned view whose board lies nearest the image centre.
+    # Survey views: the planned views whose board lies most compactly round the image centre
+    # (far and centred: the nominal model's errors cannot push it out of the image).
     centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
-    survey = min(first.views, key=lambda v: float(np.linalg.norm(v.corners_px.mean(0) - centre)))
-    job.report(0.01, "survey view: locating the board")
-    await _move(cell, survey.q, world, options.speed)
-    await asyncio.sleep(options.settle_s)
-    frame = await _fresh_frame(cell, time.monotonic())
-    q_seen = np.asarray(getattr(frame.robot_state, "q", cell.driver.state.q), dtype=np.float64)
-    B = await asyncio.to_thread(
-        _measure_board, frame.rgb, board, cam, T_base_ee(q_seen, cell.model) @ Tec
-    )
+    surveys = sorted(
+        first.views, key=lambda v: float(np.linalg.norm(v.corners_px - centre, axis=1).max())
+    )[:SURVEY_TRIES]
+    B = None
+    for n_try, survey in enumerate(surveys, start=1):
+        job.report(0.01, f"survey view {n_try}: locating the board")
+        await _move(cell, survey.q, world, options.speed)
+        await asyncio.sleep(options.settle_s)
+        frame = await _fresh_frame(cell, time.monotonic())
+        q_seen = np.asarray(getattr(frame.robot_state, "q", cell.driver.state.q), dtype=np.float64)
+        B = await asyncio.to_thread(
+            _measure_board, frame.rgb, board, cam, T_base_ee(q_seen, cell.model) @ Tec
+        )
+        if B is not None:
+            break
     if B is None:
         raise CalibrationError(
-            "the board was not found in the survey view: check that it is placed where "
-            "the request says and that it is lit"
+            f"the board was not found in {len(surveys)} survey views: check that it is placed "
+            "where the request says and that it is lit"
         )
     views = list((await asyncio.to_thread(plan, B)).views)
     n_primary = min(options.n_poses, len(views))

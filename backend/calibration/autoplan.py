@@ -123,12 +123,12 @@ def plan_calibration_poses(
     world: CollisionWorld | None = None,
     n_poses: int = 15,
     n_reserve: int = 10,
-    n_candidates: int = 1500,
+    n_candidates: int = 3000,
     distance_m: tuple[float, float] = (0.2, 0.45),
-    max_tilt_deg: float = 50.0,
+    max_tilt_deg: float = 35.0,
     max_roll_deg: float = 75.0,
     aim_offset_m: float = 0.25,
-    max_view_angle_deg: float = 65.0,
+    max_view_angle_deg: float = 45.0,
     margin_px: float = 20.0,
     q_start: ArrayLike | None = None,
     seed: int = 0,
@@ -271,33 +271,31 @@ def _pick(
 ) -> list[int]:
     """Greedy choice for rotation diversity and coverage (cf. :func:`vision.calibration.plan_views`).
 
-    Score of a candidate: ``min_angle / 30 deg + 2 new_cells / cells + 0.5 new_corner_cells``,
-    with ``min_angle`` its smallest rotation to the views already picked (Tsai and Lenz) and
-    the new cells those of the coverage grid its corners add (Zhang); the image's four
-    corner cells count extra, as distortion is largest and least constrained there.
+    Score of a candidate: ``min_angle / 30 deg + sum over the grid cells it covers of
+    (2 / n_cells + 0.5 [corner cell]) / (1 + views already covering the cell)``, with
+    ``min_angle`` its smallest rotation to the views already picked (Tsai and Lenz) and the
+    cells those of the coverage grid its corners fall in (Zhang).  Cells seen by few views
+    weigh most, and the image's four corner cells extra: distortion is largest there and
+    only fixed by corners seen there, so they are worth several views each.
     """
     cells = [coverage_map([p], size, grid=grid).counts > 0 for p in pix]
-    corner = np.zeros((grid[1], grid[0]), dtype=bool)
-    corner[[0, 0, -1, -1], [0, -1, 0, -1]] = True
+    weight = np.full((grid[1], grid[0]), 2.0 / (grid[0] * grid[1]))
+    weight[[0, 0, -1, -1], [0, -1, 0, -1]] += 0.5
     R = T[:, :3, :3]
     min_angle = np.full(len(pix), 180.0)
-    covered = np.zeros_like(corner)
+    seen = np.zeros(weight.shape)
     picked: list[int] = []
     left = set(range(len(pix)))
     while left and len(picked) < n:
+        gain = weight / (1.0 + seen)
         best, best_score = -1, -np.inf
         for k in sorted(left):
-            new = cells[k] & ~covered
-            score = (
-                min_angle[k] / 30.0
-                + 2.0 * np.count_nonzero(new) / new.size
-                + 0.5 * np.count_nonzero(new & corner)
-            )
+            score = min_angle[k] / 30.0 + float(gain[cells[k]].sum())
             if score > best_score:
                 best, best_score = k, score
         picked.append(best)
         left.discard(best)
-        covered |= cells[best]
+        seen += cells[best]
         rel = np.einsum("ji,njk->nik", R[best], R)
         ang = np.degrees(np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1, 1)))
         min_angle = np.minimum(min_angle, ang)

@@ -19,7 +19,7 @@ from vision.calibration import Chessboard, calibrate_hand_eye, calibrate_intrins
 from vision.camera import PinholeCamera
 
 pytestmark = pytest.mark.slow
-N_VIEWS = 20
+N_VIEWS = 25
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,7 @@ def sim_views():
             world=collision_world(engine.config.layout),
             n_poses=N_VIEWS,
             n_reserve=0,
-            margin_px=12.0,
+            margin_px=8.0,
             seed=3,
         )
         qs = [v.q for v in plan.views]
