@@ -378,7 +378,7 @@ def calibrate_auto_cmd(
     board: Annotated[
         str, typer.Option("--board", help="Board of the simulated cell: chessboard or charuco")
     ] = "chessboard",
-    poses: Annotated[int, typer.Option("--poses", help="Views to plan (3..60)")] = 15,
+    poses: Annotated[int, typer.Option("--poses", help="Views to plan (3..60)")] = 25,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the view planner")] = 0,
     time_scale: Annotated[
         float, typer.Option("--time-scale", help="Simulated seconds per wall second (0.1..100)")

@@ -133,7 +133,7 @@ class AutoOptions:
         driver's time scale only through the move itself).
     """
 
-    n_poses: int = 15
+    n_poses: int = 25
     n_reserve: int = 10
     activate: bool = False
     seed: int = 0

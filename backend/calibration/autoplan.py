@@ -121,7 +121,7 @@ def plan_calibration_poses(
     *,
     T_ee_cam: ArrayLike = NOMINAL_T_EE_CAM,
     world: CollisionWorld | None = None,
-    n_poses: int = 15,
+    n_poses: int = 25,
     n_reserve: int = 10,
     n_candidates: int = 3000,
     distance_m: tuple[float, float] = (0.2, 0.45),

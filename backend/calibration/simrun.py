@@ -176,7 +176,7 @@ async def _run(
 def run_sim_auto(
     *,
     board: str = "chessboard",
-    n_poses: int = 15,
+    n_poses: int = 25,
     seed: int = 0,
     time_scale: float = 8.0,
     activate: bool = True,

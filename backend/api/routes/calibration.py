@@ -425,7 +425,7 @@ class AutoIn(BaseModel):
         description="Where the board roughly is (4x4, metres); default: where the simulated "
         "cell's board was placed.  The first view measures it again.",
     )
-    n_poses: int = Field(15, ge=3, le=60, description="Views to plan")
+    n_poses: int = Field(25, ge=3, le=60, description="Views to plan")
     n_reserve: int = Field(10, ge=0, le=60, description="Reserve views while criteria are unmet")
     activate: bool = Field(False, description="Activate the solution")
     seed: int = Field(0, ge=0, description="Seed of the view planner")
