@@ -3,9 +3,10 @@
 The arm is modelled as capsules round the segments of the kinematic chain
 (:func:`robot.kinematics.joint_positions`: column, upper arm, forearm, wrist) plus a sphere
 round the camera and tool on the flange; the cell as axis-aligned boxes (table, conveyor,
-a calibration board's slab) and the floor plane ``z = 0``.  A capsule is checked by
-sampling its axis densely (spacing at most half its radius), so a point of the capsule can
-be missed by no more than ~0.13 radius: the radii below carry that margin.
+a calibration board's slab) and the floor plane ``z = 0``.  A capsule is checked as a row
+of spheres along its axis spaced at most half its radius apart; their union falls short of
+the capsule's surface by at most ``r (1 - sqrt(1 - 1/16))``, about 3 % of the radius, which
+the required clearance covers.
 
 This is a planning guard (refuse candidate poses that come near the furniture), not a
 certified safety function; the real cell's safety comes from its fences and the e-stop.
