@@ -37,6 +37,7 @@ from backend.calibration.autoplan import (
     NOMINAL_T_EE_CAM,
     AutoPlan,
     PlannedView,
+    board_box,
     plan_calibration_poses,
 )
 from backend.calibration.sessions import (
@@ -129,8 +130,7 @@ class AutoOptions:
     criteria : ViewSetCriteria
         When collection may stop (``min_views`` is capped at ``n_poses``).
     settle_s : float
-        Wait after a move before the frame is taken (simulated seconds scale with the
-        driver's time scale only through the move itself).
+        Wall-clock wait after a move before the frame is taken.
     """
 
     n_poses: int = 25
@@ -249,16 +249,20 @@ def _diversity(poses: list[NDArray[np.float64]]) -> RotationDiversity:
     return rotation_diversity(np.array(poses))
 
 
-async def _move(cell: Cell, q: NDArray[np.float64], world: CollisionWorld, speed: float) -> None:
+async def _move(
+    cell: Cell, q: NDArray[np.float64], world: CollisionWorld, speed: float
+) -> str | None:
+    """Move to ``q``; the reason instead if the straight joint path would collide."""
     q_now = np.asarray(cell.driver.state.q, dtype=np.float64)
     goal = check_joints(q, cell.model)
     hits = world.path_contacts(q_now, goal)
     if hits:
-        raise CalibrationError(f"the move to the next view would collide: {hits[0]}")
+        return f"the move would bring the {hits[0]}"
     traj = plan_joint_move(q_now, goal, speed=speed, model=cell.model)
     report = await cell.driver.move(traj)
     if not report.completed:
         raise DriverError(f"the calibration run stopped: the move ended with {report.reason!r}")
+    return None
 
 
 def _measure_board(
@@ -408,9 +412,11 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
         first.views, key=lambda v: float(np.linalg.norm(v.corners_px - centre, axis=1).max())
     )[:SURVEY_TRIES]
     B = None
+    guarded = world.with_boxes(board_box(board, run.T_base_board))
     for n_try, survey in enumerate(surveys, start=1):
         job.report(0.01, f"survey view {n_try}: locating the board")
-        await _move(cell, survey.q, world, options.speed)
+        if await _move(cell, survey.q, guarded, options.speed) is not None:
+            continue
         await asyncio.sleep(options.settle_s)
         frame = await _fresh_frame(cell, time.monotonic())
         q_seen = np.asarray(getattr(frame.robot_state, "q", cell.driver.state.q), dtype=np.float64)
@@ -421,9 +427,11 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
             break
     if B is None:
         raise CalibrationError(
-            f"the board was not found in {len(surveys)} survey views: check that it is placed "
-            "where the request says and that it is lit"
+            f"the board was not found from {len(surveys)} survey views (or they could not be "
+            "reached without collision): check that it is placed where the request says and "
+            "that it is lit"
         )
+    guarded = world.with_boxes(board_box(board, B))
     views = list((await asyncio.to_thread(plan, B)).views)
     n_primary = min(options.n_poses, len(views))
     points: list[NDArray[np.float64]] = []
@@ -449,6 +457,7 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
     await store("auto-00.png", frame.rgb, q_seen)  # the survey view is a sample too
     k = 0
     updated = False
+    skipped: list[str] = []
     while k < len(views):
         v: PlannedView = views[k]
         k += 1
@@ -460,7 +469,10 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
             f"view {visited} of {n_primary}{' (reserve)' if k > n_primary else ''}: "
             f"{len(poses)} with the board",
         )
-        await _move(cell, v.q, world, options.speed)
+        blocked = await _move(cell, v.q, guarded, options.speed)
+        if blocked is not None:
+            skipped.append(blocked)
+            continue
         await asyncio.sleep(options.settle_s)
         frame = await _fresh_frame(cell, time.monotonic())
         q_seen = np.asarray(getattr(frame.robot_state, "q", cell.driver.state.q), dtype=np.float64)
@@ -473,6 +485,7 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
             better = await asyncio.to_thread(_quick_model, dets, poses, board)
             if better is not None:
                 current["camera"], current["T_ee_cam"], B = better
+                guarded = world.with_boxes(board_box(board, B))
                 current["margin_px"] = 12.0
                 left = max(n_primary - k, 3)
                 fresh = list((await asyncio.to_thread(plan, B, left)).views)
@@ -486,7 +499,7 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
     unmet = crit.unmet(cov, div)
     if unmet:
         raise CalibrationError(
-            f"collection criteria not met after {visited + 1} views (session {session_id} keeps "
+            f"collection criteria not met after {visited + 1 - len(skipped)} views (session {session_id} keeps "
             f"the samples): {'; '.join(unmet)}"
         )
     job.report(0.86, f"solving intrinsics and hand-eye from {len(poses)} views")
@@ -510,11 +523,12 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
         }
     result.update(
         {
-            "views": visited + 1,
+            "views": visited + 1 - len(skipped),
             "accepted": len(poses),
             "coverage": cov.fraction,
             "corner_cells": cov.corner_cells,
             "diversity": div.as_dict(),
+            "skipped": skipped,
             "duration_s": time.monotonic() - t0,
         }
     )
