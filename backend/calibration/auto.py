@@ -22,6 +22,7 @@ nothing is solved or activated then.
 from __future__ import annotations
 
 import asyncio
+import functools
 import math
 import time
 import weakref
@@ -39,6 +40,7 @@ from backend.calibration.autoplan import (
     PlannedView,
     board_box,
     plan_calibration_poses,
+    survey_views,
 )
 from backend.calibration.sessions import (
     SampleIn,
@@ -130,7 +132,8 @@ class AutoOptions:
     criteria : ViewSetCriteria
         When collection may stop (``min_views`` is capped at ``n_poses``).
     settle_s : float
-        Wall-clock wait after a move before the frame is taken.
+        Wall-clock wait after a move, after which the run also waits for the arm to be
+        still (:data:`STILL_RAD_S`) before the frame is taken.
     """
 
     n_poses: int = 25
@@ -265,6 +268,23 @@ async def _move(
     return None
 
 
+#: The arm counts as still when no joint turns faster than this, rad/s (0.06 deg/s).
+STILL_RAD_S = 1e-3
+
+
+async def _settle(cell: Cell, wait_s: float, *, timeout_s: float = 3.0) -> None:
+    """Wait ``wait_s``, then until the arm's joint speeds are below :data:`STILL_RAD_S`
+    (the controller may still be damping the end of the move: a moving camera blurs the
+    corners and its encoders disagree with the exposure)."""
+    await asyncio.sleep(wait_s)
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        qd = np.asarray(cell.driver.state.qd, dtype=np.float64)
+        if float(np.abs(qd).max()) < STILL_RAD_S:
+            return
+        await asyncio.sleep(0.01)
+
+
 def _measure_board(
     image: NDArray[np.uint8], board: Board, camera: PinholeCamera, T_base_cam: NDArray[np.float64]
 ) -> NDArray[np.float64] | None:
@@ -328,6 +348,8 @@ def _plan(B: NDArray[np.float64], q: NDArray[np.float64], **kw: Any) -> AutoPlan
         n_poses=n,
         n_reserve=o.n_reserve,
         margin_px=kw.get("margin_px", 20.0),
+        seen_px=kw.get("seen_px", ()),
+        seen_T_base_cam=kw.get("seen_T_base_cam"),
         q_start=q,
         seed=o.seed,
         model=kw["model"],
@@ -379,7 +401,7 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
 
     current: dict[str, Any] = {"camera": cam, "T_ee_cam": Tec, "margin_px": 20.0}
 
-    def plan(B: NDArray[np.float64], n_poses: int | None = None) -> AutoPlan:
+    def plan(B: NDArray[np.float64], n_poses: int | None = None, **seen: Any) -> AutoPlan:
         return _plan(
             B,
             np.asarray(cell.driver.state.q, dtype=np.float64),
@@ -389,6 +411,7 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
             world=world,
             n_poses=n_poses,
             **current,
+            **seen,
         )
 
     first = run.plan
@@ -405,19 +428,31 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
         session_id = row.id
     job.params["session_id"] = session_id
 
-    # Survey views: the planned views whose board lies most compactly round the image centre
-    # (far and centred: the nominal model's errors cannot push it out of the image).
-    centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
-    surveys = sorted(
-        first.views, key=lambda v: float(np.linalg.norm(v.corners_px - centre, axis=1).max())
-    )[:SURVEY_TRIES]
+    # Survey views: far and straight on, so that the nominal model's errors cannot push
+    # the board out of the image; the planned views' most compact ones if none exists.
+    surveys = await asyncio.to_thread(
+        survey_views,
+        run.T_base_board,
+        board,
+        cam,
+        T_ee_cam=Tec,
+        world=world,
+        n=SURVEY_TRIES,
+        q_start=np.asarray(cell.driver.state.q, dtype=np.float64),
+        model=cell.model,
+    )
+    if not surveys:
+        centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+        surveys = sorted(
+            first.views, key=lambda v: float(np.linalg.norm(v.corners_px - centre, axis=1).max())
+        )[:SURVEY_TRIES]
     B = None
     guarded = world.with_boxes(board_box(board, run.T_base_board))
     for n_try, survey in enumerate(surveys, start=1):
         job.report(0.01, f"survey view {n_try}: locating the board")
         if await _move(cell, survey.q, guarded, options.speed) is not None:
             continue
-        await asyncio.sleep(options.settle_s)
+        await _settle(cell, options.settle_s)
         frame = await _fresh_frame(cell, time.monotonic())
         q_seen = np.asarray(getattr(frame.robot_state, "q", cell.driver.state.q), dtype=np.float64)
         B = await asyncio.to_thread(
@@ -473,7 +508,7 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
         if blocked is not None:
             skipped.append(blocked)
             continue
-        await asyncio.sleep(options.settle_s)
+        await _settle(cell, options.settle_s)
         frame = await _fresh_frame(cell, time.monotonic())
         q_seen = np.asarray(getattr(frame.robot_state, "q", cell.driver.state.q), dtype=np.float64)
         await store(f"auto-{visited:02d}.png", frame.rgb, q_seen)
@@ -486,9 +521,13 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
             if better is not None:
                 current["camera"], current["T_ee_cam"], B = better
                 guarded = world.with_boxes(board_box(board, B))
-                current["margin_px"] = 12.0
+                current["margin_px"] = 16.0
                 left = max(n_primary - k, 3)
-                fresh = list((await asyncio.to_thread(plan, B, left)).views)
+                seen_T = np.array([T @ current["T_ee_cam"] for T in poses])
+                fresh_plan = await asyncio.to_thread(
+                    functools.partial(plan, B, left, seen_px=list(points), seen_T_base_cam=seen_T)
+                )
+                fresh = list(fresh_plan.views)
                 views = views[:k] + fresh
                 n_primary = k + left
         cov = coverage_map(points, (w, h))

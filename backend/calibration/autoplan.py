@@ -21,6 +21,7 @@ own terms, then judged with the camera model:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,7 +34,14 @@ from robot.model import ASEA, ArmModel
 from vision.calibration import Board, coverage_map
 from vision.camera import PinholeCamera
 
-__all__ = ["NOMINAL_T_EE_CAM", "AutoPlan", "PlannedView", "board_box", "plan_calibration_poses"]
+__all__ = [
+    "NOMINAL_T_EE_CAM",
+    "AutoPlan",
+    "PlannedView",
+    "board_box",
+    "plan_calibration_poses",
+    "survey_views",
+]
 
 #: The camera's mounting from the drawing, before any hand-eye calibration: on the approach
 #: axis, 4 cm past the flange, image x along ``y_ee`` (OpenCV camera frame).
@@ -132,6 +140,8 @@ def plan_calibration_poses(
     margin_px: float = 20.0,
     q_start: ArrayLike | None = None,
     seed: int = 0,
+    seen_px: Sequence[ArrayLike] = (),
+    seen_T_base_cam: ArrayLike | None = None,
     model: ArmModel = ASEA,
 ) -> AutoPlan:
     """Plan ``n_poses`` views of the board (plus up to ``n_reserve`` reserves).
@@ -171,6 +181,9 @@ def plan_calibration_poses(
         Where the arm is (IK seed, first move); default ``model.q_ready``.
     seed : int
         Random seed.
+    seen_px, seen_T_base_cam : optional
+        Corners (list of (N_i, 2) pixel arrays) and camera poses (k, 4, 4) of views already
+        taken: the choice then favours the image cells and the rotations they lack.
     model : ArmModel
         The arm.
 
@@ -254,11 +267,73 @@ def plan_calibration_poses(
             f"the whole board; {len(qs)} usable, need at least 6"
         )
     cands = np.array(T_cam_base_of)
-    idx = _pick(cands, pix, (camera.width, camera.height), int(n_poses) + int(n_reserve))
+    prior_R = (
+        np.zeros((0, 3, 3))
+        if seen_T_base_cam is None
+        else np.asarray(seen_T_base_cam, dtype=np.float64).reshape(-1, 4, 4)[:, :3, :3]
+    )
+    idx = _pick(
+        cands,
+        pix,
+        (camera.width, camera.height),
+        int(n_poses) + int(n_reserve),
+        seen_px=[np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in seen_px],
+        seen_R=prior_R,
+    )
     n_primary = min(int(n_poses), len(idx))
     order = _short_tour([qs[i] for i in idx[:n_primary]], q0) + list(range(n_primary, len(idx)))
     views = tuple(PlannedView(qs[idx[k]], cands[idx[k]], pix[idx[k]]) for k in order)
     return AutoPlan(views, n_primary, int(n_candidates), refused)
+
+
+def survey_views(
+    T_base_board: ArrayLike,
+    board: Board,
+    camera: PinholeCamera,
+    *,
+    T_ee_cam: ArrayLike = NOMINAL_T_EE_CAM,
+    world: CollisionWorld | None = None,
+    margin_px: float = 80.0,
+    n: int = 3,
+    q_start: ArrayLike | None = None,
+    model: ArmModel = ASEA,
+) -> list[PlannedView]:
+    """Up to ``n`` views for locating the board: straight on (or nearly), as far away as the
+    arm reaches (0.65 m down to 0.3 m), the board ``margin_px`` inside the image, so that
+    an uncalibrated camera model still sees all of it; farthest first."""
+    B = np.asarray(T_base_board, dtype=np.float64)
+    q0 = np.asarray(model.q_ready if q_start is None else q_start, dtype=np.float64)
+    obstacles = (world or CollisionWorld(model=model)).with_boxes(board_box(board, B))
+    obj = board.object_points()
+    centre = B[:3, :3] @ obj.mean(axis=0) + B[:3, 3]
+    phi0 = math.asin(float(np.clip(B[2, 2], -1.0, 1.0)))  # facing the printed side
+    Tec = np.asarray(T_ee_cam, dtype=np.float64)
+    az = math.atan2(centre[1], centre[0])
+    out: list[PlannedView] = []
+    for d in np.arange(0.65, 0.299, -0.05):
+        for dphi, roll in ((0, 0), (10, 0), (-10, 0), (0, 30), (0, -30), (20, 0), (-20, 0)):
+            phi = phi0 + math.radians(dphi)
+            a = np.array(
+                [math.cos(az) * math.cos(phi), math.sin(az) * math.cos(phi), math.sin(phi)]
+            )
+            p = centre - d * a
+            try:
+                q = ik(
+                    (*p, math.cos(phi), math.sin(phi)),
+                    roll=math.radians(roll),
+                    seed=q0,
+                    model=model,
+                )
+            except Unreachable:
+                continue
+            T_bc = T_base_ee(q, model) @ Tec
+            uv = camera.project_world(obj, np.linalg.inv(T_bc) @ B)
+            if _in_view(uv, camera, margin_px) and not obstacles.collides(q):
+                out.append(PlannedView(q, T_bc, uv))
+                break
+        if len(out) >= n:
+            break
+    return out
 
 
 def _pick(
@@ -267,6 +342,8 @@ def _pick(
     size: tuple[int, int],
     n: int,
     *,
+    seen_px: Sequence[NDArray[np.float64]] = (),
+    seen_R: NDArray[np.float64] | None = None,
     grid: tuple[int, int] = (8, 6),
 ) -> list[int]:
     """Greedy choice for rotation diversity and coverage (cf. :func:`vision.calibration.plan_views`).
@@ -284,6 +361,10 @@ def _pick(
     R = T[:, :3, :3]
     min_angle = np.full(len(pix), 180.0)
     seen = np.zeros(weight.shape)
+    for p in seen_px:  # views already taken
+        seen += coverage_map([p], size, grid=grid).counts > 0
+    for Rs in np.zeros((0, 3, 3)) if seen_R is None else seen_R:
+        min_angle = np.minimum(min_angle, _angles_deg(Rs, R))
     picked: list[int] = []
     left = set(range(len(pix)))
     while left and len(picked) < n:
@@ -296,10 +377,14 @@ def _pick(
         picked.append(best)
         left.discard(best)
         seen += cells[best]
-        rel = np.einsum("ji,njk->nik", R[best], R)
-        ang = np.degrees(np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1, 1)))
-        min_angle = np.minimum(min_angle, ang)
+        min_angle = np.minimum(min_angle, _angles_deg(R[best], R))
     return picked
+
+
+def _angles_deg(R0: NDArray[np.float64], R: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rotation angles between ``R0`` (3, 3) and each of ``R`` (n, 3, 3), degrees."""
+    rel = np.einsum("ji,njk->nik", R0, R)
+    return np.degrees(np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1, 1)))
 
 
 def _short_tour(qs: list[NDArray[np.float64]], q0: NDArray[np.float64]) -> list[int]:
