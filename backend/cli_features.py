@@ -177,14 +177,14 @@ def train_pca(
     images: list[tuple[str, np.ndarray]] = []
     sources: dict[str, object] = {}
     if use_skimage:
+        chosen = tuple(photos) if photos else SKIMAGE_PHOTOS
+        bad = [p for p in chosen if p not in SKIMAGE_PHOTOS]
+        if bad:
+            err.print(
+                f"[red]error:[/red] --photo {bad[0]!r}: choose from {', '.join(SKIMAGE_PHOTOS)}"
+            )
+            raise typer.Exit(2)
         try:
-            chosen = tuple(photos) if photos else SKIMAGE_PHOTOS
-            bad = [p for p in chosen if p not in SKIMAGE_PHOTOS]
-            if bad:
-                err.print(
-                    f"[red]error:[/red] --photo {bad[0]!r}: choose from {', '.join(SKIMAGE_PHOTOS)}"
-                )
-                raise typer.Exit(2)
             images += skimage_images(chosen)
         except RuntimeError as exc:
             err.print(f"[red]error:[/red] {exc}")
