@@ -132,7 +132,7 @@ def main() -> None:
     for name, r in results.items():
         cells = [f"{r[p[0]]['correct']} ({r[p[0]]['precision']:.2f})" for p in pairs]
         table.add_row(name, str(r["dim"]), f"{r['extract_ms']:.0f}", f"{r['match_ms']:.0f}", *cells)
-    Console().print(table)
+    Console(width=150).print(table)
     print("cells: correct matches (precision); timings on a shared machine are noisy")
     if args.json:
         print(json.dumps(results))
