@@ -1,9 +1,11 @@
 """Segmentation benchmark: our snake and level set against scikit-image, same images, same starts.
 
-Run ``python -m benchmarks.segmentation [--json] [--repeats N] [--grid]``.
+Run ``python -m benchmarks.segmentation [--json] [--repeats N] [--grid] [--providers skimage,sim]``.
 
 For every case of :mod:`benchmarks.segmentation_cases` (image, object, reference mask, initial
-ellipse) it runs, in one process:
+ellipse) of the providers asked for (default both: ``skimage``, four photographs, and ``sim``,
+five wheels rendered by the simulated cell; a provider that cannot run here, e.g. ``sim``
+without MuJoCo rendering, is skipped with its reason printed) it runs, in one process:
 
 - snakes: :func:`vision.segmentation.active_contour` against
   ``skimage.segmentation.active_contour``, both from the same initial contour on the whole
@@ -18,12 +20,15 @@ It reports IoU against the reference mask and the wall time per image (median of
 ``--repeats`` runs, after one warm-up call per method so that one-off costs such as loading
 Numba's compiled code are not counted, for either side), with ratios, checks the targets,
 prints a table (and with ``--json`` one JSON object on the last line), and writes the figures
-``benchmarks/out/segmentation.png`` and ``benchmarks/out/levelset_evolution.png`` plus small
-copies in ``docs/img/``.
+``benchmarks/out/segmentation.png`` (photographs), ``benchmarks/out/segmentation_wheels.png``
+(rendered wheels) and ``benchmarks/out/levelset_evolution.png`` plus small copies in
+``docs/img/``.
 
-Parameters are fixed below for both sides.  They are the best mean IoU over the four images
-of the small grids in :data:`GRIDS` (one setting per method, for all images); ``--grid`` reruns
-those grids and prints every row, so the choice can be checked.  scikit-image's
+Parameters are fixed below for both sides.  They are the best mean IoU over the four
+photographs of the small grids in :data:`GRIDS` (one setting per method, for all images);
+``--grid`` reruns those grids on the photographs and prints every row, so the choice can be
+checked.  The rendered wheels were not used to choose any parameter: they are held-out
+test images.  scikit-image's
 ``active_contour`` keeps its own defaults otherwise (``w_line=0``, ``w_edge=1``,
 ``max_num_iter=2500``, ``convergence=0.1``, ``boundary_condition="periodic"``) and gets the image
 pre-smoothed by ``skimage.filters.gaussian(sigma)`` as its documentation's example does; that
@@ -49,7 +54,7 @@ from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
-from benchmarks.segmentation_cases import Case, all_cases, roi_box
+from benchmarks.segmentation_cases import PROVIDERS, Case, all_cases, roi_box
 from vision.segmentation import (
     active_contour,
     chan_vese,
@@ -240,8 +245,16 @@ def run_benchmark(
     return rows
 
 
+#: The provider whose images choose the parameters (the others are held out).
+TUNING_PROVIDER = "skimage"
+
+
 def run_grid(cases: list[Case], progress: Callable[[str], None]) -> dict[str, list[dict[str, Any]]]:
-    """Every setting of :data:`GRIDS` on every case; rows sorted best first (mean IoU)."""
+    """Every setting of :data:`GRIDS` on the tuning cases (:data:`TUNING_PROVIDER`); rows
+    sorted best first (mean IoU)."""
+    cases = [c for c in cases if c.provider == TUNING_PROVIDER]
+    if not cases:
+        raise ValueError(f"--grid needs the {TUNING_PROVIDER!r} provider's images")
     out: dict[str, list[dict[str, Any]]] = {}
     for method, grid in GRIDS.items():
         rows = []
@@ -262,8 +275,26 @@ def run_grid(cases: list[Case], progress: Callable[[str], None]) -> dict[str, li
     return out
 
 
-def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Per-case figures, ratios and the targets, as plain data (the JSON)."""
+def _targets(cases: list[dict[str, Any]]) -> dict[str, Any]:
+    snake_speed = min(c["snake"]["speedup"] for c in cases)
+    ls_speed = min(c["levelset"]["speedup"] for c in cases)
+    return {
+        "snake_iou_ge_skimage_every_image": all(
+            c["snake"]["iou_ours"] >= c["snake"]["iou_skimage"] for c in cases
+        ),
+        "snake_min_speedup": snake_speed,
+        "snake_speedup_met": snake_speed >= TARGETS["snake_speedup"],
+        "levelset_iou_ge_mcv_every_image": all(
+            c["levelset"]["iou_ours"] >= c["levelset"]["iou_mcv"] for c in cases
+        ),
+        "levelset_min_speedup": ls_speed,
+        "levelset_speedup_met": ls_speed >= TARGETS["levelset_speedup"],
+    }
+
+
+def summarise(rows: list[dict[str, Any]], skipped: dict[str, str] | None = None) -> dict[str, Any]:
+    """Per-case figures, ratios and the targets (over all images and per provider), as plain
+    data (the JSON)."""
     cases = []
     for r in rows:
         so, ss, lo, lg, lm = (
@@ -301,10 +332,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
                 },
             }
         )
-    snake_iou = all(c["snake"]["iou_ours"] >= c["snake"]["iou_skimage"] for c in cases)
-    snake_speed = min(c["snake"]["speedup"] for c in cases)
-    ls_iou = all(c["levelset"]["iou_ours"] >= c["levelset"]["iou_mcv"] for c in cases)
-    ls_speed = min(c["levelset"]["speedup"] for c in cases)
+    providers = list(dict.fromkeys(c["provider"] for c in cases))
     return {
         "benchmark": "segmentation",
         "cases": cases,
@@ -314,14 +342,11 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "levelset_ours": LEVELSET_OURS,
             "levelset_mcv": LEVELSET_MCV,
         },
-        "targets": {
-            "snake_iou_ge_skimage_every_image": snake_iou,
-            "snake_min_speedup": snake_speed,
-            "snake_speedup_met": snake_speed >= TARGETS["snake_speedup"],
-            "levelset_iou_ge_mcv_every_image": ls_iou,
-            "levelset_min_speedup": ls_speed,
-            "levelset_speedup_met": ls_speed >= TARGETS["levelset_speedup"],
+        "targets": _targets(cases),
+        "targets_by_provider": {
+            p: _targets([c for c in cases if c["provider"] == p]) for p in providers
         },
+        "skipped_providers": dict(skipped or {}),
     }
 
 
@@ -329,12 +354,22 @@ def print_table(summary: dict[str, Any], console: Console) -> None:
     t = Table(
         title="Snakes: ours vs skimage.segmentation.active_contour (IoU vs reference, wall time)"
     )
-    for col in ("image", "object", "IoU ours", "IoU skimage", "ms ours", "ms skimage", "speed-up"):
-        t.add_column(col, justify="right" if col not in ("image", "object") else "left")
+    for col in (
+        "image",
+        "source",
+        "object",
+        "IoU ours",
+        "IoU skimage",
+        "ms ours",
+        "ms skimage",
+        "speed-up",
+    ):
+        t.add_column(col, justify="right" if col not in ("image", "source", "object") else "left")
     for c in summary["cases"]:
         s = c["snake"]
         t.add_row(
             c["case"],
+            c["provider"],
             c["object"],
             f"{s['iou_ours']:.3f}",
             f"{s['iou_skimage']:.3f}",
@@ -368,14 +403,23 @@ def print_table(summary: dict[str, Any], console: Console) -> None:
             f"{s['speedup']:.1f}x",
         )
     console.print(t)
-    tg = summary["targets"]
+    for provider, reason in summary["skipped_providers"].items():
+        console.print(f"provider {provider!r} skipped: {reason}")
+    scopes = [("all images", summary["targets"])]
+    if len(summary["targets_by_provider"]) > 1:
+        scopes += [(f"{p} images", tg) for p, tg in summary["targets_by_provider"].items()]
+    for scope, tg in scopes:
+        _print_targets(scope, tg, console)
+
+
+def _print_targets(scope: str, tg: dict[str, Any], console: Console) -> None:
     console.print(
-        f"snake: IoU >= skimage on every image: {'MET' if tg['snake_iou_ge_skimage_every_image'] else 'MISSED'}; "
+        f"{scope}: snake: IoU >= skimage on every image: {'MET' if tg['snake_iou_ge_skimage_every_image'] else 'MISSED'}; "
         f"slowest speed-up {tg['snake_min_speedup']:.1f}x (target {TARGETS['snake_speedup']:.0f}x): "
         f"{'MET' if tg['snake_speedup_met'] else 'MISSED'}"
     )
     console.print(
-        f"level set: IoU >= MCV on every image: {'MET' if tg['levelset_iou_ge_mcv_every_image'] else 'MISSED'}; "
+        f"{scope}: level set: IoU >= MCV on every image: {'MET' if tg['levelset_iou_ge_mcv_every_image'] else 'MISSED'}; "
         f"slowest speed-up {tg['levelset_min_speedup']:.1f}x (target {TARGETS['levelset_speedup']:.0f}x): "
         f"{'MET' if tg['levelset_speedup_met'] else 'MISSED'}"
     )
@@ -391,14 +435,30 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--grid", action="store_true", help="rerun the parameter grids and print them")
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    ap.add_argument(
+        "--providers",
+        default=",".join(PROVIDERS),
+        help=f"comma-separated image providers (default: {','.join(PROVIDERS)})",
+    )
     args = ap.parse_args(argv)
     if args.repeats < 1:
         ap.error(f"--repeats must be >= 1, got {args.repeats}")
+    providers = [p.strip() for p in args.providers.split(",") if p.strip()]
+    unknown = [p for p in providers if p not in PROVIDERS]
+    if unknown or not providers:
+        ap.error(f"--providers must name some of {', '.join(PROVIDERS)}, got {args.providers!r}")
+    if args.grid and TUNING_PROVIDER not in providers:
+        ap.error(f"--grid tunes on the {TUNING_PROVIDER!r} images: include that provider")
     console = Console(width=150)
     err = Console(stderr=True)
     with Progress(console=err, transient=True) as bar:
-        task = bar.add_task("preparing cases (reference masks by GrabCut)", total=None)
-        cases = all_cases()
+        task = bar.add_task("preparing cases (GrabCut references, wheel renders)", total=None)
+        cases, skipped = all_cases(providers)
+        for provider, reason in skipped.items():
+            err.print(f"provider {provider!r} skipped: {reason}")
+        if not cases:
+            err.print("no benchmark images: every provider was skipped")
+            return 1
         bar.update(task, description="warming up")
         _warm_up()
         if args.grid:
@@ -414,11 +474,21 @@ def main(argv: list[str] | None = None) -> int:
             bar.update(task, description="figures")
             from benchmarks.segmentation_figures import comparison_figure, evolution_figure
 
-            comparison_figure(rows, OUT_DIR / "segmentation.png", DOCS_IMG / "segmentation.png")
-            evolution_figure(
-                cases, OUT_DIR / "levelset_evolution.png", DOCS_IMG / "levelset_evolution.png"
-            )
-    summary = summarise(rows)
+            # (The wheel renders carry sensor noise, which PNG compresses badly: lower dpi.)
+            for provider, stem, dpi in (
+                ("skimage", "segmentation", 90),
+                ("sim", "segmentation_wheels", 64),
+            ):
+                mine = [r for r in rows if r["case"].provider == provider]
+                if mine:
+                    comparison_figure(
+                        mine, OUT_DIR / f"{stem}.png", DOCS_IMG / f"{stem}.png", dpi=dpi
+                    )
+            if any(c.name == "coins" for c in cases):
+                evolution_figure(
+                    cases, OUT_DIR / "levelset_evolution.png", DOCS_IMG / "levelset_evolution.png"
+                )
+    summary = summarise(rows, skipped)
     if args.grid:
         for method, grid_rows in grid.items():
             t = Table(title=f"grid {method} (best first)")
@@ -437,9 +507,7 @@ def main(argv: list[str] | None = None) -> int:
         summary["grid"] = grid
     print_table(summary, console)
     if not args.no_figures:
-        console.print(
-            f"figures: {OUT_DIR / 'segmentation.png'}, {OUT_DIR / 'levelset_evolution.png'}"
-        )
+        console.print(f"figures: {', '.join(str(p) for p in sorted(OUT_DIR.glob('*.png')))}")
     if args.json:
         print(json.dumps(summary))
     return 0

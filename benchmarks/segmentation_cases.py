@@ -7,10 +7,12 @@ object) that every method starts from.
 Providers
 ---------
 A provider is a function ``() -> list[Case]``; :data:`PROVIDERS` maps names to them and the
-benchmark runs them all.  ``skimage`` serves the four photographs scikit-image ships inside
-its wheel (``skimage.data``: no download).  The simulator's rendered wheels will be one more
-provider (a function rendering a wheel and taking its reference mask from the renderer's
-segmentation buffer) once ``robot.sim`` exists; add it to :data:`PROVIDERS`.
+benchmark runs the ones asked for (all by default).  ``skimage`` serves the four photographs
+scikit-image ships inside its wheel (``skimage.data``: no download).  ``sim`` renders five
+wheel types on the belt with the simulated cell's eye-in-hand camera and takes each reference
+mask from MuJoCo's segmentation render (:mod:`benchmarks.segmentation_sim`, where its
+procedure is written down).  A provider that cannot run here (no MuJoCo rendering) raises
+:class:`ProviderUnavailable` and the benchmark skips it with the reason.
 
 Reference procedure (``skimage`` provider)
 ------------------------------------------
@@ -30,7 +32,7 @@ so its eye is the object there.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -39,7 +41,19 @@ from numpy.typing import NDArray
 
 from vision.segmentation import ellipse_contour
 
-__all__ = ["PROVIDERS", "Case", "all_cases", "reference_mask", "roi_box", "skimage_cases"]
+__all__ = [
+    "PROVIDERS",
+    "Case",
+    "ProviderUnavailable",
+    "all_cases",
+    "reference_mask",
+    "roi_box",
+    "skimage_cases",
+]
+
+
+class ProviderUnavailable(RuntimeError):
+    """A provider cannot produce its images here (the reason is the message)."""
 
 
 @dataclass(frozen=True)
@@ -219,13 +233,37 @@ def skimage_cases(n_points: int = 200) -> list[Case]:
     return cases
 
 
-#: Image providers run by the benchmark; add the simulator's wheels here when it exists.
-PROVIDERS: dict[str, Callable[[], list[Case]]] = {"skimage": skimage_cases}
+def sim_cases(n_points: int = 200) -> list[Case]:
+    """Wheels rendered by the simulated cell (:func:`benchmarks.segmentation_sim.sim_cases`)."""
+    from benchmarks.segmentation_sim import sim_cases as render_wheels
+
+    return render_wheels(n_points)
 
 
-def all_cases() -> list[Case]:
-    """Every case of every provider, in provider order."""
-    return [case for provider in PROVIDERS.values() for case in provider()]
+#: Image providers of the benchmark, in order.
+PROVIDERS: dict[str, Callable[[], list[Case]]] = {"skimage": skimage_cases, "sim": sim_cases}
+
+
+def all_cases(
+    providers: Sequence[str] | None = None,
+) -> tuple[list[Case], dict[str, str]]:
+    """The cases of ``providers`` (default: all), in provider order, and the providers
+    skipped because they cannot run here, with the reason.
+
+    Raises ``ValueError`` for an unknown provider name.
+    """
+    names = list(PROVIDERS) if providers is None else list(providers)
+    unknown = [n for n in names if n not in PROVIDERS]
+    if unknown:
+        raise ValueError(f"unknown provider(s) {unknown}; valid: {', '.join(PROVIDERS)}")
+    cases: list[Case] = []
+    skipped: dict[str, str] = {}
+    for name in names:
+        try:
+            cases.extend(PROVIDERS[name]())
+        except ProviderUnavailable as exc:
+            skipped[name] = str(exc)
+    return cases, skipped
 
 
 def roi_box(

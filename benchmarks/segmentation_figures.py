@@ -46,7 +46,9 @@ def _save(fig: Any, out: Path, docs: Path | None, dpi: int) -> None:
     plt.close(fig)
 
 
-def comparison_figure(rows: list[dict[str, Any]], out: Path, docs: Path | None = None) -> None:
+def comparison_figure(
+    rows: list[dict[str, Any]], out: Path, docs: Path | None = None, *, dpi: int = 90
+) -> None:
     """Initial and final contours per image: snakes (top row) and level sets (bottom row)."""
     n = len(rows)
     fig, axes = plt.subplots(2, n, figsize=(3.1 * n, 7.9), squeeze=False)
@@ -90,7 +92,7 @@ def comparison_figure(rows: list[dict[str, Any]], out: Path, docs: Path | None =
         fontsize=9,
     )
     fig.tight_layout(rect=(0, 0.04, 1, 0.95), h_pad=1.5)
-    _save(fig, out, docs, dpi=90)
+    _save(fig, out, docs, dpi=dpi)
 
 
 def evolution_figure(

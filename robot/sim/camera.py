@@ -202,6 +202,26 @@ class Lens:
         mx, my = self.spec.pinhole.distort_maps(self.K_ideal)
         return cv2.convertMaps(mx, my, cv2.CV_16SC2)
 
+    @cached_property
+    def nearest_maps(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """Float ``cv2.remap`` maps from the ideal canvas to the distorted image (for labels)."""
+        return self.spec.pinhole.distort_maps(self.K_ideal)
+
+    def distort_labels(self, ideal: NDArray[np.int32]) -> NDArray[np.int32]:
+        """A label image (e.g. geom ids) as the lens maps it, nearest ideal pixel per pixel.
+
+        Labels must be below 2**24 (they pass through float32 exactly).
+        """
+        if ideal.shape != (self.ideal_height, self.ideal_width):
+            raise ValueError(
+                f"label image must be {self.ideal_height}x{self.ideal_width}, got {ideal.shape}"
+            )
+        mx, my = self.nearest_maps
+        out = cv2.remap(
+            ideal.astype(np.float32), mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_REPLICATE
+        )
+        return out.astype(np.int32)
+
     def distort(self, ideal: NDArray[np.uint8]) -> NDArray[np.uint8]:
         """The image the lens records from an ideal render of the canvas."""
         if ideal.shape[:2] != (self.ideal_height, self.ideal_width):

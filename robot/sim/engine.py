@@ -464,6 +464,14 @@ class SimEngine:
         with self._lock:
             return [self._truth_locked(i) for i in sorted(self.conveyor.items)]
 
+    def object_geoms(self, obj_id: int) -> NDArray[np.int64]:
+        """Model geom ids of an object on the belt (for segmentation renders)."""
+        with self._lock:
+            if obj_id not in self._item_slot:
+                raise SimError(f"no object with id {obj_id} on the belt")
+            name, slot = self._item_slot[obj_id]
+            return self._slots[name][slot][1].copy()
+
     def configure_conveyor(
         self,
         *,

@@ -96,6 +96,44 @@ class OffscreenRenderer:
         z = (self._D / (np.flipud(self._depth).astype(np.float64) + self._C)).astype(np.float32)
         return rgb, z
 
+    def render_geom_ids(self, data: mujoco.MjData) -> NDArray[np.int32]:
+        """The id of the model geom seen at each pixel (row 0 at the top), ``-1`` where none.
+
+        MuJoCo's segmentation rendering (``mjRND_SEGMENT`` with ``mjRND_IDCOLOR``): lighting,
+        textures and fog are off and every scene geom is drawn in a flat colour encoding its
+        index in the scene plus one (``r + 256 g + 65536 b``; 0 is the background).  The index
+        is mapped back to the model geom (``mjvGeom.objid`` of geoms of type ``mjOBJ_GEOM``);
+        decorative scene geoms (none in the cell's camera view) give ``-1``.  Geoms with alpha 0
+        (hidden objects) are not drawn.  With multisampling (``offsamples > 0``) the colours of
+        edge pixels are averaged and can decode to a wrong id, so the cell renders without it
+        (the default of :class:`~robot.sim.config.SimConfig`).
+        """
+        if self._con is None:
+            raise RuntimeError("renderer is closed")
+        scn = self._scene
+        mujoco.mjv_updateScene(
+            self.model, data, self._opt, None, self._cam, mujoco.mjtCatBit.mjCAT_ALL, scn
+        )
+        scn.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = 1
+        scn.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = 1
+        try:
+            mujoco.mjr_render(self._rect, scn, self._con)
+        finally:
+            scn.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = 0
+            scn.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = 0
+        seg = np.empty((self.height, self.width, 3), np.uint8)
+        mujoco.mjr_readPixels(seg, None, self._rect, self._con)
+        code = seg.astype(np.int32)
+        code = code[..., 0] | (code[..., 1] << 8) | (code[..., 2] << 16)
+        n = scn.ngeom
+        lut = np.full(n + 2, -1, np.int32)  # code 0 = background; codes past n: not a geom
+        for i in range(n):
+            g = scn.geoms[i]
+            if g.objtype == mujoco.mjtObj.mjOBJ_GEOM and 0 <= g.segid < n:
+                lut[g.segid + 1] = g.objid
+        np.minimum(code, n + 1, out=code)
+        return np.flipud(lut[code]).copy()
+
     def close(self) -> None:
         """Free the GL resources (on the creating thread)."""
         if self._con is not None:

@@ -10,6 +10,7 @@ from vision.features.gloh import gloh_features
 from vision.features.opencv import keypoints_from_cv, keypoints_to_cv
 from vision.features.pca import PcaBasis, default_basis, fit_pca, load_npz, save_npz
 from vision.features.pcasift import pca_sift_features
+from vision.features.surf import surf_describe, surf_features, surf_orientation
 from vision.features.types import Features, Keypoints
 
 __all__ = [
@@ -30,4 +31,7 @@ __all__ = [
     "m_images",
     "pca_sift_features",
     "save_npz",
+    "surf_describe",
+    "surf_features",
+    "surf_orientation",
 ]
