@@ -9,7 +9,6 @@ fits and records each basis.
 
 from __future__ import annotations
 
-import asyncio
 import os
 from pathlib import Path
 from typing import Annotated
@@ -74,35 +73,27 @@ def oxford_images(data_dir: Path, exclude: tuple[str, ...]) -> list[tuple[str, n
 
 def sim_frames(n: int) -> list[tuple[str, np.ndarray]]:
     """``n`` frames of the simulated demo cell (MuJoCo, needs ``MUJOCO_GL=egl`` headless):
-    the eye-in-hand camera at the standard viewpoints, with the demo objects shifted along
-    the belt between rounds so different objects sit under the camera."""
+    the eye-in-hand camera at the standard viewpoints, the demo objects rotated along the
+    belt between rounds so different objects sit under the camera. Deterministic: the
+    engine's object yaws and the sensor noise are seeded, and each frame is taken at rest."""
     os.environ.setdefault("MUJOCO_GL", "egl")
-    from robot.sim import DEMO_OBJECTS, SimCamera, SimEngine, populate_demo
+    from robot.sim import DEMO_OBJECTS, SimEngine, populate_demo
+    from robot.sim.imaging import capture
     from robot.sim.poses import standard_configurations
 
     engine = SimEngine()
     views = ["top", "inner", "outer", "upstream", "table"]
     configs = standard_configurations()
-
-    async def grab() -> list[tuple[str, np.ndarray]]:
-        cam = SimCamera(engine)
-        await cam.open()
-        frames = []
-        try:
-            for i in range(n):
-                rnd, view = divmod(i, len(views))
-                if i % len(views) == 0:
-                    engine.clear_objects()
-                    k = rnd % len(DEMO_OBJECTS)
-                    populate_demo(engine, names=DEMO_OBJECTS[k:] + DEMO_OBJECTS[:k])
-                engine.set_joints(configs[views[view]])
-                frame = await cam.grab()
-                frames.append((f"sim:{views[view]}-{rnd}", np.asarray(frame.rgb)))
-        finally:
-            await cam.close()
-        return frames
-
-    return asyncio.run(grab())
+    frames = []
+    for i in range(n):
+        rnd, view = divmod(i, len(views))
+        if view == 0:
+            engine.clear_objects()
+            k = rnd % len(DEMO_OBJECTS)
+            populate_demo(engine, names=DEMO_OBJECTS[k:] + DEMO_OBJECTS[:k])
+        image = capture(engine, configs[views[view]])
+        frames.append((f"sim:{views[view]}-{rnd}", np.asarray(image.rgb)))
+    return frames
 
 
 def train_pca(
