@@ -14,6 +14,7 @@ from rich.console import Console
 
 from backend import __version__
 from backend.cli_calibrate import calibrate_app
+from backend.cli_features import train_pca
 from backend.settings import Settings
 
 __all__ = ["app", "main"]
@@ -30,6 +31,7 @@ user_app = typer.Typer(help="Users and API tokens.", no_args_is_help=True)
 app.add_typer(db_app, name="db")
 app.add_typer(user_app, name="user")
 app.add_typer(calibrate_app, name="calibrate")
+app.command("train-pca")(train_pca)
 
 out = Console()
 err = Console(stderr=True)

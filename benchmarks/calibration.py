@@ -8,7 +8,10 @@
   solver and after the reprojection refinement, against plain OpenCV (classic detector,
   ``calibrateCamera``, ``calibrateHandEye`` with its default Tsai method).
 
-Run ``python -m benchmarks.calibration [--json] [--data-dir DIR] [--skip-kuka]``; a report
+- The simulated cell (:mod:`benchmarks.calibration_sim`): automatic calibration runs judged
+  against the simulator's ground truth, next to the nominal model they start from.
+
+Run ``python -m benchmarks.calibration [--json] [--data-dir DIR] [--skip-kuka] [--skip-sim]``; a report
 picture goes to ``benchmarks/out/calibration-report.png``.
 """
 
@@ -292,6 +295,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--no-loo", action="store_true", help="skip the leave-one-out check (about a minute)"
     )
+    ap.add_argument(
+        "--skip-sim", action="store_true", help="skip the simulated auto-calibration runs"
+    )
     args = ap.parse_args(argv)
     cal = args.data_dir / "calibration"
     if not (cal / "opencv-left").is_dir():
@@ -376,6 +382,13 @@ def main(argv: list[str] | None = None) -> int:
             "hand_eye": kuka["rows"],
             "leave_one_out": kuka["leave_one_out"],
         }
+    if not args.skip_sim:
+        from benchmarks.calibration_sim import bench_sim, print_sim
+
+        with Progress(console=err, transient=True) as progress:
+            sim = bench_sim([0, 1, 2], ["chessboard", "charuco"], progress, n_poses=25)
+        print_sim(sim)
+        summary["sim_auto"] = sim
     out.print("timings are wall-clock on a shared machine; compare within one run only")
     if args.json:
         sys.stdout.write(json.dumps(_no_nan(summary)) + "\n")

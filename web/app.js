@@ -34,6 +34,7 @@ async function signIn(candidate) {
   sessionStorage.setItem("visioncell-token", token);
   role = me.role;
   $("#who").textContent = `${me.name} (${me.role})`;
+  $("#calib-auto").hidden = role !== "engineer";
   $("#login-page").hidden = true;
   $("#nav").hidden = false;
   $("#logout").hidden = false;
@@ -271,6 +272,51 @@ async function activateCalibration(id) {
   } catch (e) { $("#calib-message").textContent = e.message; }
 }
 
+// -- automatic calibration (engineers) -------------------------------------------------
+let autoTimer = null;
+
+function showAutoJob(job) {
+  const bar = $("#calib-auto-progress");
+  bar.hidden = false;
+  bar.value = job.progress;
+  let text = `${job.state}: ${job.message || ""}`;
+  if (job.error) text = `${job.state}: ${job.error.detail}`;
+  else if (job.state === "done" && job.result) {
+    const r = job.result;
+    text = `done: session ${r.session_id}, calibration #${r.calibration_id}, RMS ${r.rms_px.toFixed(3)} px, ${r.accepted} views${r.active ? ", active" : ""}`;
+  }
+  $("#calib-auto-status").textContent = text;
+  $("#calib-auto-start").disabled = job.state === "running";
+}
+
+async function followAutoJob(id) {
+  clearTimeout(autoTimer);
+  try {
+    const { job } = await api("GET", `/jobs/${id}`);
+    showAutoJob(job);
+    if (job.state === "running") autoTimer = setTimeout(() => followAutoJob(id), 500);
+    else loadSessions();
+  } catch (e) { $("#calib-auto-status").textContent = e.message; $("#calib-auto-start").disabled = false; }
+}
+
+async function startAutoCalibration(ev) {
+  ev.preventDefault();
+  $("#calib-auto-status").textContent = "planning views...";
+  $("#calib-auto-start").disabled = true;
+  try {
+    const { job } = await api("POST", "/calibration/auto", {
+      board: $("#calib-auto-board").value,
+      n_poses: Number($("#calib-auto-poses").value),
+      activate: $("#calib-auto-activate").checked,
+    });
+    showAutoJob(job);
+    followAutoJob(job.id);
+  } catch (e) {
+    $("#calib-auto-status").textContent = e.message;
+    $("#calib-auto-start").disabled = false;
+  }
+}
+
 $("#login-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();
   $("#login-error").textContent = "";
@@ -280,6 +326,7 @@ $("#login-form").addEventListener("submit", async (ev) => {
 $("#logout").addEventListener("click", signOut);
 document.querySelectorAll("#nav .tab").forEach((a) => a.addEventListener("click", () => showPage(a.dataset.page)));
 $("#calib-refresh").addEventListener("click", loadSessions);
+$("#calib-auto-form").addEventListener("submit", startAutoCalibration);
 $("#estop").addEventListener("click", () => command("POST", "/robot/estop"));
 $("#home").addEventListener("click", () => command("POST", "/robot/home", { speed: Number($("#speed").value) }));
 $("#stop").addEventListener("click", () => command("POST", "/robot/stop"));

@@ -1,6 +1,23 @@
 """Calibration in the running system: sessions and samples in the database, solving as
-jobs, activation, history and reports (the algorithms live in ``vision.calibration``)."""
+jobs, activation, history and reports, automatic calibration in the cell (the algorithms
+live in ``vision.calibration``)."""
 
+from backend.calibration.auto import (
+    AUTO_CRITERIA,
+    AutoOptions,
+    AutoRun,
+    CalibrationViewLog,
+    nominal_camera,
+    prepare_auto_calibration,
+    run_auto_calibration,
+    view_log,
+)
+from backend.calibration.autoplan import (
+    NOMINAL_T_EE_CAM,
+    AutoPlan,
+    PlannedView,
+    plan_calibration_poses,
+)
 from backend.calibration.reports import PLOTS, calibration_public, calibration_report, report_png
 from backend.calibration.sessions import (
     NotFound,
@@ -28,9 +45,16 @@ from backend.calibration.solving import (
 )
 
 __all__ = [
+    "AUTO_CRITERIA",
+    "NOMINAL_T_EE_CAM",
     "PLOTS",
+    "AutoOptions",
+    "AutoPlan",
+    "AutoRun",
+    "CalibrationViewLog",
     "CameraCalibration",
     "NotFound",
+    "PlannedView",
     "SampleIn",
     "SolveOptions",
     "SolveOutcome",
@@ -48,8 +72,13 @@ __all__ = [
     "history",
     "list_sessions",
     "load_detections",
+    "nominal_camera",
+    "plan_calibration_poses",
+    "prepare_auto_calibration",
     "report_png",
     "result_of",
+    "run_auto_calibration",
     "session_summary",
     "solve_session",
+    "view_log",
 ]

@@ -22,8 +22,10 @@ import numpy as np
 import viser
 import viser.transforms as vtf
 
+from backend.calibration.auto import view_log
 from backend.cell import Cell
 from backend.view3d.arm import arm_shapes, link_poses
+from backend.view3d.calibviews import CalibrationFrusta
 from backend.view3d.simscene import SimScene
 from vision.errors import VisionCellError
 
@@ -89,6 +91,7 @@ class View3D:
         self._handles: list[Any] = []
         self._frustum: Any = None
         self._sim_scene: SimScene | None = None
+        self._calib_frusta: CalibrationFrusta | None = None
         self.updates = 0
         self.image_updates = 0
         self._fov_rad = math.radians(50.0)
@@ -164,6 +167,8 @@ class View3D:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
+        if self._calib_frusta is not None:
+            self._calib_frusta.close()
         if self.server is not None:
             await asyncio.to_thread(self.server.stop)
             self.server = None
@@ -211,6 +216,10 @@ class View3D:
         self._image_index = -1
         if self.sim is not None:
             self._sim_scene = SimScene(server, self.sim)
+        # Camera poses of automatic calibration runs (backend.calibration.auto).
+        self._calib_frusta = CalibrationFrusta(
+            server, view_log(self.cell), fov_rad=self._fov_rad, aspect=self._aspect
+        )
 
     def _build_panel(self, server: viser.ViserServer) -> None:
         gui = server.gui

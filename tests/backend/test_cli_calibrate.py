@@ -178,3 +178,18 @@ def test_opencv_left_through_the_cli(data_dir):
     assert r.returncode == 0, r.stderr
     result = json.loads(r.stdout.strip().splitlines()[-1])
     assert result["rms_px"] <= 0.25 and abs(result["K"][0][0] / 535.9 - 1) <= 0.01
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--board", "dots"], "board must be chessboard or charuco, got 'dots'"),
+        (["--poses", "2"], "poses must be in [3, 60], got 2"),
+        (["--time-scale", "0"], "time-scale must be in [0.1, 100], got 0.0"),
+    ],
+)
+def test_auto_bad_arguments(args, message):
+    # The full in-process run is covered through the API (tests/backend/test_calibration_auto.py)
+    # and by `python -m benchmarks.calibration_sim`.
+    r = _invoke("auto", *args)
+    assert r.exit_code == 2 and message in r.stderr

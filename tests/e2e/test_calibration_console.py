@@ -38,6 +38,7 @@ def test_calibration_tab_lists_sessions_shows_reports_and_activates(browser, ser
     row.click()
     page.wait_for_selector(f"#calib-calibrations tbody tr:has-text('#{cid}')")
     assert page.query_selector(".activate") is None  # viewers cannot activate
+    assert not page.is_visible("#calib-auto-start")  # nor start an automatic run
     assert "rejected" in page.inner_text("#calib-samples")
     page.close()
 
@@ -58,4 +59,11 @@ def test_calibration_tab_lists_sessions_shows_reports_and_activates(browser, ser
     page.click(f".activate[data-id='{cid}']")
     page.wait_for_selector(f"#calib-sessions tbody tr[data-id='{sid}'] .status-active")
     assert f"intrinsic: #{cid}" in page.inner_text("#calib-active")
+    # Start of an automatic run: this server has no simulator and no board pattern was
+    # given, so the API's reason is shown (a full run is in tests/backend/test_calibration_auto.py).
+    page.click("#calib-auto-start")
+    page.wait_for_function(
+        "() => document.querySelector('#calib-auto-status').textContent.includes('pattern')"
+    )
+    assert page.is_enabled("#calib-auto-start")
     page.close()

@@ -149,8 +149,10 @@ def test_bad_options(kwargs, message):
 
 
 def test_rendered_views_recover_the_true_camera():
-    """Stand-in for the simulator target until the simulator lands: rendered views of a
-    board through a known lens (``BoardRenderer``), detected and calibrated."""
+    """Rendered views of a board through a known lens (``BoardRenderer``), detected and
+    calibrated.  The simulator's ground-truth targets are asserted in
+    ``tests/backend/test_calibration_sim_truth.py``; this keeps a fast check of the
+    synthetic renderer that needs no simulator."""
     data = hand_eye_samples(15, seed=1)
     images = rendered_views(data.T_cam_board, seed=1)
     progress = []

@@ -4,8 +4,12 @@
 ``(x, y)`` = (column, row), angles in radians counter-clockwise on screen.
 """
 
+from vision.features.colour import colour_features, m_images
 from vision.features.extract import COLOUR_METHODS, METHODS, extract, grey_from_image
+from vision.features.gloh import gloh_features
 from vision.features.opencv import keypoints_from_cv, keypoints_to_cv
+from vision.features.pca import PcaBasis, default_basis, fit_pca, load_npz, save_npz
+from vision.features.pcasift import pca_sift_features
 from vision.features.surf import surf_describe, surf_features, surf_orientation
 from vision.features.types import Features, Keypoints
 
@@ -14,10 +18,19 @@ __all__ = [
     "METHODS",
     "Features",
     "Keypoints",
+    "PcaBasis",
+    "colour_features",
+    "default_basis",
     "extract",
+    "fit_pca",
+    "gloh_features",
     "grey_from_image",
     "keypoints_from_cv",
     "keypoints_to_cv",
+    "load_npz",
+    "m_images",
+    "pca_sift_features",
+    "save_npz",
     "surf_describe",
     "surf_features",
     "surf_orientation",

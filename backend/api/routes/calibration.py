@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
-from fastapi import APIRouter, File, Form, Query, UploadFile, status
+from fastapi import APIRouter, File, Form, Query, Request, UploadFile, status
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, Field, model_validator
 
@@ -21,6 +21,8 @@ from backend.api.deps import CellDep, DatabaseDep, EngineerUser, SessionDep, Vie
 from backend.api.errors import ApiError, error_body
 from backend.db.models import CalibrationKind
 from backend.jobs import Job, JobState
+from robot.collision import CollisionWorld
+from robot.errors import RobotBusy
 from vision.calibration import (
     ALL_METHODS,
     ARUCO_DICTIONARIES,
@@ -404,3 +406,109 @@ async def update_calibration_activate(
 ) -> dict[str, Any]:
     cal = await svc.activate(session, calibration_id)
     return {"calibration": svc.calibration_public(cal)}
+
+
+# -- automatic calibration -----------------------------------------------------------------
+
+
+class AutoIn(BaseModel):
+    """An automatic calibration run (see ``backend.calibration.auto``)."""
+
+    board: Literal["chessboard", "charuco"] = Field(
+        "chessboard", description="Which board of the cell to use (simulated cell: the placed one)"
+    )
+    pattern: BoardIn | None = Field(
+        None, description="The board's pattern; default: the simulated cell's board of that kind"
+    )
+    T_base_board: list[list[float]] | None = Field(
+        None,
+        description="Where the board roughly is (4x4, metres); default: where the simulated "
+        "cell's board was placed.  The first view measures it again.",
+    )
+    n_poses: int = Field(25, ge=3, le=60, description="Views to plan")
+    n_reserve: int = Field(10, ge=0, le=60, description="Reserve views while criteria are unmet")
+    activate: bool = Field(False, description="Activate the solution")
+    seed: int = Field(0, ge=0, description="Seed of the view planner")
+    speed: float = Field(0.6, gt=0, le=1, description="Fraction of the arm's speed limits")
+
+    @model_validator(mode="after")
+    def _pose_shape(self) -> AutoIn:
+        T = self.T_base_board
+        if T is not None:
+            a = np.asarray(T, dtype=np.float64)
+            if a.shape != (4, 4) or not np.isfinite(a).all():
+                raise ValueError("T_base_board must be a finite 4x4 matrix")
+        return self
+
+
+@router.post(
+    "/auto",
+    status_code=status.HTTP_202_ACCEPTED,
+    summary="Start an automatic calibration run (a motion job; 409 while the arm is busy)",
+)
+async def create_calibration_auto(
+    _: EngineerUser, request: Request, db: DatabaseDep, cell: CellDep, body: AutoIn
+) -> dict[str, Any]:
+    from backend.calibration import auto
+
+    if cell.driver.state.estopped:
+        raise RobotBusy("emergency stop is active: reset before moving")
+    if cell.jobs.motion_lock.locked():
+        raise RobotBusy("the arm is busy with another job; stop it or wait for it to finish")
+    sim = getattr(request.app.state, "sim", None)
+    board, T = _auto_board(body, sim)
+    world = CollisionWorld()
+    if sim is not None:
+        from robot.sim.obstacles import collision_world
+
+        world = collision_world(sim.config.layout)
+    options = auto.AutoOptions(
+        n_poses=body.n_poses,
+        n_reserve=body.n_reserve,
+        activate=body.activate,
+        seed=body.seed,
+        speed=body.speed,
+    )
+    run = await auto.prepare_auto_calibration(
+        cell, board=board, T_base_board=T, options=options, world=world
+    )
+
+    async def body_(job: Job) -> dict[str, Any]:
+        return await auto.run_auto_calibration(job, cell, db, run)
+
+    job = cell.jobs.start(
+        "auto_calibrate",
+        body_,
+        motion=True,
+        params={**body.model_dump(), "plan": run.plan.as_dict()},
+    )
+    return {"job": job.public()}
+
+
+def _auto_board(body: AutoIn, sim: Any) -> tuple[Board, np.ndarray]:
+    """The board and its rough pose for ``body`` (from the simulated cell where not given)."""
+    placed = None
+    if sim is not None:
+        placed = next((b for b in sim.boards() if b.kind == body.board), None)
+    if body.pattern is not None:
+        board = body.pattern.to_board()
+    elif sim is not None:
+        spec = next((s for s in sim.config.boards if s.kind == body.board), None)
+        if spec is None:
+            raise ApiError(404, "not_found", f"this cell has no {body.board} board")
+        board = (
+            Chessboard(spec.cols, spec.rows, spec.square_m)
+            if spec.kind == "chessboard"
+            else CharucoBoard(spec.cols, spec.rows, spec.square_m, spec.marker_m, spec.dictionary)
+        )
+    else:
+        raise ApiError(422, "validation_error", "pattern: give the board's pattern (no simulator)")
+    if body.T_base_board is not None:
+        return board, np.asarray(body.T_base_board, dtype=np.float64)
+    if placed is None:
+        raise ApiError(
+            422,
+            "validation_error",
+            f"T_base_board: give where the board is; no {body.board} board is placed in the cell",
+        )
+    return board, np.asarray(placed.T_base_board, dtype=np.float64)

@@ -1,0 +1,575 @@
+"""Automatic calibration in the cell: move through planned poses, grab, detect, solve, store.
+
+One run is one motion job (it holds the arm until it ends):
+
+1. a hand-eye session (``source="auto"``) is created;
+2. the arm goes to the plan's first view (the board centred, seen nearly straight on); the
+   board's pose is measured there with the planning camera model (PnP), and the views are
+   planned again around that measurement, so that a rough board placement is enough;
+3. for each view: joint move (collision-checked along the path), wait for a frame exposed
+   after the arm has stopped, store it with the joints and ``T_base_ee`` from the encoders
+   (the board is detected when the sample is stored);
+4. collection stops when the planned views are done and the criteria hold (stated in
+   :data:`AUTO_CRITERIA`); reserves are visited while they do not; with none left the run
+   fails, the samples stay in the session;
+5. intrinsics and hand-eye are solved from the session (:func:`solve_session`) and,
+   if asked, activated.
+
+Cancelling (or an e-stop, which cancels motion jobs) stops the run between two steps;
+nothing is solved or activated then.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import math
+import time
+import weakref
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from backend.calibration.autoplan import (
+    NOMINAL_T_EE_CAM,
+    AutoPlan,
+    PlannedView,
+    board_box,
+    plan_calibration_poses,
+    survey_views,
+)
+from backend.calibration.sessions import (
+    SampleIn,
+    add_samples,
+    cell_id_of,
+    create_session,
+    get_session,
+)
+from backend.calibration.solving import SolveOptions, solve_session
+from backend.db.models import CalibrationKind
+from robot.collision import CollisionWorld
+from robot.errors import DriverError
+from robot.kinematics import T_base_ee
+from robot.model import check_joints
+from robot.trajectory import plan_joint_move
+from vision.calibration import (
+    Board,
+    Detection,
+    HandEyeOptions,
+    IntrinsicsOptions,
+    RotationDiversity,
+    ViewSetCriteria,
+    calibrate_hand_eye,
+    calibrate_intrinsics_from_detections,
+    coverage_map,
+    detect_pattern,
+    rotation_diversity,
+)
+from vision.camera import PinholeCamera
+from vision.errors import CalibrationError
+
+if TYPE_CHECKING:
+    from backend.cell import Cell
+    from backend.db.session import Database
+    from backend.jobs import Job
+
+__all__ = [
+    "AUTO_CRITERIA",
+    "AutoOptions",
+    "AutoRun",
+    "CalibrationViewLog",
+    "nominal_camera",
+    "prepare_auto_calibration",
+    "run_auto_calibration",
+    "view_log",
+]
+
+#: When collection may stop: >= 12 views with the board found, corners in >= 70 % of an
+#: 8 x 6 grid over the image and in >= 3 of its 4 corner cells (Zhang 2000: distortion is
+#: only fixed where corners are seen), robot orientations differing by >= 30 deg and turning
+#: about axes >= 30 deg apart (Tsai and Lenz 1989).
+AUTO_CRITERIA = ViewSetCriteria(
+    min_views=12,
+    min_coverage=0.7,
+    min_corner_cells=3,
+    min_max_angle_deg=30.0,
+    min_axis_spread_deg=30.0,
+)
+
+
+def nominal_camera(width: int, height: int, *, fovy_deg: float = 60.0) -> PinholeCamera:
+    """The camera model before any calibration: square pixels, centred principal point,
+    no distortion, focal length from the lens's nominal vertical field of view."""
+    f = 0.5 * height / math.tan(math.radians(fovy_deg) / 2.0)
+    return PinholeCamera(
+        [[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]],
+        None,
+        width=width,
+        height=height,
+    )
+
+
+@dataclass(frozen=True)
+class AutoOptions:
+    """Options of an automatic run.
+
+    Attributes
+    ----------
+    n_poses : int
+        Views planned (reserves come on top while the criteria are unmet).
+    n_reserve : int
+        Reserve views.
+    activate : bool
+        Activate the solution.
+    seed : int
+        Seed of the planner.
+    speed : float
+        Fraction of the arm's speed limits, (0, 1].
+    criteria : ViewSetCriteria
+        When collection may stop (``min_views`` is capped at ``n_poses``).
+    settle_s : float
+        Wall-clock wait after a move, after which the run also waits for the arm to be
+        still (:data:`STILL_RAD_S`) before the frame is taken.
+    """
+
+    n_poses: int = 25
+    n_reserve: int = 10
+    activate: bool = False
+    seed: int = 0
+    speed: float = 0.6
+    criteria: ViewSetCriteria = field(default_factory=lambda: AUTO_CRITERIA)
+    settle_s: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not 3 <= int(self.n_poses) <= 60:
+            raise ValueError(f"n_poses must be in [3, 60], got {self.n_poses!r}")
+        if not 0 <= int(self.n_reserve) <= 60:
+            raise ValueError(f"n_reserve must be in [0, 60], got {self.n_reserve!r}")
+        if not 0.0 < float(self.speed) <= 1.0:
+            raise ValueError(f"speed must be in (0, 1], got {self.speed!r}")
+
+
+class CalibrationViewLog:
+    """The camera poses sampled by the current (or last) run of a cell, for the 3D view.
+
+    Listeners get ``("clear", None)`` when a run starts and ``("view", (T_base_cam, ok))``
+    for each stored sample (``ok``: the board was found).
+    """
+
+    def __init__(self) -> None:
+        self.poses: list[tuple[NDArray[np.float64], bool]] = []
+        self._listeners: list[Callable[[str, Any], None]] = []
+
+    def add_listener(self, fn: Callable[[str, Any], None]) -> None:
+        """Call ``fn(event, data)`` on every change."""
+        self._listeners.append(fn)
+
+    def remove_listener(self, fn: Callable[[str, Any], None]) -> None:
+        """Stop calling ``fn``."""
+        if fn in self._listeners:
+            self._listeners.remove(fn)
+
+    def _emit(self, event: str, data: Any) -> None:
+        for fn in list(self._listeners):
+            fn(event, data)
+
+    def clear(self) -> None:
+        """A new run starts."""
+        self.poses = []
+        self._emit("clear", None)
+
+    def add(self, T_base_cam: NDArray[np.float64], ok: bool) -> None:
+        """A sample was stored."""
+        self.poses.append((T_base_cam, ok))
+        self._emit("view", (T_base_cam, ok))
+
+
+_LOGS: weakref.WeakKeyDictionary[Any, CalibrationViewLog] = weakref.WeakKeyDictionary()
+
+
+def view_log(cell: Cell) -> CalibrationViewLog:
+    """The :class:`CalibrationViewLog` of ``cell`` (made on first use)."""
+    log = _LOGS.get(cell)
+    if log is None:
+        log = _LOGS[cell] = CalibrationViewLog()
+    return log
+
+
+async def _fresh_frame(cell: Cell, after_s: float, timeout_s: float = 10.0) -> Any:
+    """The first frame of the cell's camera exposed after ``after_s`` (``time.monotonic``)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        frame = cell.latest_frame
+        if frame is not None and frame.stamp_s > after_s:
+            return frame
+        if time.monotonic() > deadline:
+            raise CalibrationError(
+                f"the camera gave no frame within {timeout_s:g} s: {cell.camera_status().error or 'no error reported'}"
+            )
+        await asyncio.sleep(0.02)
+
+
+#: Survey views tried before the run gives up on finding the board.
+SURVEY_TRIES = 3
+#: Accepted views after which the planning model is replaced by a quick calibration.
+UPDATE_AFTER_VIEWS = 6
+
+
+def _detection(corners: Any, size: tuple[int, int]) -> Detection:
+    a = np.asarray(corners, dtype=np.float64).reshape(-1, 3)
+    return Detection(True, a[:, 1:3].copy(), a[:, 0].astype(np.int64), size, "stored", "")
+
+
+def _quick_model(
+    dets: list[Detection], poses: list[NDArray[np.float64]], board: Board
+) -> tuple[PinholeCamera, NDArray[np.float64], NDArray[np.float64]] | None:
+    """Camera, ``T_ee_cam`` and ``T_base_board`` from the views so far: intrinsics with
+    radial terms only, then Tsai and Lenz's closed form without refinement; None if the
+    views do not allow it yet."""
+    try:
+        intr = calibrate_intrinsics_from_detections(
+            dets, board, options=IntrinsicsOptions(radial_only=True, reject_outliers=False)
+        )
+        he = calibrate_hand_eye(
+            dets,
+            np.array(poses),
+            board,
+            intr.camera,
+            options=HandEyeOptions(methods=("tsai",), refine=False),
+        )
+    except (CalibrationError, ValueError):
+        return None
+    return intr.camera, he.T_ee_cam, he.T_base_board
+
+
+def _diversity(poses: list[NDArray[np.float64]]) -> RotationDiversity:
+    if len(poses) < 2:
+        return RotationDiversity(len(poses), 0.0, 0.0, 0.0)
+    return rotation_diversity(np.array(poses))
+
+
+async def _move(
+    cell: Cell, q: NDArray[np.float64], world: CollisionWorld, speed: float
+) -> str | None:
+    """Move to ``q``; the reason instead if the straight joint path would collide."""
+    q_now = np.asarray(cell.driver.state.q, dtype=np.float64)
+    goal = check_joints(q, cell.model)
+    hits = world.path_contacts(q_now, goal)
+    if hits:
+        return f"the move would bring the {hits[0]}"
+    traj = plan_joint_move(q_now, goal, speed=speed, model=cell.model)
+    report = await cell.driver.move(traj)
+    if not report.completed:
+        raise DriverError(f"the calibration run stopped: the move ended with {report.reason!r}")
+    return None
+
+
+#: The arm counts as still when no joint turns faster than this, rad/s (0.06 deg/s).
+STILL_RAD_S = 1e-3
+
+
+async def _settle(cell: Cell, wait_s: float, *, timeout_s: float = 3.0) -> None:
+    """Wait ``wait_s``, then until the arm's joint speeds are below :data:`STILL_RAD_S`
+    (the controller may still be damping the end of the move: a moving camera blurs the
+    corners and its encoders disagree with the exposure)."""
+    await asyncio.sleep(wait_s)
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        qd = np.asarray(cell.driver.state.qd, dtype=np.float64)
+        if float(np.abs(qd).max()) < STILL_RAD_S:
+            return
+        await asyncio.sleep(0.01)
+
+
+def _measure_board(
+    image: NDArray[np.uint8], board: Board, camera: PinholeCamera, T_base_cam: NDArray[np.float64]
+) -> NDArray[np.float64] | None:
+    """The board's pose in the base frame from one image with the planning model (PnP)."""
+    det = detect_pattern(image, board)
+    if not det.found:
+        return None
+    ok, rvec, tvec = cv2.solvePnP(
+        det.object_points(board),
+        np.asarray(det.image_points, dtype=np.float64).reshape(-1, 1, 2),
+        camera.K,
+        camera.dist,
+    )
+    if not ok:
+        return None
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(rvec)[0]
+    T[:3, 3] = tvec.ravel()
+    return T_base_cam @ T
+
+
+@dataclass(frozen=True)
+class AutoRun:
+    """Everything a run needs, checked before the job starts.
+
+    Attributes
+    ----------
+    board : Board
+    T_base_board : ndarray (4, 4)
+        Where the board is believed to be (a starting guess).
+    options : AutoOptions
+    world : CollisionWorld
+        The cell's obstacles.
+    camera : PinholeCamera
+        Planning model (nominal before calibration).
+    T_ee_cam : ndarray (4, 4)
+        Planning mounting.
+    plan : AutoPlan
+        The first plan (from the guess).
+    """
+
+    board: Board
+    T_base_board: NDArray[np.float64]
+    options: AutoOptions
+    world: CollisionWorld
+    camera: PinholeCamera
+    T_ee_cam: NDArray[np.float64]
+    plan: AutoPlan
+
+
+def _plan(B: NDArray[np.float64], q: NDArray[np.float64], **kw: Any) -> AutoPlan:
+    """Plan from the board pose ``B`` with the arm at ``q`` (keywords: see :class:`AutoRun`)."""
+    o: AutoOptions = kw["options"]
+    n = kw.get("n_poses") or o.n_poses
+    return plan_calibration_poses(
+        B,
+        kw["board"],
+        kw["camera"],
+        T_ee_cam=kw["T_ee_cam"],
+        world=kw["world"],
+        n_poses=n,
+        n_reserve=o.n_reserve,
+        margin_px=kw.get("margin_px", 20.0),
+        seen_px=kw.get("seen_px", ()),
+        seen_T_base_cam=kw.get("seen_T_base_cam"),
+        q_start=q,
+        seed=o.seed,
+        model=kw["model"],
+    )
+
+
+async def prepare_auto_calibration(
+    cell: Cell,
+    *,
+    board: Board,
+    T_base_board: NDArray[np.float64],
+    options: AutoOptions,
+    world: CollisionWorld,
+    camera: PinholeCamera | None = None,
+    T_ee_cam: NDArray[np.float64] | None = None,
+) -> AutoRun:
+    """Plan the first views (raises :class:`~robot.errors.Unreachable` when the board cannot
+    be seen from any reachable, collision-free pose) and fix the planning model: ``camera``
+    and ``T_ee_cam`` default to :func:`nominal_camera` of the camera's frame size and
+    :data:`NOMINAL_T_EE_CAM`."""
+    B = np.asarray(T_base_board, dtype=np.float64)
+    if camera is None:
+        frame = await _fresh_frame(cell, 0.0)
+        h, w = frame.rgb.shape[:2]
+        camera = nominal_camera(w, h)
+    Tec = np.asarray(NOMINAL_T_EE_CAM if T_ee_cam is None else T_ee_cam, dtype=np.float64)
+    kw = {"options": options, "board": board, "camera": camera, "T_ee_cam": Tec, "world": world}
+    first = await asyncio.to_thread(
+        _plan, B, np.asarray(cell.driver.state.q, dtype=np.float64), model=cell.model, **kw
+    )
+    return AutoRun(board, B, options, world, camera, Tec, first)
+
+
+async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun) -> dict[str, Any]:
+    """The body of an ``auto_calibrate`` motion job (see the module docstring)."""
+    t0 = time.monotonic()
+    log = view_log(cell)
+    log.clear()
+    board, options, world, cam, Tec = run.board, run.options, run.world, run.camera, run.T_ee_cam
+    w, h = cam.width, cam.height
+    crit = options.criteria
+    crit = ViewSetCriteria(
+        min(crit.min_views, options.n_poses),
+        crit.min_coverage,
+        crit.min_corner_cells,
+        crit.min_max_angle_deg,
+        crit.min_axis_spread_deg,
+    )
+
+    current: dict[str, Any] = {"camera": cam, "T_ee_cam": Tec, "margin_px": 20.0}
+
+    def plan(B: NDArray[np.float64], n_poses: int | None = None, **seen: Any) -> AutoPlan:
+        return _plan(
+            B,
+            np.asarray(cell.driver.state.q, dtype=np.float64),
+            model=cell.model,
+            options=options,
+            board=board,
+            world=world,
+            n_poses=n_poses,
+            **current,
+            **seen,
+        )
+
+    first = run.plan
+    async with db.session() as s:
+        cell_id = await cell_id_of(s)
+        row = await create_session(
+            s,
+            kind=CalibrationKind.hand_eye,
+            board=board,
+            cell_id=cell_id,
+            source="auto",
+            note=f"automatic: {options.n_poses} poses, seed {options.seed}",
+        )
+        session_id = row.id
+    job.params["session_id"] = session_id
+
+    # Survey views: far and straight on, so that the nominal model's errors cannot push
+    # the board out of the image; the planned views' most compact ones if none exists.
+    surveys = await asyncio.to_thread(
+        survey_views,
+        run.T_base_board,
+        board,
+        cam,
+        T_ee_cam=Tec,
+        world=world,
+        n=SURVEY_TRIES,
+        q_start=np.asarray(cell.driver.state.q, dtype=np.float64),
+        model=cell.model,
+    )
+    if not surveys:
+        centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+        surveys = sorted(
+            first.views, key=lambda v: float(np.linalg.norm(v.corners_px - centre, axis=1).max())
+        )[:SURVEY_TRIES]
+    B = None
+    guarded = world.with_boxes(board_box(board, run.T_base_board))
+    for n_try, survey in enumerate(surveys, start=1):
+        job.report(0.01, f"survey view {n_try}: locating the board")
+        if await _move(cell, survey.q, guarded, options.speed) is not None:
+            continue
+        await _settle(cell, options.settle_s)
+        frame = await _fresh_frame(cell, time.monotonic())
+        q_seen = np.asarray(getattr(frame.robot_state, "q", cell.driver.state.q), dtype=np.float64)
+        B = await asyncio.to_thread(
+            _measure_board, frame.rgb, board, cam, T_base_ee(q_seen, cell.model) @ Tec
+        )
+        if B is not None:
+            break
+    if B is None:
+        raise CalibrationError(
+            f"the board was not found from {len(surveys)} survey views (or they could not be "
+            "reached without collision): check that it is placed where the request says and "
+            "that it is lit"
+        )
+    guarded = world.with_boxes(board_box(board, B))
+    views = list((await asyncio.to_thread(plan, B)).views)
+    n_primary = min(options.n_poses, len(views))
+    points: list[NDArray[np.float64]] = []
+    dets: list[Detection] = []
+    poses: list[NDArray[np.float64]] = []
+    visited = 0
+    unmet: list[str] = ["no views yet"]
+
+    async def store(name: str, image: NDArray[np.uint8], q: NDArray[np.float64]) -> None:
+        T_be = T_base_ee(q, cell.model)
+        async with db.session() as s2:
+            cal = await get_session(s2, session_id)
+            rows = await add_samples(
+                s2, cal, [SampleIn(name=name, image=image, joints=q.tolist(), T_base_ee=T_be)]
+            )
+            ok = rows[0].accepted
+            if ok:
+                dets.append(_detection(rows[0].corners, (w, h)))
+                points.append(np.asarray(rows[0].corners, dtype=np.float64).reshape(-1, 3)[:, 1:3])
+                poses.append(T_be)
+        log.add(T_be @ current["T_ee_cam"], ok)
+
+    await store("auto-00.png", frame.rgb, q_seen)  # the survey view is a sample too
+    k = 0
+    updated = False
+    skipped: list[str] = []
+    while k < len(views):
+        v: PlannedView = views[k]
+        k += 1
+        if k > n_primary and not unmet:
+            break
+        visited += 1
+        job.report(
+            0.85 * min(visited / max(n_primary, 1), 1.0),
+            f"view {visited} of {n_primary}{' (reserve)' if k > n_primary else ''}: "
+            f"{len(poses)} with the board",
+        )
+        blocked = await _move(cell, v.q, guarded, options.speed)
+        if blocked is not None:
+            skipped.append(blocked)
+            continue
+        await _settle(cell, options.settle_s)
+        frame = await _fresh_frame(cell, time.monotonic())
+        q_seen = np.asarray(getattr(frame.robot_state, "q", cell.driver.state.q), dtype=np.float64)
+        await store(f"auto-{visited:02d}.png", frame.rgb, q_seen)
+        if not updated and len(poses) >= UPDATE_AFTER_VIEWS:
+            # Plan the rest with the camera model measured so far (the nominal one
+            # misplaces the board by tens of pixels near the image's edges).
+            updated = True
+            job.report(job.progress, f"updating the camera model from {len(poses)} views")
+            better = await asyncio.to_thread(_quick_model, dets, poses, board)
+            if better is not None:
+                current["camera"], current["T_ee_cam"], B = better
+                guarded = world.with_boxes(board_box(board, B))
+                current["margin_px"] = 16.0
+                left = max(n_primary - k, 3)
+                seen_T = np.array([T @ current["T_ee_cam"] for T in poses])
+                fresh_plan = await asyncio.to_thread(
+                    functools.partial(plan, B, left, seen_px=list(points), seen_T_base_cam=seen_T)
+                )
+                fresh = list(fresh_plan.views)
+                views = views[:k] + fresh
+                n_primary = k + left
+        cov = coverage_map(points, (w, h))
+        div = _diversity(poses)
+        unmet = crit.unmet(cov, div)
+    cov = coverage_map(points, (w, h))
+    div = _diversity(poses)
+    unmet = crit.unmet(cov, div)
+    if unmet:
+        raise CalibrationError(
+            f"collection criteria not met after {visited + 1 - len(skipped)} views (session {session_id} keeps "
+            f"the samples): {'; '.join(unmet)}"
+        )
+    job.report(0.86, f"solving intrinsics and hand-eye from {len(poses)} views")
+    async with db.session() as s:
+        out = await solve_session(
+            s,
+            session_id,
+            SolveOptions(intrinsics_source="session", activate=options.activate),
+            progress=lambda f, m: job.report(0.86 + 0.14 * f, m),
+        )
+        cal = out.calibration
+        result: dict[str, Any] = {
+            "session_id": session_id,
+            "calibration_id": cal.id,
+            "intrinsic_calibration_id": None if out.intrinsic is None else out.intrinsic.id,
+            "active": cal.active,
+            "rms_px": cal.rms_px,
+            "T_ee_cam": cal.parameters["T_ee_cam"],
+            "K": cal.parameters["K"],
+            "dist": cal.parameters["dist"],
+        }
+    result.update(
+        {
+            "views": visited + 1 - len(skipped),
+            "accepted": len(poses),
+            "coverage": cov.fraction,
+            "corner_cells": cov.corner_cells,
+            "diversity": div.as_dict(),
+            "skipped": skipped,
+            "duration_s": time.monotonic() - t0,
+        }
+    )
+    job.report(1.0, f"calibration {result['calibration_id']}: RMS {result['rms_px']:.3f} px")
+    return result

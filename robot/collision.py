@@ -1,0 +1,197 @@
+"""A simple collision check of the arm against the cell: link capsules against boxes and the floor.
+
+The arm is modelled as capsules round the segments of the kinematic chain
+(:func:`robot.kinematics.joint_positions`: column, upper arm, forearm, wrist) plus a sphere
+round the camera and tool on the flange; the cell as axis-aligned boxes (table, conveyor,
+a calibration board's slab) and the floor plane ``z = 0``.  A capsule is checked as a row
+of spheres along its axis spaced at most half its radius apart; their union falls short of
+the capsule's surface by at most ``r (1 - sqrt(1 - 1/16))``, about 3 % of the radius, which
+the required clearance covers.
+
+This is a planning guard (refuse candidate poses that come near the furniture), not a
+certified safety function; the real cell's safety comes from its fences and the e-stop.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robot.kinematics import T_base_ee, joint_positions
+from robot.model import ASEA, ArmModel
+
+__all__ = ["ArmCapsules", "Box", "CollisionWorld", "Contact", "box_distance"]
+
+
+@dataclass(frozen=True)
+class Box:
+    """An axis-aligned box in the base frame.
+
+    Attributes
+    ----------
+    name : str
+        Reported in :class:`Contact`.
+    lower, upper : tuple of 3 floats
+        Opposite corners, metres.
+    """
+
+    name: str
+    lower: tuple[float, float, float]
+    upper: tuple[float, float, float]
+
+    def __post_init__(self) -> None:
+        lo, hi = np.asarray(self.lower, float), np.asarray(self.upper, float)
+        if lo.shape != (3,) or hi.shape != (3,) or not (hi >= lo).all():
+            raise ValueError(
+                f"box {self.name!r}: lower must be <= upper, got {self.lower!r}, {self.upper!r}"
+            )
+
+    @classmethod
+    def around(cls, name: str, points: ArrayLike, *, pad_m: float = 0.0) -> Box:
+        """The smallest box holding ``points`` (N, 3), grown by ``pad_m`` on every side."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        lo, hi = p.min(axis=0) - pad_m, p.max(axis=0) + pad_m
+        return cls(name, tuple(float(v) for v in lo), tuple(float(v) for v in hi))  # type: ignore[arg-type]
+
+
+def box_distance(points: ArrayLike, box: Box) -> NDArray[np.float64]:
+    """Euclidean distance of ``points`` (N, 3) to ``box`` (0 inside), shape (N,)."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    lo, hi = np.asarray(box.lower), np.asarray(box.upper)
+    d = np.maximum(np.maximum(lo - p, p - hi), 0.0)
+    return np.linalg.norm(d, axis=1)
+
+
+@dataclass(frozen=True)
+class ArmCapsules:
+    """Radii of the arm's collision shapes, metres (outer envelope of the ASEA-class links).
+
+    Attributes
+    ----------
+    column_m, upper_arm_m, forearm_m, wrist_m : float
+        Capsule radii of the segments base-shoulder, shoulder-elbow, elbow-wrist and
+        wrist-flange.
+    tool_m : float
+        Radius of the sphere round the camera and tool.
+    tool_offset_m : float
+        Its centre along the approach axis past the flange.
+    """
+
+    column_m: float = 0.16
+    upper_arm_m: float = 0.10
+    forearm_m: float = 0.08
+    wrist_m: float = 0.06
+    tool_m: float = 0.09
+    tool_offset_m: float = 0.04
+
+    @property
+    def radii(self) -> tuple[float, float, float, float]:
+        """Capsule radii of the four segments, base first."""
+        return (self.column_m, self.upper_arm_m, self.forearm_m, self.wrist_m)
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A shape of the arm too near an obstacle.
+
+    Attributes
+    ----------
+    link : str
+        ``"column"``, ``"upper_arm"``, ``"forearm"``, ``"wrist"`` or ``"tool"``.
+    obstacle : str
+        The box's name or ``"floor"``.
+    clearance_m : float
+        Surface distance (negative: penetration).
+    """
+
+    link: str
+    obstacle: str
+    clearance_m: float
+
+    def __str__(self) -> str:
+        return f"{self.link} {self.clearance_m * 1e3:.0f} mm from the {self.obstacle}"
+
+
+_LINKS = ("column", "upper_arm", "forearm", "wrist")
+
+
+@dataclass(frozen=True)
+class CollisionWorld:
+    """Obstacles of a cell and the arm's collision shapes.
+
+    Attributes
+    ----------
+    boxes : tuple of Box
+        Furniture (and anything else the arm must keep clear of).
+    floor_z_m : float
+        Height of the floor plane; the column stands on it and is not checked against it.
+    clearance_m : float
+        Required gap between any arm shape and any obstacle.
+    shapes : ArmCapsules
+        The arm's radii.
+    model : ArmModel
+        Link lengths.
+    """
+
+    boxes: tuple[Box, ...] = ()
+    floor_z_m: float = 0.0
+    clearance_m: float = 0.02
+    shapes: ArmCapsules = field(default_factory=ArmCapsules)
+    model: ArmModel = ASEA
+
+    def with_boxes(self, *extra: Box) -> CollisionWorld:
+        """A copy with more obstacles."""
+        return CollisionWorld(
+            (*self.boxes, *extra), self.floor_z_m, self.clearance_m, self.shapes, self.model
+        )
+
+    def _spheres(self, q: NDArray[np.float64]) -> list[tuple[str, NDArray[np.float64], float]]:
+        """Sample spheres covering each capsule (spacing <= radius / 2), then the tool."""
+        pts = joint_positions(q, self.model)
+        out: list[tuple[str, NDArray[np.float64], float]] = []
+        for k, (name, r) in enumerate(zip(_LINKS, self.shapes.radii, strict=True)):
+            a, b = pts[k], pts[k + 1]
+            n = max(2, math.ceil(float(np.linalg.norm(b - a)) / (0.5 * r)) + 1)
+            t = np.linspace(0.0, 1.0, n)[:, None]
+            out.append((name, a + t * (b - a), r))
+        T = T_base_ee(q, self.model)
+        tool = T[:3, 3] + self.shapes.tool_offset_m * T[:3, 2]
+        out.append(("tool", tool[None, :], self.shapes.tool_m))
+        return out
+
+    def contacts(self, q: ArrayLike) -> list[Contact]:
+        """Every arm shape nearer than ``clearance_m`` to an obstacle at joints ``q`` (5,)."""
+        qa = np.asarray(q, dtype=np.float64)
+        if qa.shape != (5,) or not np.isfinite(qa).all():
+            raise ValueError(f"q must be 5 finite joint values, got {np.asarray(q).tolist()}")
+        found: list[Contact] = []
+        for name, centres, r in self._spheres(qa):
+            if name != "column":
+                gap = float(centres[:, 2].min()) - r - self.floor_z_m
+                if gap < self.clearance_m:
+                    found.append(Contact(name, "floor", gap))
+            for box in self.boxes:
+                gap = float(box_distance(centres, box).min()) - r
+                if gap < self.clearance_m:
+                    found.append(Contact(name, box.name, gap))
+        return found
+
+    def collides(self, q: ArrayLike) -> bool:
+        """Whether any arm shape comes nearer than ``clearance_m`` to an obstacle."""
+        return bool(self.contacts(q))
+
+    def path_contacts(
+        self, q_from: ArrayLike, q_to: ArrayLike, *, step_rad: float = 0.05
+    ) -> list[Contact]:
+        """Contacts along the straight joint-space path (what a synchronised joint move
+        follows), checked every ``step_rad`` of the largest joint change."""
+        a, b = np.asarray(q_from, dtype=np.float64), np.asarray(q_to, dtype=np.float64)
+        n = max(2, math.ceil(float(np.abs(b - a).max()) / step_rad) + 1)
+        for t in np.linspace(0.0, 1.0, n):
+            c = self.contacts(a + t * (b - a))
+            if c:
+                return c
+        return []
