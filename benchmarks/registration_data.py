@@ -184,11 +184,23 @@ def _warp(image: np.ndarray, H: np.ndarray, size: tuple[int, int]) -> np.ndarray
     return cv2.warpPerspective(image, H, size, flags=cv2.INTER_LINEAR)
 
 
-def illumination_pairs(photos: tuple[str, ...] = PHOTOS) -> list[ImagePair]:
-    """Each photo against itself under each illumination model and :data:`MILD_WARP`."""
+def illumination_pairs(
+    photos: tuple[str, ...] = PHOTOS, data_dir: Path | None = None
+) -> list[ImagePair]:
+    """Each photo against itself under each illumination model and :data:`MILD_WARP`.
+
+    With ``data_dir``, the colour Oxford images graf img1 and bikes img1 are added (names
+    ``oxford-graf``, ``oxford-bikes``) where present: unlike scikit-image's photos, which
+    ``visioncell train-pca`` uses for the colour PCA bases, they are held out of training.
+    """
+    sources = [(name, skimage_photo(name)) for name in photos]
+    if data_dir is not None:
+        for seq in ("graf", "bikes"):
+            path = Path(data_dir) / "registration" / "oxford" / seq / "img1.png"
+            if path.is_file():
+                sources.append((f"oxford-{seq}", _read_rgb(path)))
     pairs = []
-    for name in photos:
-        a = skimage_photo(name)
+    for name, a in sources:
         H = similarity_about_centre(a.shape[:2], *MILD_WARP)
         warped = _warp(a, H, (a.shape[1], a.shape[0]))
         for model, params in ILLUMINATION_MODELS.items():
