@@ -43,6 +43,7 @@ err = Console(stderr=True)
 BASELINE = "sift"
 COLOUR_BASE = {"color-sift": "sift", "color-surf": "surf"}
 FULL_SUFFIX = ":full"
+DOCS_MAX_BYTES = 300_000  # README images stay small
 ALL_SEQUENCES = (
     *rd.OXFORD_SEQUENCES,
     "illumination",
@@ -383,6 +384,9 @@ def write_plots(rows, labels, pairs, plot_dir: Path, docs_img: Path | None) -> l
     if docs_img is not None:
         docs_img.mkdir(parents=True, exist_ok=True)
         for p in paths:
+            if p.stat().st_size > DOCS_MAX_BYTES:
+                err.print(f"not copying {p.name} to {docs_img}: over {DOCS_MAX_BYTES} bytes")
+                continue
             shutil.copyfile(p, docs_img / f"registration_{p.name}")
     return [str(p) for p in paths]
 
