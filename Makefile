@@ -41,7 +41,7 @@ demo-serial: install
 	sleep 1; VISIONCELL_DRIVER=serial VISIONCELL_SERIAL_PORT=var/robot-tty $(BIN)/visioncell serve
 
 bench: install-dev
-	@for b in benchmarks/[a-z]*.py; do \
+	@for b in $$(grep -l '__name__ == "__main__"' benchmarks/[a-z]*.py); do \
 		m=$$(basename $$b .py); echo "== benchmarks.$$m"; \
 		$(BIN)/python -m benchmarks.$$m || exit 1; \
 	done
