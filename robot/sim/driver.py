@@ -150,15 +150,22 @@ class SimDriver:
 
     # -- internals ---------------------------------------------------------------------
     def _publish(self) -> None:
-        self._hub.publish(_state(self.engine.arm_state(), connected=self._connected))
+        self._publish_sample(self.engine.arm_state())
+
+    def _publish_sample(self, sample: ArmSample) -> None:  # event loop
+        # A physics-thread sample queued before a reset or e-stop may arrive after the state
+        # published by that call: publishing it would bring the old flags back until the next
+        # sample, so anything older than what was published last is dropped.
+        latest = self._hub.latest
+        if latest is not None and sample.stamp_s < latest.stamp_s:
+            return
+        self._hub.publish(_state(sample, connected=self._connected))
 
     def _on_sample(self, sample: ArmSample) -> None:  # physics thread
         loop = self._loop
         if loop is not None and not loop.is_closed():
             with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
-                loop.call_soon_threadsafe(
-                    self._hub.publish, _state(sample, connected=self._connected)
-                )
+                loop.call_soon_threadsafe(self._publish_sample, sample)
 
 
 def _resolve(fut: asyncio.Future[MoveReport], report: MoveReport) -> None:
