@@ -6,8 +6,8 @@ Chessboards are found with OpenCV's sector-based detector with its accuracy flag
 classic detector (``findChessboardCorners`` + ``cornerSubPix``) takes over.  Large images
 are searched at a reduced size and the corners are then located again at full resolution
 in a crop around the board.  ChArUco boards use OpenCV's current ``aruco`` API
-(``CharucoDetector``); their corners are then located again with ``cornerSubPix`` in a window
-that stays clear of the markers (see :func:`_refine_charuco_corners`).
+(``CharucoDetector``); their corners are then located again leaving the marker pixels out
+(:func:`~vision.calibration.charuco_refine.refine_charuco_corners`).
 
 The corner order is made canonical (see :func:`canonical_corner_order`) so that the board
 frame is the same in every image: hand-eye calibration depends on it.
@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vision.calibration.boards import Board, CharucoBoard, Chessboard
+from vision.calibration.charuco_refine import refine_charuco_corners
 from vision.errors import ImageError
 
 __all__ = [
@@ -215,64 +216,6 @@ def _find_chessboard(
     return None, ""
 
 
-def _local_jacobian(H: NDArray[np.float64], x: float, y: float) -> NDArray[np.float64]:
-    """Derivative (2, 2) of the homography ``H`` at board point ``(x, y)``, pixels per metre."""
-    w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
-    u = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w
-    v = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w
-    return (
-        np.array(
-            [
-                [H[0, 0] - u * H[2, 0], H[0, 1] - u * H[2, 1]],
-                [H[1, 0] - v * H[2, 0], H[1, 1] - v * H[2, 1]],
-            ]
-        )
-        / w
-    )
-
-
-def _refine_charuco_corners(
-    gray: NDArray[np.uint8], pts: NDArray[np.float64], ids: NDArray[np.int64], board: CharucoBoard
-) -> NDArray[np.float64]:
-    """Locate ChArUco corners again with ``cornerSubPix`` in a window free of marker pixels.
-
-    ``CharucoDetector`` refines each corner in a square window whose half side is the
-    distance to the nearest marker corner less 2 px (1 to 10 px).  That marker corner lies
-    on the diagonal, so once it is more than about 7 px away the window's corners take in
-    the marker's black border, which pulls the corner; closer, the window shrinks to 1-2 px
-    and the estimate is noisy.  Both errors depend on the board's scale in the image, and
-    in the simulated cell they biased the focal length by -0.1 to -0.3 %.
-
-    Here the window is the largest image-axis-aligned square (less half a pixel for the
-    gradient) that maps into the marker-free square ``|x|, |y| < (square - marker) / 2``
-    round the corner on the board, through a homography fitted to the nearest detected
-    corners.  Where that square is under 2 px, OpenCV's position is kept.
-    """
-    obj = board.object_points()[:, :2]
-    gap = 0.5 * (board.square_m - board.marker_m)
-    X = obj[ids]
-    out = pts.copy()
-    if len(ids) < 4:
-        return out
-    for k in range(len(ids)):
-        near = np.argsort(np.linalg.norm(X - X[k], axis=1), kind="stable")[:9]
-        H, _ = cv2.findHomography(X[near], pts[near], 0)
-        if H is None or not np.all(np.isfinite(H)):
-            continue
-        J = _local_jacobian(H, float(X[k, 0]), float(X[k, 1]))
-        if abs(np.linalg.det(J)) < 1e-9:
-            continue
-        # Image box [-a, a]^2 maps into the board box [-gap, gap]^2 for a below this.
-        a = gap / float(np.abs(np.linalg.inv(J)).sum(axis=1).max())
-        half = int(np.floor(a - 0.5))
-        if half < 2:
-            continue
-        c = pts[k].astype(np.float32).reshape(1, 1, 2)
-        c = cv2.cornerSubPix(gray, c, (half, half), (-1, -1), _SUBPIX_CRITERIA)
-        out[k] = np.asarray(c, dtype=np.float64).reshape(2)
-    return out
-
-
 def _detect_charuco(gray: NDArray[np.uint8], board: CharucoBoard, min_corners: int) -> Detection:
     size = (int(gray.shape[1]), int(gray.shape[0]))
     detector = cv2.aruco.CharucoDetector(board.to_cv())
@@ -286,7 +229,7 @@ def _detect_charuco(gray: NDArray[np.uint8], board: CharucoBoard, min_corners: i
         )
     pts = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
     idx = np.asarray(ids, dtype=np.int64).ravel()
-    pts = _refine_charuco_corners(gray, pts, idx, board)
+    pts = refine_charuco_corners(gray, pts, idx, board)
     order = np.argsort(idx)
     return Detection(True, pts[order], idx[order], size, "charuco", "")
 
