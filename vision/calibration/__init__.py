@@ -20,6 +20,7 @@ from vision.calibration.boards import (
     parse_board_size,
     parse_length_m,
 )
+from vision.calibration.charuco_refine import refine_charuco_corners
 from vision.calibration.coverage import (
     CoverageMap,
     RotationDiversity,
@@ -88,6 +89,7 @@ __all__ = [
     "parse_board_size",
     "parse_length_m",
     "plan_views",
+    "refine_charuco_corners",
     "rotation_diversity",
     "solve_hand_eye",
 ]

@@ -6,7 +6,8 @@ Chessboards are found with OpenCV's sector-based detector with its accuracy flag
 classic detector (``findChessboardCorners`` + ``cornerSubPix``) takes over.  Large images
 are searched at a reduced size and the corners are then located again at full resolution
 in a crop around the board.  ChArUco boards use OpenCV's current ``aruco`` API
-(``CharucoDetector``).
+(``CharucoDetector``); their corners are then located again leaving the marker pixels out
+(:func:`~vision.calibration.charuco_refine.refine_charuco_corners`).
 
 The corner order is made canonical (see :func:`canonical_corner_order`) so that the board
 frame is the same in every image: hand-eye calibration depends on it.
@@ -27,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vision.calibration.boards import Board, CharucoBoard, Chessboard
+from vision.calibration.charuco_refine import refine_charuco_corners
 from vision.errors import ImageError
 
 __all__ = [
@@ -227,6 +229,7 @@ def _detect_charuco(gray: NDArray[np.uint8], board: CharucoBoard, min_corners: i
         )
     pts = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
     idx = np.asarray(ids, dtype=np.int64).ravel()
+    pts = refine_charuco_corners(gray, pts, idx, board)
     order = np.argsort(idx)
     return Detection(True, pts[order], idx[order], size, "charuco", "")
 
