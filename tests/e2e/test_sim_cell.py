@@ -92,13 +92,24 @@ def test_browser_sees_the_simulated_arm_and_camera_images(browser, sim_server):
     )
     # What the browser decoded, read back through a canvas (an element screenshot would
     # wait for animation frames, which crawl while the software-rendered 3D view runs).
-    data_url = page.evaluate(
-        """() => { const img = document.querySelector('#camera');
-                   const c = document.createElement('canvas');
-                   c.width = img.naturalWidth; c.height = img.naturalHeight;
-                   c.getContext('2d').drawImage(img, 0, 0);
-                   return c.toDataURL('image/png'); }"""
-    )
+    # The console replaces the image's source with every new frame: between two frames the
+    # element can be mid-load (no pixels, an empty "data:," URL), so read it again until a
+    # whole frame comes back.
+    data_url = "data:,"
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline:
+        data_url = page.evaluate(
+            """() => { const img = document.querySelector('#camera');
+                       if (!img.complete || img.naturalWidth === 0) return 'data:,';
+                       const c = document.createElement('canvas');
+                       c.width = img.naturalWidth; c.height = img.naturalHeight;
+                       c.getContext('2d').drawImage(img, 0, 0);
+                       return c.toDataURL('image/png'); }"""
+        )
+        if data_url.startswith("data:image/png;base64,"):
+            break
+        time.sleep(0.25)
+    assert data_url.startswith("data:image/png;base64,"), "the console never held a whole frame"
     cam = _png(base64.b64decode(data_url.split(",", 1)[1]))
     page.close()
     assert _is_render(cam), f"console camera image looks blank: std {cam.std():.1f}"
