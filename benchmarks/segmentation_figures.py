@@ -16,6 +16,7 @@ from benchmarks.segmentation_cases import Case, roi_box
 from vision.segmentation import box_contour, chan_vese, contour_from_mask, region_contours
 
 OURS, THEIRS, REF, INIT = "#ff3b30", "#e040fb", "#00e676", "#40c4ff"
+LOCAL = "#ffb300"
 
 
 def _closed(c: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -51,7 +52,7 @@ def comparison_figure(
 ) -> None:
     """Initial and final contours per image: snakes (top row) and level sets (bottom row)."""
     n = len(rows)
-    fig, axes = plt.subplots(2, n, figsize=(3.1 * n, 7.9), squeeze=False)
+    fig, axes = plt.subplots(2, n, figsize=(3.1 * n, 8.2), squeeze=False)
     for j, r in enumerate(rows):
         case: Case = r["case"]
         box = roi_box(case.init, case.image.shape)
@@ -71,24 +72,28 @@ def comparison_figure(
             f"skimage IoU {ss.iou:.3f}, {1e3 * ss.seconds:.0f} ms",
             fontsize=8,
         )
-        lo, lm = r["levelset_ours"], r["levelset_mcv"]
+        lo, lm, ll = r["levelset_ours"], r["levelset_mcv"], r.get("levelset_local")
         ax = axes[1, j]
         for c in region_contours(lm.mask):
             ax.plot(*_closed(c).T, color=THEIRS, lw=1.2)
         for c in region_contours(lo.mask):
             ax.plot(*_closed(c).T, color=OURS, lw=1.2)
-        ax.set_xlabel(
+        label = (
             f"ours IoU {lo.iou:.3f}, {1e3 * lo.seconds:.0f} ms\n"
-            f"MCV IoU {lm.iou:.3f}, {1e3 * lm.seconds:.0f} ms",
-            fontsize=8,
+            f"MCV IoU {lm.iou:.3f}, {1e3 * lm.seconds:.0f} ms"
         )
+        if ll is not None:
+            for c in region_contours(ll.mask):
+                ax.plot(*_closed(c).T, color=LOCAL, lw=1.2)
+            label += f"\nlocalised IoU {ll.iou:.3f}, {1e3 * ll.seconds:.0f} ms"
+        ax.set_xlabel(label, fontsize=8)
     axes[0, 0].set_ylabel("snake (active_contour)", fontsize=9)
     axes[1, 0].set_ylabel("level set (Chan-Vese / MCV)", fontsize=9)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
     fig.suptitle(
-        "Initial (dashed) and final contours: ours (red) vs scikit-image (magenta); "
-        "IoU against the reference (dotted) and wall time",
+        "Initial (dashed) and final contours: ours (red; level set: global red, localised "
+        "orange) vs scikit-image (magenta); IoU against the reference (dotted) and wall time",
         fontsize=9,
     )
     fig.tight_layout(rect=(0, 0.04, 1, 0.95), h_pad=1.5)
