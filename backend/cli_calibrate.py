@@ -390,9 +390,9 @@ def calibrate_auto_cmd(
     collision-free views of the board on the table, move, grab, detect, solve intrinsics and
     hand-eye, and compare with the simulator's ground truth.  (On a running server, start
     it with POST /api/calibration/auto or the console's Calibration tab.)"""
-    import os
+    from backend.hardware import headless_mujoco
 
-    os.environ.setdefault("MUJOCO_GL", "egl")
+    headless_mujoco()
     from backend.calibration.simrun import run_sim_auto
 
     if board not in ("chessboard", "charuco"):

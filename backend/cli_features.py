@@ -9,7 +9,6 @@ fits and records each basis.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Annotated
 
@@ -17,6 +16,9 @@ import cv2
 import numpy as np
 import typer
 from rich.console import Console
+
+from vision.errors import CameraError
+from vision.sources import read_rgb
 
 __all__ = ["SKIMAGE_PHOTOS", "oxford_images", "sim_frames", "skimage_images", "train_pca"]
 
@@ -65,9 +67,10 @@ def oxford_images(data_dir: Path, exclude: tuple[str, ...]) -> list[tuple[str, n
     for path in sorted(root.glob("*/img*.png")):
         if path.parent.name in exclude:
             continue
-        bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if bgr is not None:
-            out.append((f"oxford:{path.parent.name}/{path.name}", bgr[..., ::-1].copy()))
+        try:
+            out.append((f"oxford:{path.parent.name}/{path.name}", read_rgb(path)))
+        except CameraError:  # unreadable files are skipped
+            continue
     return out
 
 
@@ -76,7 +79,9 @@ def sim_frames(n: int) -> list[tuple[str, np.ndarray]]:
     the eye-in-hand camera at the standard viewpoints, the demo objects rotated along the
     belt between rounds so different objects sit under the camera. Deterministic: the
     engine's object yaws and the sensor noise are seeded, and each frame is taken at rest."""
-    os.environ.setdefault("MUJOCO_GL", "egl")
+    from backend.hardware import headless_mujoco
+
+    headless_mujoco()
     from robot.sim import DEMO_OBJECTS, SimEngine, populate_demo
     from robot.sim.imaging import capture
     from robot.sim.poses import standard_configurations

@@ -30,10 +30,15 @@ class Hardware:
     sim: SimEngine | None = None
 
 
+def headless_mujoco() -> None:
+    """Render MuJoCo headless (EGL) unless ``MUJOCO_GL`` says otherwise. MuJoCo chooses its
+    OpenGL back end when it is imported, so call this before importing ``robot.sim``."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+
 def make_sim_engine(settings: Settings) -> SimEngine:
     """The simulated cell for ``settings`` (demo objects on the belt if ``sim_demo``)."""
-    # MuJoCo chooses its OpenGL back end at import: render headless unless told otherwise.
-    os.environ.setdefault("MUJOCO_GL", "egl")
+    headless_mujoco()
     from robot.sim import SimConfig, SimEngine, populate_demo
 
     engine = SimEngine(

@@ -83,16 +83,9 @@ def main() -> None:
         "color-sift": lambda im: extract(im, "color-sift", max_features=nf),
         "color-sift full": lambda im: extract(im, "color-sift", max_features=nf, reduce=False),
     }
-    try:
-        import vision.features.surf  # noqa: F401
-
-        methods["surf"] = lambda im: extract(im, "surf", max_features=nf)
-        methods["color-surf"] = lambda im: extract(im, "color-surf", max_features=nf)
-        methods["color-surf full"] = lambda im: extract(
-            im, "color-surf", max_features=nf, reduce=False
-        )
-    except ImportError:
-        err.print("SURF not available: surf and color-surf skipped")
+    methods["surf"] = lambda im: extract(im, "surf", max_features=nf)
+    methods["color-surf"] = lambda im: extract(im, "color-surf", max_features=nf)
+    methods["color-surf full"] = lambda im: extract(im, "color-surf", max_features=nf, reduce=False)
     if args.f32_dir is not None:
         for kind in ("pca-sift", "gloh", "color-sift", "color-surf"):
             path = args.f32_dir / f"{kind}.npz"

@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from dataclasses import dataclass, field
@@ -20,6 +21,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
+from vision.errors import CameraError
+from vision.sources import read_rgb
 
 __all__ = [
     "GRAF_ANGLES_DEG",
@@ -71,11 +75,16 @@ class ImagePair:
     note: str = field(default="")
 
 
+@functools.cache
 def _read_rgb(path: Path) -> np.ndarray:
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if img is None:
-        raise FileNotFoundError(f"cannot read image {path}")
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    """The image at ``path`` (RGB), read once per run and shared read-only, so that every pair
+    holding it is the same array and the benchmark extracts its features once."""
+    try:
+        img = read_rgb(path)
+    except CameraError as exc:
+        raise FileNotFoundError(str(exc)) from exc
+    img.setflags(write=False)
+    return img
 
 
 def oxford_pairs(
@@ -124,14 +133,17 @@ ILLUMINATION_MODELS: dict[str, tuple[float, ...]] = {
 }
 
 
+@functools.cache
 def skimage_photo(name: str) -> np.ndarray:
-    """A colour photo bundled with scikit-image (RGB uint8)."""
+    """A colour photo bundled with scikit-image (RGB uint8), loaded once per run and shared
+    read-only (see :func:`_read_rgb`)."""
     from skimage import data
 
     if name not in PHOTOS:
         raise ValueError(f"photo must be one of {PHOTOS}, got {name!r}")
-    img = getattr(data, name)()
-    return np.ascontiguousarray(img[..., :3]).astype(np.uint8)
+    img = np.ascontiguousarray(getattr(data, name)()[..., :3]).astype(np.uint8)
+    img.setflags(write=False)
+    return img
 
 
 def apply_illumination(image: np.ndarray, model: str, params: tuple[float, ...]) -> np.ndarray:

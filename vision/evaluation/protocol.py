@@ -266,21 +266,17 @@ def evaluate_pair(
     empty = RecallCurve(np.zeros(0), np.zeros(0), np.zeros(0), n_corr)
     if len(fa) == 0 or len(fb) == 0:
         return PairEvaluation(empty, len(fa), len(fb), n_corr, strategy)
-    good = ov.pair_set()
+    # Pairs (i, j) are compared through the flat index i * len(fb) + j.
+    good_keys = ov.index_a.astype(np.int64) * len(fb) + ov.index_b
     if strategy == "threshold":
         D = _distance_matrix(fa.descriptors, fb.descriptors, fa.binary)
-        ia, ib = np.unravel_index(np.arange(D.size), D.shape)
+        key = np.arange(D.size, dtype=np.int64)  # every pair, in D's row-major order
         score = D.reshape(-1)
     else:
         nn = nearest_neighbours(fa, fb, method="exact")
         ia = np.flatnonzero(nn.index >= 0)
-        ib = nn.index[ia]
+        key = ia.astype(np.int64) * len(fb) + nn.index[ia]
         score = (nn.ratio if strategy == "nndr" else nn.distance)[ia]
-    if good:
-        key = ia.astype(np.int64) * len(fb) + ib
-        good_keys = np.array([i * len(fb) + j for i, j in good], dtype=np.int64)
-        correct = np.isin(key, good_keys)
-    else:
-        correct = np.zeros(len(ia), dtype=bool)
+    correct = np.isin(key, good_keys)
     curve = curve_from_matches(score, correct, n_corr)
     return PairEvaluation(curve, len(fa), len(fb), n_corr, strategy)

@@ -152,10 +152,6 @@ class Overlaps:
     error: np.ndarray
     max_error: float
 
-    def pair_set(self) -> set[tuple[int, int]]:
-        """The pairs as a set of ``(i, j)`` for membership tests."""
-        return set(zip(self.index_a.tolist(), self.index_b.tolist(), strict=True))
-
 
 def overlap_errors(
     kp_a: Keypoints,

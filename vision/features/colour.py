@@ -121,10 +121,9 @@ def colour_raw_surf(
 ) -> tuple:
     """Keypoints of our SURF on ``grey`` and SURF descriptors of the three (float) m-images,
     concatenated: ``(Keypoints, ndarray (N, 192) float32)`` (384 with ``extended``)."""
-    from vision.features.surf import surf_describe, surf_features
+    from vision.features.surf import surf_describe, surf_keypoints
 
-    base = surf_features(grey, upright=upright, extended=extended, **detect)
-    kp = base.keypoints
+    kp = surf_keypoints(grey, upright=upright, **detect)
     width = 128 if extended else 64
     if len(kp) == 0:
         return kp, np.zeros((0, 3 * width), np.float32)

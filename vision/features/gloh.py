@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from vision.features.patches import detect_sift, patch_gradients, sample_patches
-from vision.features.pca import PcaBasis, default_basis
+from vision.features.patches import patch_gradients, reduced_sift_features, sample_patches
+from vision.features.pca import PcaBasis
 from vision.features.types import Features, Keypoints
 
 __all__ = ["GLOH_DIM", "RADII", "gloh_features", "gloh_raw"]
@@ -136,12 +136,15 @@ def gloh_features(
     Features
         Method ``"gloh"``; the version is the basis's (it includes its hash).
     """
-    if reduce:
-        basis = basis if basis is not None else default_basis("gloh")
-        if basis.dim_in != GLOH_DIM:
-            raise ValueError(f"basis must reduce {GLOH_DIM}-dim vectors, got {basis.dim_in}")
-    kp, _ = detect_sift(grey, max_features=max_features, threshold=threshold, mask=mask)
-    raw = gloh_raw(grey, kp)
-    if not reduce:
-        return Features(kp, raw, "gloh", _RAW_VERSION, False, grey.shape[:2])
-    return Features(kp, basis.project(raw), "gloh", basis.version, False, grey.shape[:2])
+    return reduced_sift_features(
+        grey,
+        "gloh",
+        gloh_raw,
+        GLOH_DIM,
+        _RAW_VERSION,
+        max_features=max_features,
+        threshold=threshold,
+        mask=mask,
+        basis=basis,
+        reduce=reduce,
+    )

@@ -3,11 +3,14 @@ pyramid level (shared by PCA-SIFT and GLOH), and the SIFT detector they both use
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import cv2
 import numpy as np
 
 from vision.features.opencv import keypoints_from_cv
-from vision.features.types import Keypoints
+from vision.features.pca import PcaBasis, default_basis
+from vision.features.types import Features, Keypoints
 
 __all__ = ["detect_sift", "patch_gradients", "sample_patches"]
 
@@ -116,3 +119,31 @@ def patch_gradients(patches: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     gx = p[:, 1:-1, 2:] - p[:, 1:-1, :-2]
     gy = p[:, 2:, 1:-1] - p[:, :-2, 1:-1]
     return gx, gy
+
+
+def reduced_sift_features(
+    grey: np.ndarray,
+    kind: str,
+    describe_raw: Callable[[np.ndarray, Keypoints], np.ndarray],
+    dim_in: int,
+    raw_version: str,
+    *,
+    max_features: int | None,
+    threshold: float | None,
+    mask: np.ndarray | None,
+    basis: PcaBasis | None,
+    reduce: bool,
+) -> Features:
+    """The common path of the PCA-reduced descriptors at DoG keypoints (PCA-SIFT, GLOH):
+    check the basis, detect with OpenCV's SIFT detector, compute the raw ``dim_in`` vectors
+    with ``describe_raw(grey, keypoints)`` and project them (equation 18) unless ``reduce``
+    is False (then the version is ``raw_version``)."""
+    if reduce:
+        basis = basis if basis is not None else default_basis(kind)
+        if basis.dim_in != dim_in:
+            raise ValueError(f"basis must reduce {dim_in}-dim vectors, got {basis.dim_in}")
+    kp, _ = detect_sift(grey, max_features=max_features, threshold=threshold, mask=mask)
+    raw = describe_raw(grey, kp)
+    if not reduce:
+        return Features(kp, raw, kind, raw_version, False, grey.shape[:2])
+    return Features(kp, basis.project(raw), kind, basis.version, False, grey.shape[:2])

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from vision.features.types import _frozen
+
 __all__ = [
     "BASIS_KINDS",
     "DATA_DIR",
@@ -37,11 +39,6 @@ BASIS_KINDS: dict[str, tuple[int, int]] = {
     "color-surf": (192, 64),
 }
 _FORMAT = 1
-
-
-def _ro(a: np.ndarray) -> np.ndarray:
-    a.setflags(write=False)
-    return a
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,9 +84,9 @@ class PcaBasis:
             raise ValueError(f"eigenvalues has {ev.shape[0]} entries, components {comp.shape[1]}")
         if not self.kind:
             raise ValueError(f"kind must be a non-empty string, got {self.kind!r}")
-        object.__setattr__(self, "mean", _ro(mean))
-        object.__setattr__(self, "components", _ro(comp))
-        object.__setattr__(self, "eigenvalues", _ro(ev))
+        object.__setattr__(self, "mean", _frozen(mean))
+        object.__setattr__(self, "components", _frozen(comp))
+        object.__setattr__(self, "eigenvalues", _frozen(ev))
         object.__setattr__(self, "provenance", dict(self.provenance))
         digest = hashlib.sha256(mean.tobytes() + comp.tobytes()).hexdigest()[:12]
         object.__setattr__(self, "version", f"{self.kind}-k{comp.shape[1]}-{digest}")
@@ -129,19 +126,6 @@ class PcaBasis:
                 f"{self.dim_in}"
             )
         return (x - self.mean) @ self.components
-
-    def truncated(self, k: int) -> PcaBasis:
-        """The same basis keeping only the first ``k`` components."""
-        if not 1 <= k <= self.dim_out:
-            raise ValueError(f"k must be in [1, {self.dim_out}], got {k}")
-        return PcaBasis(
-            self.mean,
-            self.components[:, :k],
-            self.eigenvalues[:k],
-            self.kind,
-            self.provenance,
-            self.total_variance,
-        )
 
 
 def fit_pca(

@@ -10,20 +10,15 @@ the basis with its provenance.
 from __future__ import annotations
 
 import datetime as _dt
-import importlib.util
 from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
 
-from vision.features.colour import colour_raw_sift, colour_raw_surf
-from vision.features.gloh import gloh_raw
-from vision.features.patches import detect_sift
+from vision.features.extract import extract
 from vision.features.pca import BASIS_KINDS, PcaBasis, fit_pca
-from vision.features.pcasift import pca_sift_raw
 
 __all__ = [
-    "available_kinds",
     "raw_descriptors",
     "sample_training_set",
     "train_basis",
@@ -37,14 +32,7 @@ def unavailable_reason(kind: str) -> str | None:
     """Why the descriptor ``kind`` cannot be computed here, or None when it can."""
     if kind not in BASIS_KINDS:
         return f"unknown kind {kind!r}; choose one of {', '.join(BASIS_KINDS)}"
-    if kind == "color-surf" and importlib.util.find_spec("vision.features.surf") is None:
-        return "its base descriptor SURF (vision.features.surf) is not available"
     return None
-
-
-def available_kinds() -> tuple[str, ...]:
-    """The basis kinds whose raw descriptors can be computed in this installation."""
-    return tuple(k for k in BASIS_KINDS if unavailable_reason(k) is None)
 
 
 def raw_descriptors(kind: str, rgb: np.ndarray, *, max_features: int = 3000) -> np.ndarray:
@@ -69,13 +57,7 @@ def raw_descriptors(kind: str, rgb: np.ndarray, *, max_features: int = 3000) -> 
     rgb = np.asarray(rgb)
     if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
         raise ValueError(f"rgb must be a uint8 (H, W, 3) image, got {rgb.dtype} {rgb.shape}")
-    grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
-    if kind in ("pca-sift", "gloh"):
-        kp, _ = detect_sift(grey, max_features=max_features)
-        return (pca_sift_raw if kind == "pca-sift" else gloh_raw)(grey, kp)
-    if kind == "color-sift":
-        return colour_raw_sift(rgb, grey, max_features=max_features)[1]
-    return colour_raw_surf(rgb, grey, max_features=max_features)[1]
+    return extract(rgb, kind, max_features=max_features, reduce=False).descriptors
 
 
 def sample_training_set(

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from vision.features.patches import detect_sift, patch_gradients, sample_patches
-from vision.features.pca import PcaBasis, default_basis
+from vision.features.patches import patch_gradients, reduced_sift_features, sample_patches
+from vision.features.pca import PcaBasis
 from vision.features.types import Features, Keypoints
 
 __all__ = ["PATCH_SIZE", "STEP_PER_SIZE", "pca_sift_features", "pca_sift_raw"]
@@ -76,14 +76,15 @@ def pca_sift_features(
     Features
         Method ``"pca-sift"``; the version is the basis's (it includes its hash).
     """
-    if reduce:
-        basis = basis if basis is not None else default_basis("pca-sift")
-        if basis.dim_in != 2 * (PATCH_SIZE - 2) ** 2:
-            raise ValueError(
-                f"basis must reduce {2 * (PATCH_SIZE - 2) ** 2}-dim vectors, got {basis.dim_in}"
-            )
-    kp, _ = detect_sift(grey, max_features=max_features, threshold=threshold, mask=mask)
-    raw = pca_sift_raw(grey, kp)
-    if not reduce:
-        return Features(kp, raw, "pca-sift", _RAW_VERSION, False, grey.shape[:2])
-    return Features(kp, basis.project(raw), "pca-sift", basis.version, False, grey.shape[:2])
+    return reduced_sift_features(
+        grey,
+        "pca-sift",
+        pca_sift_raw,
+        2 * (PATCH_SIZE - 2) ** 2,
+        _RAW_VERSION,
+        max_features=max_features,
+        threshold=threshold,
+        mask=mask,
+        basis=basis,
+        reduce=reduce,
+    )

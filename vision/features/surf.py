@@ -35,6 +35,7 @@ __all__ = [
     "SURF_VERSION",
     "surf_describe",
     "surf_features",
+    "surf_keypoints",
     "surf_orientation",
     "warm_up",
 ]
@@ -199,6 +200,45 @@ def surf_features(
     >>> f.dim
     64
     """
+    ii, xy, scales, theta, strength, octave = _detect(
+        grey, threshold, n_octaves, upright, max_features, mask
+    )
+    desc = describe_integral(ii, xy, scales, theta, extended=extended)
+    kp = Keypoints(xy, WINDOW_IN_S * scales, -theta + 0.0, strength, octave)
+    return Features(kp, desc, "surf", SURF_VERSION, False, np.shape(grey))
+
+
+def surf_keypoints(
+    grey: np.ndarray,
+    *,
+    threshold: float = DEFAULT_THRESHOLD,
+    n_octaves: int = 4,
+    upright: bool = False,
+    max_features: int | None = None,
+    mask: np.ndarray | None = None,
+) -> Keypoints:
+    """The keypoints of :func:`surf_features` (detection and orientation) without their
+    descriptors, for callers that describe other images at them (the colour descriptor).
+
+    Parameters and errors as :func:`surf_features`.
+    """
+    _, xy, scales, theta, strength, octave = _detect(
+        grey, threshold, n_octaves, upright, max_features, mask
+    )
+    return Keypoints(xy, WINDOW_IN_S * scales, -theta + 0.0, strength, octave)
+
+
+def _detect(
+    grey: np.ndarray,
+    threshold: float,
+    n_octaves: int,
+    upright: bool,
+    max_features: int | None,
+    mask: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Validate, detect (Fast-Hessian), filter, sort strongest first and orient: the integral
+    image, positions (N, 2), scales s, orientations (clockwise, the kernels' convention),
+    Hessian responses and octaves."""
     grey = _check_image(grey, "grey", (np.uint8,))
     if not isinstance(threshold, numbers.Real) or not np.isfinite(threshold) or threshold < 0:
         raise ValueError(f"threshold must be a finite number >= 0, got {threshold!r}")
@@ -237,9 +277,7 @@ def surf_features(
     xy = pts[:, :2]
     scales = BASE_SCALE * pts[:, 2] / 9.0
     theta = np.zeros(len(pts)) if upright or len(pts) == 0 else orientation_integral(ii, xy, scales)
-    desc = describe_integral(ii, xy, scales, theta, extended=extended)
-    kp = Keypoints(xy, WINDOW_IN_S * scales, -theta + 0.0, pts[:, 3], octave)
-    return Features(kp, desc, "surf", SURF_VERSION, False, grey.shape)
+    return ii, xy, scales, theta, pts[:, 3], octave
 
 
 def warm_up() -> None:

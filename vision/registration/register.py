@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from vision.features import Features, extract
-from vision.registration.matching import Matches, check_compatible, match
+from vision.registration.matching import Matches, match
 from vision.registration.verify import Verification, verify
 
 __all__ = ["N_SAT", "Registration", "register", "registration_score"]
@@ -152,7 +152,6 @@ def register(
     """
     fa = _features(a, "a", method, extract_options)
     fb = _features(b, "b", method, extract_options)
-    check_compatible(fa, fb)
     matches = match(fa, fb, ratio=ratio, mutual=mutual, method=match_method)
     ver = verify(matches, fa, fb, model=model, method=robust, reproj_px=reproj_px)
     score, sat, inl, cov = registration_score(ver, matches, fa)
