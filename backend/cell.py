@@ -104,10 +104,17 @@ class Cell:
             raise ValueError(f"speed must be in (0, 1], got {speed!r}")
         return s
 
-    def _start_motion(self, kind: str, traj: JointTrajectory, params: dict[str, Any]) -> Job:
-        """Run ``traj`` as a motion job (the motion lock refuses a second one)."""
+    def check_can_move(self) -> None:
+        """Raise :class:`RobotBusy` if a motion would be refused now: the emergency stop is
+        latched, or another job holds the arm. For callers with work to do before their
+        motion job starts (planning), so that they refuse before doing it."""
         if self.driver.state.estopped:
             raise RobotBusy("emergency stop is active: reset before moving")
+        self.jobs.check_arm_free()
+
+    def _start_motion(self, kind: str, traj: JointTrajectory, params: dict[str, Any]) -> Job:
+        """Run ``traj`` as a motion job (the motion lock refuses a second one)."""
+        self.check_can_move()
 
         async def body(job: Job) -> dict[str, Any]:
             job.report(0.0, f"moving for {traj.duration_s:.2f} s")

@@ -103,6 +103,15 @@ class JobManager:
             except Exception:  # a broken listener must not break the job
                 log.exception("job listener failed")
 
+    def check_arm_free(self) -> None:
+        """Raise :class:`RobotBusy` naming the job that holds the motion lock, if one does."""
+        if self.motion_lock.locked():
+            holder = next(
+                (j for j in self._jobs.values() if j.motion and j.state is JobState.running), None
+            )
+            what = f"job {holder.id} ({holder.kind})" if holder else "another job"
+            raise RobotBusy(f"the arm is busy with {what}; stop it or wait for it to finish")
+
     def start(
         self,
         kind: str,
@@ -112,12 +121,8 @@ class JobManager:
         params: dict[str, Any] | None = None,
     ) -> Job:
         """Run ``body(job)`` as a task; raise :class:`RobotBusy` if ``motion`` and the arm is taken."""
-        if motion and self.motion_lock.locked():
-            holder = next(
-                (j for j in self._jobs.values() if j.motion and j.state is JobState.running), None
-            )
-            what = f"job {holder.id} ({holder.kind})" if holder else "another job"
-            raise RobotBusy(f"the arm is busy with {what}; stop it or wait for it to finish")
+        if motion:
+            self.check_arm_free()
         job = Job(id=uuid.uuid4().hex[:12], kind=kind, motion=motion, params=params or {})
         job.task = asyncio.create_task(self._run(job, body), name=f"job-{kind}-{job.id}")
         self._jobs[job.id] = job

@@ -22,8 +22,8 @@ nothing is solved or activated then.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import functools
-import math
 import time
 import weakref
 from collections.abc import Callable
@@ -58,6 +58,8 @@ from robot.model import check_joints
 from robot.trajectory import plan_joint_move
 from vision.calibration import (
     Board,
+    CharucoBoard,
+    Chessboard,
     Detection,
     HandEyeOptions,
     IntrinsicsOptions,
@@ -101,16 +103,18 @@ AUTO_CRITERIA = ViewSetCriteria(
 )
 
 
+def pattern_of_sim_board(spec: Any) -> Chessboard | CharucoBoard:
+    """The calibration pattern printed on one of the simulated cell's boards
+    (``robot.sim.boards.BoardSpec``: kind, cols, rows, square and marker sizes, dictionary)."""
+    if spec.kind == "chessboard":
+        return Chessboard(spec.cols, spec.rows, spec.square_m)
+    return CharucoBoard(spec.cols, spec.rows, spec.square_m, spec.marker_m, spec.dictionary)
+
+
 def nominal_camera(width: int, height: int, *, fovy_deg: float = 60.0) -> PinholeCamera:
     """The camera model before any calibration: square pixels, centred principal point,
     no distortion, focal length from the lens's nominal vertical field of view."""
-    f = 0.5 * height / math.tan(math.radians(fovy_deg) / 2.0)
-    return PinholeCamera(
-        [[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]],
-        None,
-        width=width,
-        height=height,
-    )
+    return PinholeCamera.from_fov(fovy_deg, width=width, height=height)
 
 
 @dataclass(frozen=True)
@@ -247,9 +251,7 @@ def _quick_model(
 
 
 def _diversity(poses: list[NDArray[np.float64]]) -> RotationDiversity:
-    if len(poses) < 2:
-        return RotationDiversity(len(poses), 0.0, 0.0, 0.0)
-    return rotation_diversity(np.array(poses))
+    return rotation_diversity(np.array(poses, dtype=np.float64).reshape(-1, 4, 4))
 
 
 async def _move(
@@ -391,13 +393,7 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
     board, options, world, cam, Tec = run.board, run.options, run.world, run.camera, run.T_ee_cam
     w, h = cam.width, cam.height
     crit = options.criteria
-    crit = ViewSetCriteria(
-        min(crit.min_views, options.n_poses),
-        crit.min_coverage,
-        crit.min_corner_cells,
-        crit.min_max_angle_deg,
-        crit.min_axis_spread_deg,
-    )
+    crit = dataclasses.replace(crit, min_views=min(crit.min_views, options.n_poses))
 
     current: dict[str, Any] = {"camera": cam, "T_ee_cam": Tec, "margin_px": 20.0}
 

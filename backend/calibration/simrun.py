@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from robot.kinematics.pose6 import rotation_angle
+
 __all__ = ["SimAutoReport", "run_sim_auto"]
 
 
@@ -86,9 +88,7 @@ def _judge(result: dict[str, Any], truth: Any) -> dict[str, float]:
         "principal_point_error_px": float(np.hypot(*(K[:2, 2] - truth.K[:2, 2]))),
         "map_error_px": float(np.nanmax(np.hypot(mx - tx, my - ty))),
         "hand_eye_mm": 1e3 * float(np.linalg.norm(T[:3, 3] - truth.T_ee_cam[:3, 3])),
-        "hand_eye_deg": math.degrees(
-            math.acos(float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
-        ),
+        "hand_eye_deg": math.degrees(rotation_angle(R)),
     }
 
 
@@ -107,7 +107,6 @@ async def _run(
     from backend.db.migrate import upgrade
     from backend.settings import Settings
     from robot.sim.obstacles import collision_world
-    from vision.calibration import CharucoBoard, Chessboard
 
     url = f"sqlite+aiosqlite:///{folder / 'calibration.db'}"
     settings = Settings(
@@ -139,11 +138,7 @@ async def _run(
             ]
         )
         sim.place_board(board, T)
-        pattern = (
-            Chessboard(spec.cols, spec.rows, spec.square_m)
-            if spec.kind == "chessboard"
-            else CharucoBoard(spec.cols, spec.rows, spec.square_m, spec.marker_m, spec.dictionary)
-        )
+        pattern = auto.pattern_of_sim_board(spec)
         t0 = time.monotonic()
         run = await auto.prepare_auto_calibration(
             cell,

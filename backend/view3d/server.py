@@ -23,6 +23,7 @@ import viser
 import viser.transforms as vtf
 
 from backend.calibration.auto import view_log
+from backend.calibration.autoplan import NOMINAL_T_EE_CAM
 from backend.cell import Cell
 from backend.view3d.arm import arm_shapes, link_poses
 from backend.view3d.calibviews import CalibrationFrusta
@@ -36,11 +37,9 @@ __all__ = ["T_EE_CAM_PLACEHOLDER", "View3D"]
 
 log = logging.getLogger(__name__)
 
-#: Where the frustum is drawn until a hand-eye calibration is active: on the approach
-#: axis, 4 cm past the flange, looking along it (OpenCV camera frame: +z forward).
-T_EE_CAM_PLACEHOLDER = np.array(
-    [[0.0, -1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.04], [0.0, 0.0, 0.0, 1.0]]
-)
+#: Where the frustum is drawn until a hand-eye calibration is active: the drawing's
+#: mounting, the same one the calibration planner starts from.
+T_EE_CAM_PLACEHOLDER = NOMINAL_T_EE_CAM
 
 
 def _wxyz(R: np.ndarray) -> np.ndarray:

@@ -22,7 +22,6 @@ from backend.api.errors import ApiError, error_body
 from backend.db.models import CalibrationKind
 from backend.jobs import Job, JobState
 from robot.collision import CollisionWorld
-from robot.errors import RobotBusy
 from vision.calibration import (
     ALL_METHODS,
     ARUCO_DICTIONARIES,
@@ -451,10 +450,7 @@ async def create_calibration_auto(
 ) -> dict[str, Any]:
     from backend.calibration import auto
 
-    if cell.driver.state.estopped:
-        raise RobotBusy("emergency stop is active: reset before moving")
-    if cell.jobs.motion_lock.locked():
-        raise RobotBusy("the arm is busy with another job; stop it or wait for it to finish")
+    cell.check_can_move()  # refuse before the planning work
     sim = getattr(request.app.state, "sim", None)
     board, T = _auto_board(body, sim)
     world = CollisionWorld()
@@ -496,11 +492,9 @@ def _auto_board(body: AutoIn, sim: Any) -> tuple[Board, np.ndarray]:
         spec = next((s for s in sim.config.boards if s.kind == body.board), None)
         if spec is None:
             raise ApiError(404, "not_found", f"this cell has no {body.board} board")
-        board = (
-            Chessboard(spec.cols, spec.rows, spec.square_m)
-            if spec.kind == "chessboard"
-            else CharucoBoard(spec.cols, spec.rows, spec.square_m, spec.marker_m, spec.dictionary)
-        )
+        from backend.calibration.auto import pattern_of_sim_board
+
+        board = pattern_of_sim_board(spec)
     else:
         raise ApiError(422, "validation_error", "pattern: give the board's pattern (no simulator)")
     if body.T_base_board is not None:
