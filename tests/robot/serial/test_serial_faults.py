@@ -69,7 +69,13 @@ async def test_checksummed_frame_with_bad_arguments_gets_nak_syntax(raw_host):
     assert isinstance(nak, fr.Nak) and nak.code == "SYNTAX"
 
 
-async def test_moves_survive_a_noisy_line_and_run_exactly_once(driver, emulator):
+async def test_moves_survive_a_noisy_line_and_run_exactly_once(make_driver, emulator):
+    # This test is about exactly-once execution, not latency: a command timeout of 3 s (the
+    # FAST fixture's 1 s is for the timeout tests) keeps a starved CI machine from turning
+    # a slow resend round into a failed upload.
+    driver = make_driver(emulator.path, command_timeout_s=3.0)
+    await driver.connect()
+    assert driver.state.connected
     emulator.fault = FaultConfig(
         drop_p=0.04, corrupt_p=0.04, truncate_p=0.03, garbage_p=0.04, delay_p=0.03, delay_s=0.03
     )
