@@ -311,15 +311,28 @@ async def _settle(task: asyncio.Task[object]) -> None:
 
 
 # -- 5. fault campaign -----------------------------------------------------------------------
-async def bench_campaign(faults: int, progress: Progress) -> dict[str, object]:
-    """Moves on a faulty line until ``faults`` faults hit command traffic; count losses and duplicates."""
+async def bench_campaign(
+    faults: int,
+    progress: Progress,
+    *,
+    config: FaultConfig = CAMPAIGN_FAULTS,
+    stall_s: float = 60.0,
+) -> dict[str, object]:
+    """Moves on a faulty line until ``faults`` faults hit command traffic; count losses and duplicates.
+
+    ``config`` is the line's faults (the tests raise the port-vanish rate so that faults
+    during the reconnection handshake happen within a short run); the campaign fails if no
+    fault is injected for ``stall_s`` seconds (the link went dead).
+    """
     async with _Cell(time_scale=50.0, watchdog_s=1.0) as cell:
         d = await cell.attach()
-        cell.emu.fault = CAMPAIGN_FAULTS
+        cell.emu.fault = config
         issued: list[tuple[int, str]] = []  # (mid, outcome) per motion command
         t0 = time.perf_counter()
         i = 0
-        stall = _StallGuard(lambda: cell.emu.stats.faults.on_commands)
+        stall = _StallGuard(lambda: cell.emu.stats.faults.on_commands, stall_s)
+        outages_s: list[float] = []  # each outage, from the state's fall to its rise
+        watcher = asyncio.create_task(_watch_outages(d, outages_s))
         while cell.emu.stats.faults.on_commands < faults:
             stall.check()
             i += 1
@@ -333,6 +346,10 @@ async def bench_campaign(faults: int, progress: Progress) -> dict[str, object]:
                 outcome = "done" if report.completed else "interrupted"
             except RobotError:
                 outcome = "refused" if d.last_move_id == mid else "not_sent"
+                # Pause before the next try, as an operator's client would: a refusal can
+                # come back without yielding to the event loop, and a loop that retries at
+                # once would starve the driver's own tasks (its reconnection included).
+                await asyncio.sleep(0.01)
                 if not d.state.connected:
                     with contextlib.suppress(TimeoutError):
                         async with asyncio.timeout(5.0):
@@ -346,6 +363,8 @@ async def bench_campaign(faults: int, progress: Progress) -> dict[str, object]:
             )
         cell.emu.fault = FaultConfig()
         await asyncio.sleep(0.5)
+        watcher.cancel()
+        await asyncio.gather(watcher, return_exceptions=True)
         elapsed = time.perf_counter() - t0
         counts = _executions(cell.emu, d.session_id)
         result = _tally(issued, counts)
@@ -357,8 +376,20 @@ async def bench_campaign(faults: int, progress: Progress) -> dict[str, object]:
             "rejected_lines_controller": cell.emu.stats.rx_rejected,
             "duplicates_answered_from_cache": cell.emu.stats.duplicates,
             "outages": d.outages,
+            "reconnect": _summary_ms(outages_s) if outages_s else {"n": 0},
         }
     return result
+
+
+async def _watch_outages(d: SerialDriver, out: list[float]) -> None:
+    """Append the length of every outage the driver's state shows (connected False -> True)."""
+    since: float | None = None
+    async for s in d.states():
+        if not s.connected and since is None:
+            since = time.monotonic()
+        elif s.connected and since is not None:
+            out.append(time.monotonic() - since)
+            since = None
 
 
 class _StallGuard:
@@ -650,6 +681,13 @@ def _table(r: dict[str, object]) -> str:
             f"lost {c['lost']}, duplicated {c['duplicated']}",
             "0 and 0",
             c["lost"] == 0 and c["duplicated"] == 0 and c["executed_but_reported_refused"] == 0,
+        ),
+        (
+            f"  {c['outages']} outages in the campaign: reconnect (median / max)",
+            f"{c['reconnect'].get('median_ms', float('nan')):.0f} / "
+            f"{c['reconnect'].get('max_ms', float('nan')):.0f} ms",
+            "",
+            None,
         ),
         (
             f"  baseline naive host: {n['faults']['on_commands']} faults, {n['motion_commands']} moves",

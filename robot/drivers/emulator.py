@@ -204,7 +204,8 @@ class Emulator:
         self._session: str | None = None
         self._floor = 0
         self._max_seq = 0
-        self._cache: dict[int, bytes | None] = {}
+        self._cache: dict[int, tuple[str, bytes] | None] = {}
+        """Replies by sequence number, as (verb or NAK code, wire); None while executing."""
         self._estopped = False
         self.moves = MoveTable(
             driver,
@@ -339,8 +340,8 @@ class Emulator:
         if seq in self._cache:
             self.stats.duplicates += 1
             cached = self._cache[seq]
-            if cached is not None:
-                self._tx_wire.push(cached, carries_command=True)
+            if cached is not None and not self._muted(cached[0]):
+                self._tx_wire.push(cached[1], carries_command=True)
             return  # still being executed: its one reply will follow
         if seq <= max(self._floor, self._max_seq - self.cache_depth):
             self.stats.stale += 1
@@ -396,14 +397,22 @@ class Emulator:
 
     def _finish(self, seq: int, reply: Ack | Nak) -> None:
         wire = encode(reply)
+        tag = reply.verb if isinstance(reply, Ack) else reply.code
         if seq in self._cache:
-            self._cache[seq] = wire
+            self._cache[seq] = (tag, wire)
         self.replies.append(reply)
-        self._tx_wire.push(wire, carries_command=True)
+        if not self._muted(tag):
+            self._tx_wire.push(wire, carries_command=True)
+
+    def _muted(self, tag: str) -> bool:
+        """True if replies tagged ``tag`` are lost on the line (``FaultConfig.mute_replies``)."""
+        return tag in self.fault.mute_replies
 
     def _send(self, frame: Frame) -> None:
         if isinstance(frame, Ack | Nak):
             self.replies.append(frame)
+            if self._muted(frame.verb if isinstance(frame, Ack) else frame.code):
+                return
         self._tx_wire.push(encode(frame), carries_command=not isinstance(frame, StateEvent))
 
     # -- command execution --------------------------------------------------------------------

@@ -253,7 +253,8 @@ class SerialDevice:
         make : callable
             Builds the command from its sequence number, e.g. ``lambda s: Ping(s)``.
         timeout_s : float
-            Longest wait for the reply, counted from the command's first write.
+            Longest wait for the reply, counted from the command's first write (from the
+            call for an urgent command, which is never queued).
         resend_after_s : float, optional
             Re-send interval for this command (default: the device's).
         urgent : bool
@@ -286,6 +287,7 @@ class SerialDevice:
         if urgent:
             self._inflight[cmd.seq] = p
             self._write(p)
+            p.sent.set()  # its clock runs from now, even if the write did not go out
         else:
             self._queue.append(p)
             self._pump()

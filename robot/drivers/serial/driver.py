@@ -211,6 +211,7 @@ class SerialDriver:
         self._epoch = 0
         self._boot_id: str | None = None
         self._last_stamp_ms = -1
+        self._snap: ArmSnapshot | None = None
         self._warned_limits: LimitsInfo | None = None
         self._mid = 0
         self._background: set[asyncio.Task[None]] = set()
@@ -220,6 +221,7 @@ class SerialDriver:
             device=self._device,
             handshake=self._handshake,
             on_down=self._on_down,
+            on_up=self._on_up,
             heartbeat_s=self.heartbeat_s,
             silence_timeout_s=self.silence_timeout_s,
             command_timeout_s=self.command_timeout_s,
@@ -593,6 +595,7 @@ class SerialDriver:
             )
         if info.boot_id != self._boot_id:
             self._last_stamp_ms = -1  # a new controller clock
+        self._snap = None
         self._boot_id = info.boot_id
         self.controller = info
         self._device.window = max(1, min(self.window, info.window))
@@ -634,8 +637,7 @@ class SerialDriver:
     # -- events -------------------------------------------------------------------------------
     def _on_event(self, event: Event) -> None:
         if isinstance(event, StateEvent):
-            if self._ready.is_set():
-                self._publish(event.state)
+            self._publish(event.state)
             if event.state.mid in self._waiters and event.state.move_status in TERMINAL_STATUSES:
                 self._hint.set()
         elif isinstance(event, DoneEvent):
@@ -645,9 +647,20 @@ class SerialDriver:
             self._hint.set()
 
     def _publish(self, snap: ArmSnapshot) -> None:
+        """Show ``snap``, but only once the link is ready (the handshake finished).
+
+        A reply that arrives during a handshake (a command re-sent on a resumed session)
+        is kept for :meth:`_on_up`: publishing it would say ``connected=True`` while moves
+        are still refused, and the handshake may yet fail.
+        """
         if snap.stamp_ms < self._last_stamp_ms:
             return  # older than what we already showed (a reply overtook a delayed event)
         self._last_stamp_ms = snap.stamp_ms
+        self._snap = snap
+        if self._ready.is_set():
+            self._show(snap)
+
+    def _show(self, snap: ArmSnapshot) -> None:
         self._hub.publish(
             RobotState(
                 q=snap.q,
@@ -659,3 +672,9 @@ class SerialDriver:
                 fault=snap.fault,
             )
         )
+
+    def _on_up(self) -> None:
+        """The supervisor's link is ready: publish the state read by the handshake."""
+        if self._snap is not None:
+            self._show(self._snap)
+        self._hint.set()

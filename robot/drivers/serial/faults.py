@@ -47,6 +47,10 @@ class FaultConfig:
     directions : str
         ``"both"``, ``"rx"`` (host to controller only) or ``"tx"`` (controller to host only)
         for the per-line faults.
+    mute_replies : tuple of str
+        Verbs (``"RATE"``, ``"HELLO"``, ...) whose replies never reach the host: the
+        controller executes the command, but its answer, and every answer to a re-send, is
+        lost on the line (a targeted fault, e.g. during the host's handshake).
     """
 
     drop_p: float = 0.0
@@ -60,6 +64,7 @@ class FaultConfig:
     silent: bool = False
     process_delay_s: float = 0.0
     directions: str = "both"
+    mute_replies: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         for name in ("drop_p", "corrupt_p", "truncate_p", "garbage_p", "delay_p", "vanish_p"):
@@ -72,6 +77,12 @@ class FaultConfig:
                 raise ValueError(f"{name} must be in [0, 3600) seconds, got {v!r}")
         if self.directions not in _DIRECTIONS:
             raise ValueError(f"directions must be one of {_DIRECTIONS}, got {self.directions!r}")
+        if not isinstance(self.mute_replies, tuple) or not all(
+            isinstance(v, str) and v.isalpha() and v.isupper() for v in self.mute_replies
+        ):
+            raise ValueError(
+                f"mute_replies must be a tuple of upper-case verbs, got {self.mute_replies!r}"
+            )
 
     def applies_to(self, direction: str) -> bool:
         """True if per-line faults hit ``direction`` (``"rx"`` or ``"tx"``)."""

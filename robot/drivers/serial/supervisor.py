@@ -12,6 +12,14 @@ under a :class:`~robot.drivers.serial.device.SerialDevice`:
    knows the host is alive;
 4. when the link ends: detach, tell the driver (``on_down``), and go back to 1.
 
+A handshake that fails (a command unanswered, the port closed under it, any exception) or
+takes longer than ``handshake_timeout_s`` fails the attempt, which is retried like a failed
+open: a fault during reconnection leads to another reconnection, never to a dead link.  The
+handshake runs as a task that every way out of an attempt cancels and awaits (stop included),
+so no task outlives its attempt and no exception goes unretrieved; an unexpected exception
+in the loop itself is logged and counts as a failed attempt.  The driver is told ``on_up``
+only once the link is ready, so nothing says "connected" while moves are still refused.
+
 Failed attempts wait ``backoff_initial_s`` doubling up to ``backoff_max_s``, each wait
 multiplied by a random factor in [0.5, 1] (jitter, so that the cells of a plant do not retry in
 step); a success resets the delay.  The first retry after losing a working link is
@@ -31,7 +39,7 @@ from collections.abc import Awaitable, Callable
 from robot.drivers.serial.device import SerialDevice
 from robot.drivers.serial.frames import Ping
 from robot.drivers.serial.transport import SerialLink
-from robot.errors import LinkDown, RobotError
+from robot.errors import CommandTimeout, LinkDown, RobotError
 
 __all__ = ["LinkSupervisor"]
 
@@ -55,10 +63,15 @@ class LinkSupervisor:
     on_down : callable
         Called with a short reason whenever the link is not usable (each failed attempt and
         each loss), on the event loop.
+    on_up : callable, optional
+        Called once the handshake succeeded and :attr:`ready` is set (the driver publishes
+        ``connected=True`` only then).
     heartbeat_s, silence_timeout_s : float
         Idle time before a ``PING``; silence after which the link is declared dead.
     command_timeout_s : float
         Timeout of the heartbeat ``PING``.
+    handshake_timeout_s : float, optional
+        Longest handshake; a slower one fails the attempt (default: five command timeouts).
     backoff_initial_s, backoff_max_s : float
         First retry delay and its cap.
     rng : random.Random
@@ -79,15 +92,25 @@ class LinkSupervisor:
         backoff_initial_s: float,
         backoff_max_s: float,
         rng: random.Random,
+        on_up: Callable[[], None] | None = None,
+        handshake_timeout_s: float | None = None,
     ) -> None:
         self.port = port
         self.baud = baud
         self.device = device
         self._handshake = handshake
         self._on_down = on_down
+        self._on_up = on_up
         self.heartbeat_s = heartbeat_s
         self.silence_timeout_s = silence_timeout_s
         self.command_timeout_s = command_timeout_s
+        self.handshake_timeout_s = (
+            5.0 * command_timeout_s if handshake_timeout_s is None else handshake_timeout_s
+        )
+        if not self.handshake_timeout_s > 0:
+            raise ValueError(
+                f"handshake_timeout_s must be positive, got {self.handshake_timeout_s!r}"
+            )
         self.backoff_initial_s = backoff_initial_s
         self.backoff_max_s = backoff_max_s
         self._rng = rng
@@ -151,63 +174,100 @@ class LinkSupervisor:
         delay = self.backoff_initial_s
         while True:
             try:
-                link = await SerialLink.open(self.port, baud=self.baud, on_bytes=self.device.feed)
-            except LinkDown as exc:
-                self._note_down(str(exc))
+                was_up = await self._attempt()
+            except Exception as exc:  # a bug below must not end supervision: log, try again
+                log.exception("serial supervisor: unexpected error on %s", self.port)
+                self._note_down(f"unexpected error: {type(exc).__name__}: {exc}")
+                was_up = False
+            if was_up:
+                delay = self.backoff_initial_s  # a working link was lost: retry at once
+            else:
                 wait, delay = self._backoff(delay)
                 await asyncio.sleep(wait)
-                continue
-            self.link = link
-            self.device.attach(link)
-            handshake = asyncio.create_task(self._handshake())
-            ok = False
-            try:
-                await asyncio.wait({handshake, link.closed}, return_when=asyncio.FIRST_COMPLETED)
-                ok = (
-                    handshake.done() and not handshake.cancelled() and handshake.exception() is None
-                )
-                if ok:
+
+    async def _attempt(self) -> bool:
+        """One connection: open, hand-shake, serve until lost.  True if it was ever ready.
+
+        Every way out (a failed open, a failed or hung handshake, the link lost, an
+        exception, cancellation by :meth:`stop`) leaves no task behind: the handshake is
+        cancelled and awaited here, its exception retrieved.
+        """
+        try:
+            link = await SerialLink.open(self.port, baud=self.baud, on_bytes=self.device.feed)
+        except LinkDown as exc:
+            self._note_down(str(exc))
+            return False
+        self.link = link
+        self.device.attach(link)
+        handshake = asyncio.create_task(self._bounded_handshake(), name="serial-handshake")
+        up = False
+        why = "port closed during the handshake"
+        try:
+            await asyncio.wait({handshake, link.closed}, return_when=asyncio.FIRST_COMPLETED)
+            if handshake.done() and not handshake.cancelled():
+                exc = handshake.exception()
+                if exc is not None:
+                    why = f"handshake failed: {exc}"
+                else:
+                    up = True
                     self.ready.set()
                     self.connected_at = time.monotonic()
-                    delay = self.backoff_initial_s
                     self._note_up()
+                    if self._on_up is not None:
+                        self._on_up()
                     await link.closed
                     why = self._close_reason or f"serial link lost ({link.closed.result()})"
-                else:
-                    handshake.cancel()
-                    with contextlib.suppress(asyncio.CancelledError, Exception):
-                        await handshake
-                    exc = None if handshake.cancelled() else handshake.exception()
-                    why = f"handshake failed: {exc or 'port closed'}"
-            finally:
-                self.ready.clear()
-                self.device.detach()
-                link.close()
-                self.link = None
-            self._close_reason = None
-            self._note_down(why)
-            if not ok:
-                wait, delay = self._backoff(delay)
-                await asyncio.sleep(wait)
+        finally:
+            self.ready.clear()
+            if not handshake.done():
+                handshake.cancel()
+            # Retrieve its outcome whatever it is (even while stop() cancels this task).
+            await asyncio.gather(handshake, return_exceptions=True)
+            self.device.detach()
+            link.close()
+            self.link = None
+        self._close_reason = None
+        self._note_down(why)
+        return up
+
+    async def _bounded_handshake(self) -> None:
+        """The driver's handshake, failed if it takes longer than ``handshake_timeout_s``."""
+        try:
+            async with asyncio.timeout(self.handshake_timeout_s):
+                await self._handshake()
+        except TimeoutError:
+            raise CommandTimeout(
+                f"handshake not finished within {self.handshake_timeout_s:g} s"
+            ) from None
 
     async def _heartbeat(self) -> None:
         while True:
             await asyncio.sleep(self.heartbeat_s / 2)
-            link = self.link
-            if not self.ready.is_set() or link is None:
-                continue
-            now = time.monotonic()
-            if now - self.device.last_rx_s > self.silence_timeout_s:
-                self._close_reason = f"controller silent for {self.silence_timeout_s:g} s"
-                link.close()
-            elif now - self.device.last_tx_s >= self.heartbeat_s and (
-                self._ping is None or self._ping.done()
-            ):
-                self._ping = asyncio.create_task(self._quiet_ping())
+            try:
+                self._beat()
+            except Exception:  # never let the watch on the line die silently
+                log.exception("serial supervisor: heartbeat failed on %s", self.port)
+
+    def _beat(self) -> None:
+        link = self.link
+        if not self.ready.is_set() or link is None:
+            return
+        now = time.monotonic()
+        if now - self.device.last_rx_s > self.silence_timeout_s:
+            self._close_reason = f"controller silent for {self.silence_timeout_s:g} s"
+            link.close()
+        elif now - self.device.last_tx_s >= self.heartbeat_s and (
+            self._ping is None or self._ping.done()
+        ):
+            self._ping = asyncio.create_task(self._quiet_ping(), name="serial-ping")
 
     async def _quiet_ping(self) -> None:
-        with contextlib.suppress(RobotError):
+        try:
             await self.device.request(lambda s: Ping(s), timeout_s=self.command_timeout_s)
+        except RobotError:
+            pass  # a lost ping is what silence detection is for
+        except Exception:
+            log.exception("serial supervisor: heartbeat ping failed on %s", self.port)
 
     def _note_down(self, why: str) -> None:
         if self._outage_since is None:
