@@ -34,11 +34,14 @@ lint: install-dev
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
-# The whole serial path: an emulated controller on a pseudo-terminal drives the cell.
+# The whole serial path: an emulated controller (robot/drivers/serial/emulator.py) on a
+# pseudo-terminal drives the cell; the server starts once the emulator has published its port.
 demo-serial: install
-	@mkdir -p var
+	@mkdir -p var; if [ -L var/robot-tty ]; then rm var/robot-tty; fi
 	@$(BIN)/visioncell emulator --link var/robot-tty & emu=$$!; trap "kill $$emu 2>/dev/null" EXIT INT TERM; \
-	sleep 1; VISIONCELL_DRIVER=serial VISIONCELL_SERIAL_PORT=var/robot-tty $(BIN)/visioncell serve
+	for i in $$(seq 100); do [ -L var/robot-tty ] && break; sleep 0.1; done; \
+	[ -L var/robot-tty ] || { echo "emulator did not publish var/robot-tty" >&2; exit 1; }; \
+	VISIONCELL_DRIVER=serial VISIONCELL_SERIAL_PORT=var/robot-tty $(BIN)/visioncell serve
 
 bench: install-dev
 	@for b in $$(grep -l '__name__ == "__main__"' benchmarks/[a-z]*.py); do \

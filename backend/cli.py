@@ -222,7 +222,7 @@ def emulator(
     import signal
 
     from backend.hardware import make_driver
-    from robot.drivers.emulator import run_emulator
+    from robot.drivers.serial.emulator import run_emulator
     from robot.drivers.serial.faults import FaultConfig
 
     if driver not in ("ideal", "sim"):

@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from robot.drivers import IdealDriver
-from robot.drivers.emulator import Emulator
 from robot.drivers.serial import FaultConfig, SerialDriver, SerialLink
 from robot.drivers.serial import frames as fr
+from robot.drivers.serial.emulator import Emulator
 from robot.drivers.serial.ptyport import PtyPort
 from robot.errors import DriverError, RobotError
 from robot.model import ASEA

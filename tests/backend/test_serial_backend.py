@@ -14,9 +14,9 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from robot.drivers.emulator import run_emulator
 from robot.drivers.ideal import IdealDriver
 from robot.drivers.serial import SerialDriver
+from robot.drivers.serial.emulator import run_emulator
 from robot.model import ASEA
 from tests.utils.factories import TEST_SECRET, make_settings, make_tokens, migrate
 

@@ -1,6 +1,6 @@
 """The controller's move table: loading, starting and tracking moves by id, at most once each.
 
-Used by the emulator (:mod:`robot.drivers.emulator`) for the motion commands of the protocol
+Used by the emulator (:mod:`robot.drivers.serial.emulator`) for the motion commands of the protocol
 (``docs/serial-protocol.md`` section 6): ``TBEGIN``/``TP``/``RUN`` (a streamed trajectory),
 ``MOVE`` (a joint move planned here) and ``QMV`` (what became of a move).  Each move id of a
 session is started at most once: a second ``RUN`` or ``MOVE`` for a known id is answered with

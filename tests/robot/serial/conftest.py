@@ -8,8 +8,8 @@ from collections.abc import AsyncIterator, Callable
 import pytest
 
 from robot.drivers import IdealDriver
-from robot.drivers.emulator import Emulator
 from robot.drivers.serial import SerialDriver, SerialLink
+from robot.drivers.serial.emulator import Emulator
 from robot.drivers.serial.frames import Ack, Command, Event, Frame, FrameParser, Nak, encode
 
 

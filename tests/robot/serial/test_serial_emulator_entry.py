@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from robot.drivers import IdealDriver
-from robot.drivers.emulator import run_emulator
+from robot.drivers.serial.emulator import run_emulator
 from robot.model import ASEA
 from robot.trajectory import plan_joint_move
 
@@ -40,7 +40,7 @@ async def test_run_emulator_announces_the_path_and_serves_until_stopped(make_dri
 async def test_emulator_in_another_process(make_driver, tmp_path):
     link = str(tmp_path / "robot-tty")
     proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "robot.drivers.emulator", "--link", link, "--time-scale", "20",
+        sys.executable, "-m", "robot.drivers.serial.emulator", "--link", link, "--time-scale", "20",
         cwd=REPO, stdout=asyncio.subprocess.PIPE,
         env={**os.environ, "PYTHONPATH": str(REPO)},
     )  # fmt: skip

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from robot.drivers import RobotDriver
-from robot.drivers.emulator import Emulator
+from robot.drivers.serial.emulator import Emulator
 from robot.errors import CommandRejected, DriverError, JointLimitError, LinkDown, RobotBusy
 from robot.model import ASEA
 from robot.trajectory import JointTrajectory, plan_joint_move

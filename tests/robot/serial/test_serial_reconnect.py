@@ -6,7 +6,7 @@ import logging
 import pytest
 
 from robot.drivers import IdealDriver
-from robot.drivers.emulator import Emulator
+from robot.drivers.serial.emulator import Emulator
 from robot.errors import LinkDown
 from robot.model import ASEA
 from robot.trajectory import plan_joint_move

@@ -3,8 +3,8 @@
 import asyncio
 import random
 
-from robot.drivers.emulator import Emulator
 from robot.drivers.serial import LinkSupervisor, SerialDevice
+from robot.drivers.serial.emulator import Emulator
 from robot.drivers.serial.frames import Hello
 
 

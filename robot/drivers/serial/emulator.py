@@ -558,7 +558,7 @@ async def run_emulator(
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m robot.drivers.emulator``: serve an ideal arm until interrupted.
+    """``python -m robot.drivers.serial.emulator``: serve an ideal arm until interrupted.
 
     Prints the device path on its own line first.  The backend's ``visioncell emulator``
     command offers the same options (and ``--driver sim`` for the simulator).
@@ -568,7 +568,9 @@ def main(argv: list[str] | None = None) -> int:
 
     from robot.drivers.ideal import IdealDriver
 
-    ap = argparse.ArgumentParser(prog="python -m robot.drivers.emulator", description=main.__doc__)
+    ap = argparse.ArgumentParser(
+        prog="python -m robot.drivers.serial.emulator", description=main.__doc__
+    )
     ap.add_argument("--link", help="stable device path to create (default: a temporary one)")
     ap.add_argument("--rate", type=float, default=50.0, help="state events per second")
     ap.add_argument("--baud", type=int, default=None, help="pace bytes as on a real line")
