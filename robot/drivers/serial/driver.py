@@ -10,7 +10,8 @@ Supervisor
     reads the controller's limits and state, then waits for the link to end.  When the port
     disappears or the controller falls silent for ``silence_timeout_s``, it publishes a state
     with ``connected=False`` and ``fault="disconnected: ..."``, logs one warning for the whole
-    outage, and retries with exponential backoff (``backoff_initial_s`` doubling up to
+    outage, and retries with the shared exponential backoff (:class:`robot.backoff.Backoff`:
+    ``backoff_initial_s`` doubling up to
     ``backoff_max_s``, each wait multiplied by a random factor in [0.5, 1] so that several
     cells do not retry in step), back to the initial delay after a success.  The cap bounds
     the time to notice a returned port.  A resumed session (same controller boot, same
@@ -45,6 +46,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike
 
+from robot.backoff import Backoff
 from robot.drivers.base import MoveReport, RobotState, StateHub
 from robot.drivers.serial.device import SerialDevice
 from robot.drivers.serial.frames import (
@@ -225,9 +227,9 @@ class SerialDriver:
             heartbeat_s=self.heartbeat_s,
             silence_timeout_s=self.silence_timeout_s,
             command_timeout_s=self.command_timeout_s,
-            backoff_initial_s=self.backoff_initial_s,
-            backoff_max_s=self.backoff_max_s,
-            rng=self._rng,
+            backoff=Backoff(
+                initial_s=self.backoff_initial_s, max_s=self.backoff_max_s, rng=self._rng
+            ),
         )
         self._ready = self._sup.ready
 

@@ -207,6 +207,7 @@ class Emulator:
         self._cache: dict[int, tuple[str, bytes] | None] = {}
         """Replies by sequence number, as (verb or NAK code, wire); None while executing."""
         self._estopped = False
+        self._estops = 0  # emergency stops received (the worker checks it after a delay)
         self.moves = MoveTable(
             driver,
             model=model,
@@ -380,6 +381,7 @@ class Emulator:
 
     def _emergency_stop(self, cmd: EStop) -> None:
         self._estopped = True
+        self._estops += 1
         flushed: list[Command] = []
         while not self._queue.empty():
             flushed.append(self._queue.get_nowait())
@@ -420,7 +422,11 @@ class Emulator:
         while True:
             cmd = await self._queue.get()
             if self.fault.process_delay_s:
+                estops = self._estops
                 await asyncio.sleep(self.fault.process_delay_s)
+                if self._estops != estops:  # still waiting when the stop came: flushed too
+                    self._finish(cmd.seq, Nak(cmd.seq, "ESTOP", "flushed by an emergency stop"))
+                    continue
             try:
                 reply = await self._execute(cmd)
             except Exception as exc:  # the backing driver failed: report, keep serving

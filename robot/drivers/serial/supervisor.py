@@ -20,9 +20,9 @@ so no task outlives its attempt and no exception goes unretrieved; an unexpected
 in the loop itself is logged and counts as a failed attempt.  The driver is told ``on_up``
 only once the link is ready, so nothing says "connected" while moves are still refused.
 
-Failed attempts wait ``backoff_initial_s`` doubling up to ``backoff_max_s``, each wait
-multiplied by a random factor in [0.5, 1] (jitter, so that the cells of a plant do not retry in
-step); a success resets the delay.  The first retry after losing a working link is
+Failed attempts wait as the shared :class:`robot.backoff.Backoff` says (the driver's: its
+initial delay doubling up to its cap, each wait multiplied by a random factor in [0.5, 1], so
+that the cells of a plant do not retry in step); a success resets the delay.  The first retry after losing a working link is
 immediate.  The cap bounds how long a returned port goes unnoticed.  One warning is logged
 when an outage starts and one info line when it ends, however many attempts it took.
 """
@@ -32,10 +32,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import random
 import time
 from collections.abc import Awaitable, Callable
 
+from robot.backoff import Backoff
 from robot.drivers.serial.device import SerialDevice
 from robot.drivers.serial.frames import Ping
 from robot.drivers.serial.transport import SerialLink
@@ -72,10 +72,8 @@ class LinkSupervisor:
         Timeout of the heartbeat ``PING``.
     handshake_timeout_s : float, optional
         Longest handshake; a slower one fails the attempt (default: five command timeouts).
-    backoff_initial_s, backoff_max_s : float
-        First retry delay and its cap.
-    rng : random.Random
-        Source of the jitter.
+    backoff : Backoff
+        Waits between failed attempts (reset after every success).
     """
 
     def __init__(
@@ -89,9 +87,7 @@ class LinkSupervisor:
         heartbeat_s: float,
         silence_timeout_s: float,
         command_timeout_s: float,
-        backoff_initial_s: float,
-        backoff_max_s: float,
-        rng: random.Random,
+        backoff: Backoff,
         on_up: Callable[[], None] | None = None,
         handshake_timeout_s: float | None = None,
     ) -> None:
@@ -111,9 +107,7 @@ class LinkSupervisor:
             raise ValueError(
                 f"handshake_timeout_s must be positive, got {self.handshake_timeout_s!r}"
             )
-        self.backoff_initial_s = backoff_initial_s
-        self.backoff_max_s = backoff_max_s
-        self._rng = rng
+        self.backoff = backoff
         self.ready = asyncio.Event()
         """Set while a link is open and its handshake succeeded."""
         self.closed = False
@@ -166,12 +160,7 @@ class LinkSupervisor:
         return not self.closed
 
     # -- internals ----------------------------------------------------------------------------
-    def _backoff(self, delay: float) -> tuple[float, float]:
-        """(jittered wait now, next delay)."""
-        return delay * self._rng.uniform(0.5, 1.0), min(2.0 * delay, self.backoff_max_s)
-
     async def _run(self) -> None:
-        delay = self.backoff_initial_s
         while True:
             try:
                 was_up = await self._attempt()
@@ -180,10 +169,9 @@ class LinkSupervisor:
                 self._note_down(f"unexpected error: {type(exc).__name__}: {exc}")
                 was_up = False
             if was_up:
-                delay = self.backoff_initial_s  # a working link was lost: retry at once
+                self.backoff.reset()  # a working link was lost: retry at once
             else:
-                wait, delay = self._backoff(delay)
-                await asyncio.sleep(wait)
+                await self.backoff.sleep()
 
     async def _attempt(self) -> bool:
         """One connection: open, hand-shake, serve until lost.  True if it was ever ready.
