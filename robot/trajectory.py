@@ -7,9 +7,10 @@ accelerations that a driver plays back.
   so that all arrive together, with either the classic trapezoidal velocity profile (each
   joint's time-optimal trapezoid, the slowest sets the duration) or a quintic
   (minimum-jerk, ``s = 10 t^3 - 15 t^4 + 6 t^5``) profile with continuous acceleration.
-* :func:`plan_cartesian_line` moves the flange on a straight line in Cartesian space through
-  the closed-form IK, checking joint ranges and branch continuity along the path and scaling
-  time so that every joint stays within its speed and acceleration limits.
+* :func:`robot.trajectory_cartesian.plan_cartesian_line` (its own module, which builds on
+  this one) moves the flange on a straight line in Cartesian space through the closed-form
+  IK, checking joint ranges and branch continuity along the path and scaling time so that
+  every joint stays within its speed and acceleration limits.
 * :func:`sample_at_rate` resamples any trajectory at a driver's fixed rate.
 
 Every table these functions return has passed :func:`robot.model.check_joints`, the one
@@ -29,7 +30,6 @@ from robot.model import ASEA, ArmModel, check_joints
 
 __all__ = [
     "JointTrajectory",
-    "plan_cartesian_line",  # noqa: F822 (resolved lazily by __getattr__ below)
     "plan_joint_move",
     "quintic",
     "sample_at_rate",
@@ -281,13 +281,3 @@ def sample_at_rate(traj: JointTrajectory, rate_hz: float) -> JointTrajectory:
     ]
     cols[0][0], cols[0][-1] = traj.q[0], traj.q[-1]
     return JointTrajectory(t, check_joints(cols[0]), cols[1], cols[2])
-
-
-def __getattr__(name: str) -> object:
-    # plan_cartesian_line lives in robot.trajectory_cartesian, which imports this module;
-    # resolving it lazily (PEP 562) lets either module be imported first.
-    if name == "plan_cartesian_line":
-        from robot.trajectory_cartesian import plan_cartesian_line
-
-        return plan_cartesian_line
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

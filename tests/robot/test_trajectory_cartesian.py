@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from robot.errors import JointLimitError, JointLimitsBlock, OutOfReach, Unreachable
 from robot.kinematics import fk
 from robot.model import ASEA
-from robot.trajectory import plan_cartesian_line
+from robot.trajectory_cartesian import plan_cartesian_line
 
 _q = st.tuples(*[st.floats(float(lo), float(hi)) for lo, hi in ASEA.joint_limits_rad]).map(np.array)
 _delta = st.tuples(*[st.floats(-0.4, 0.4) for _ in range(5)]).map(np.array)
