@@ -14,12 +14,13 @@ from backend import __version__
 from backend.api import api_router
 from backend.api.deps import install_runtime
 from backend.api.errors import install_error_handlers
+from backend.resources import resource_dir
 from backend.runtime import CellRuntime, StartupError
 from backend.settings import Settings
 
 __all__ = ["WEB_DIR", "StartupError", "create_app"]
 
-WEB_DIR = Path(__file__).resolve().parents[1] / "web"
+WEB_DIR: Path = resource_dir("web")
 
 
 def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None = None) -> FastAPI:
