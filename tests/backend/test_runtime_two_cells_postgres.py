@@ -59,6 +59,17 @@ def test_two_cells_keep_their_own_calibrations(tmp_path, postgres_url, synthetic
         sessions_a = ca.get("/api/calibration/sessions", headers=hdr).json()["data"]
         assert [s["id"] for s in sessions_a] == [sid_a]
         assert {s["cell_id"] for s in sessions_a} == {ids["cell-a"]}
+        # Cell B may read A's calibration (the plant shares reading), not change it.
+        cid_a = again_a["id"]
+        assert cb.get(f"/api/calibration/calibrations/{cid_a}", headers=hdr).status_code == 200
+        r = cb.post(f"/api/calibration/calibrations/{cid_a}/activate", headers=hdr)
+        assert r.status_code == 409 and r.json()["error"] == "other_cell", r.text
+        r = cb.post(f"/api/calibration/sessions/{sid_a}/solve?wait=true", headers=hdr)
+        assert r.status_code == 409 and "belongs to cell id" in r.json()["detail"]
+        assert (
+            cb.get("/api/calibration/active", headers=hdr).json()["intrinsic"]["id"]
+            == active_b["id"]
+        )
 
 
 def test_a_second_start_of_a_cell_reuses_its_row(tmp_path, postgres_url):
