@@ -15,7 +15,9 @@ from sqlalchemy import select
 
 from backend import __version__
 from backend.api import api_router
+from backend.api.docs import install_docs
 from backend.api.errors import install_error_handlers
+from backend.api.limits import UrlLengthLimit
 from backend.cell import Cell
 from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Cell as CellRow
@@ -103,12 +105,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         description="Operator console API of a vision-guided robot cell. "
         'Send `Authorization: Bearer TOKEN`; errors are `{"error": code, "detail": text}`.',
         lifespan=lifespan,
+        docs_url=None,
+        redoc_url=None,
     )
     app.state.settings = settings
     app.state.cell = None
     app.state.view3d = None
     app.state.sim = None
     install_error_handlers(app)
+    install_docs(app)
+    app.add_middleware(UrlLengthLimit)
     app.include_router(api_router)
 
     @app.get("/", include_in_schema=False)

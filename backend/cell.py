@@ -23,9 +23,9 @@ from robot.drivers.base import MoveReport, RobotDriver
 from robot.errors import RobotBusy
 from robot.kinematics import ik
 from robot.model import ASEA, ArmModel, check_joints
-from robot.trajectory import JointTrajectory, plan_joint_move
+from robot.trajectory import MIN_SPEED, JointTrajectory, plan_joint_move
 from robot.trajectory_cartesian import plan_cartesian_line
-from vision.errors import CameraError
+from vision.errors import CameraError, InvalidInput
 from vision.sources import Camera, Frame
 
 __all__ = ["CameraStatus", "Cell"]
@@ -99,10 +99,10 @@ class Cell:
 
     # -- motion --------------------------------------------------------------------------
     def _check_speed(self, speed: float | None) -> float:
-        s = self.speed if speed is None else float(speed)
-        if not (0.0 < s <= 1.0) or not np.isfinite(s):
-            raise ValueError(f"speed must be in (0, 1], got {speed!r}")
-        return s
+        s = self.speed if speed is None else speed
+        if isinstance(s, bool) or not (MIN_SPEED <= s <= 1.0):
+            raise InvalidInput(f"speed must be in [{MIN_SPEED}, 1], got {s!r}")
+        return float(s)
 
     def check_can_move(self) -> None:
         """Raise :class:`RobotBusy` if a motion would be refused now: the emergency stop is
