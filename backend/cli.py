@@ -150,6 +150,7 @@ def serve(
     """Migrate the database and run the cell: console, REST API and 3D view."""
     import uvicorn
 
+    from backend.api.limits import uvicorn_options
     from backend.app import create_app
     from backend.db.migrate import upgrade
 
@@ -180,6 +181,7 @@ def serve(
         log_level="warning" if settings.log_level == "info" else settings.log_level,
         timeout_graceful_shutdown=1,
         ws_ping_interval=10,
+        **uvicorn_options(),  # JSON answers for over-long or malformed requests
     )
 
 

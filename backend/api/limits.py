@@ -2,12 +2,17 @@
 
 Two places can refuse a request before FastAPI sees it:
 
-* the HTTP parser of uvicorn, for a request it cannot parse (a malformed or oversized
-  request head).  Uvicorn answers those with a ``text/plain`` 400 of its own;
-  :class:`JsonErrorHttpProtocol` (uvicorn's httptools protocol with that one answer
-  replaced) sends ``{"error": "bad_request", "detail": ...}`` instead;
+* the HTTP parser of uvicorn, for a request it cannot parse (a malformed request head, or
+  one longer than :data:`MAX_REQUEST_HEAD_BYTES`).  Uvicorn answers those with a
+  ``text/plain`` 400 of its own; :class:`JsonErrorHttpProtocol` (uvicorn's h11 protocol
+  with that one answer replaced) sends ``{"error": "bad_request", "detail": ...}``;
 * :class:`UrlLengthLimit`, a pure ASGI middleware, refuses a path plus query string longer
   than :data:`MAX_URL_BYTES` with a JSON 414 before any routing or parsing of parameters.
+
+The h11 parser is used (not httptools, whose fixed limit of about 80 KB on a request line
+cannot be raised): its limit on an incomplete request head is raised to
+:data:`MAX_REQUEST_HEAD_BYTES`, so every URL between 8 KB and 1 MiB reaches the middleware
+and gets the 414, and anything longer still gets a JSON 400 rather than plain text.
 
 :func:`uvicorn_options` gives the options ``visioncell serve`` (and the tests) pass to
 uvicorn, so a real server behaves as the tests check.
@@ -19,9 +24,10 @@ import json
 from typing import Any
 
 from starlette.types import ASGIApp, Receive, Scope, Send
-from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
+from uvicorn.protocols.http.h11_impl import H11Protocol
 
 __all__ = [
+    "MAX_REQUEST_HEAD_BYTES",
     "MAX_URL_BYTES",
     "JsonErrorHttpProtocol",
     "UrlLengthLimit",
@@ -30,6 +36,8 @@ __all__ = [
 
 #: Longest path plus query string accepted, bytes (the usual limit of proxies and browsers).
 MAX_URL_BYTES = 8192
+#: Longest request head (request line and headers) the parser buffers, bytes.
+MAX_REQUEST_HEAD_BYTES = 1 << 20
 
 
 def _json_error(status: int, code: str, detail: str) -> tuple[bytes, list[tuple[bytes, bytes]]]:
@@ -77,15 +85,16 @@ class UrlLengthLimit:
         await send({"type": "http.response.body", "body": body})
 
 
-class JsonErrorHttpProtocol(HttpToolsProtocol):
-    """Uvicorn's httptools protocol whose parse-error answer is the JSON error body."""
+class JsonErrorHttpProtocol(H11Protocol):
+    """Uvicorn's h11 protocol whose parse-error answer is the JSON error body."""
 
     def send_400_response(self, msg: str) -> None:
         body, headers = _json_error(
             400,
             "bad_request",
             f"{msg.rstrip('.')}: the request line or headers are malformed or too long "
-            f"(URLs up to {MAX_URL_BYTES} bytes are accepted)",
+            f"(URLs up to {MAX_URL_BYTES} bytes, request heads up to "
+            f"{MAX_REQUEST_HEAD_BYTES} bytes are accepted)",
         )
         content = [b"HTTP/1.1 400 Bad Request\r\n"]
         for name, value in [*self.server_state.default_headers, *headers]:
@@ -97,4 +106,7 @@ class JsonErrorHttpProtocol(HttpToolsProtocol):
 
 def uvicorn_options() -> dict[str, Any]:
     """Keyword arguments for ``uvicorn.run`` / ``uvicorn.Config`` that give JSON errors."""
-    return {"http": JsonErrorHttpProtocol}
+    return {
+        "http": JsonErrorHttpProtocol,
+        "h11_max_incomplete_event_size": MAX_REQUEST_HEAD_BYTES,
+    }
