@@ -5,10 +5,15 @@ machine without internet (a cell's usual network).  The assets come from the
 ``fastapi-offline`` package instead (Swagger UI 5, Apache 2.0; ReDoc, MIT; licences in that
 package's metadata), served by the app under :data:`DOCS_ASSETS_URL`.  The create-app code
 passes ``docs_url=None, redoc_url=None`` to FastAPI and calls :func:`install_docs`.
+
+The one remote load left in ReDoc's bundle, the Redocly logo in its footer (an image the
+page hides when it fails to load), is blanked when the bundle is served, so a browser
+without network makes no request outside the cell.
 """
 
 from __future__ import annotations
 
+import functools
 from importlib.resources import files
 from pathlib import Path
 
@@ -18,7 +23,7 @@ from fastapi.openapi.docs import (
     get_swagger_ui_html,
     get_swagger_ui_oauth2_redirect_html,
 )
-from fastapi.responses import HTMLResponse
+from fastapi.responses import HTMLResponse, Response
 from fastapi.staticfiles import StaticFiles
 
 __all__ = ["DOCS_ASSETS", "DOCS_ASSETS_URL", "docs_assets_dir", "install_docs"]
@@ -43,10 +48,31 @@ def docs_assets_dir() -> Path:
     return folder
 
 
+#: Remote images inside the ReDoc bundle, replaced by an empty ``src`` when served.
+_REDOC_REMOTE = (b'"https://cdn.redoc.ly/redoc/logo-mini.svg"',)
+
+
+@functools.cache
+def _redoc_bundle() -> bytes:
+    data = (docs_assets_dir() / "redoc.standalone.js").read_bytes()
+    for remote in _REDOC_REMOTE:
+        data = data.replace(remote, b'""')
+    return data
+
+
 def install_docs(app: FastAPI, *, docs_url: str = "/docs", redoc_url: str = "/redoc") -> None:
     """Serve the assets and the two pages on ``app`` (created with ``docs_url=None``)."""
     if app.docs_url is not None or app.redoc_url is not None:
         raise ValueError("create the app with docs_url=None and redoc_url=None")
+
+    @app.get(f"{DOCS_ASSETS_URL}/redoc.standalone.js", include_in_schema=False)
+    async def redoc_bundle() -> Response:
+        return Response(
+            _redoc_bundle(),
+            media_type="text/javascript",
+            headers={"Cache-Control": "max-age=86400"},
+        )
+
     app.mount(DOCS_ASSETS_URL, StaticFiles(directory=docs_assets_dir()), name="docs-assets")
     openapi_url = app.openapi_url or "/openapi.json"
     oauth2_url = app.swagger_ui_oauth2_redirect_url or "/docs/oauth2-redirect"
