@@ -13,7 +13,9 @@ from fastapi.staticfiles import StaticFiles
 from backend import __version__
 from backend.api import api_router
 from backend.api.deps import install_runtime
+from backend.api.docs import install_docs
 from backend.api.errors import install_error_handlers
+from backend.api.limits import UrlLengthLimit
 from backend.resources import resource_dir
 from backend.runtime import CellRuntime, StartupError
 from backend.settings import Settings
@@ -51,9 +53,13 @@ def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None 
         description="Operator console API of a vision-guided robot cell. "
         'Send `Authorization: Bearer TOKEN`; errors are `{"error": code, "detail": text}`.',
         lifespan=lifespan,
+        docs_url=None,
+        redoc_url=None,
     )
     install_runtime(app, None, settings=settings)
     install_error_handlers(app)
+    install_docs(app)
+    app.add_middleware(UrlLengthLimit)
     app.include_router(api_router)
 
     @app.get("/", include_in_schema=False)

@@ -18,9 +18,11 @@ from sqlalchemy.orm import selectinload
 
 from backend.db.models import ApiToken, Role, User
 from backend.db.types import utcnow
+from vision.errors import Conflict, InvalidInput
 
 __all__ = [
     "TOKEN_PREFIX",
+    "UserExists",
     "authenticate",
     "create_user",
     "hash_token",
@@ -31,23 +33,31 @@ __all__ = [
 ]
 
 TOKEN_PREFIX = "vc_"
+
+
+class UserExists(Conflict, ValueError):
+    """A user of that name exists already (a ``ValueError`` too, for the command line)."""
+
+
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.@-]{0,63}$")
 
 
 def parse_role(value: str) -> Role:
-    """The :class:`Role` named ``value``; ``ValueError`` listing the roles otherwise."""
+    """The :class:`Role` named ``value``; :class:`InvalidInput` (a ``ValueError``) listing
+    the roles otherwise."""
     try:
         return Role[value]
     except KeyError:
-        raise ValueError(
+        raise InvalidInput(
             f"role must be one of {', '.join(r.name for r in Role)}, got {value!r}"
         ) from None
 
 
 def validate_user_name(name: str) -> str:
-    """Return ``name`` if it is a valid user name, else raise ``ValueError`` quoting it."""
+    """Return ``name`` if it is a valid user name, else raise :class:`InvalidInput` (a
+    ``ValueError``) quoting it."""
     if not _NAME.match(name):
-        raise ValueError(
+        raise InvalidInput(
             f"user name must be 1-64 characters of letters, digits, '_', '.', '@', '-' "
             f"starting with a letter or digit, got {name!r}"
         )
@@ -74,11 +84,12 @@ async def issue_token(session: AsyncSession, user: User, secret: str, *, label: 
 async def create_user(
     session: AsyncSession, name: str, role: Role, secret: str, *, label: str = "created"
 ) -> tuple[User, str]:
-    """Create a user with one token; ``ValueError`` if the name is invalid or taken."""
+    """Create a user with one token; :class:`InvalidInput` if the name is invalid,
+    :class:`UserExists` (a :class:`Conflict`) if it is taken; both are ``ValueError`` too."""
     validate_user_name(name)
     existing = await session.scalar(select(User).where(User.name == name))
     if existing is not None:
-        raise ValueError(f"user {name!r} already exists")
+        raise UserExists(f"user {name!r} already exists")
     user = User(name=name, role=role.name)
     session.add(user)
     await session.flush()

@@ -24,8 +24,8 @@ It reports IoU against the reference mask and the wall time per image (median of
 Numba's compiled code are not counted, for either side), with ratios, checks the targets,
 prints a table (and with ``--json`` one JSON object on the last line), and writes the figures
 ``benchmarks/out/segmentation.png`` (photographs), ``benchmarks/out/segmentation_wheels.png``
-(rendered wheels) and ``benchmarks/out/levelset_evolution.png`` plus small copies in
-``docs/img/``.
+(rendered wheels) and ``benchmarks/out/levelset_evolution.png`` (git-ignored); with
+``--docs`` it also refreshes the small copies in ``docs/img/`` that the README shows.
 
 Parameters are fixed below for both sides.  They are the best mean IoU over the four
 photographs of the small grids in :data:`GRIDS` (one setting per method, for all images);
@@ -483,6 +483,11 @@ def _print_targets(scope: str, tg: dict[str, Any], console: Console) -> None:
         )
 
 
+def figure_paths(stem: str, *, docs: bool) -> tuple[Path, Path | None]:
+    """Where figure ``stem`` goes: ``benchmarks/out/`` always, ``docs/img/`` only with ``docs``."""
+    return OUT_DIR / f"{stem}.png", (DOCS_IMG / f"{stem}.png" if docs else None)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m benchmarks.segmentation", description=__doc__.split("\n")[0]
@@ -494,11 +499,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--grid", action="store_true", help="rerun the parameter grids and print them")
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     ap.add_argument(
+        "--docs",
+        action="store_true",
+        help="also refresh the README's small copies in docs/img/ (tracked files)",
+    )
+    ap.add_argument(
         "--providers",
         default=",".join(PROVIDERS),
         help=f"comma-separated image providers (default: {','.join(PROVIDERS)})",
     )
     args = ap.parse_args(argv)
+    if args.docs and args.no_figures:
+        ap.error("--docs refreshes the figures: drop --no-figures")
     if args.repeats < 1:
         ap.error(f"--repeats must be >= 1, got {args.repeats}")
     providers = [p.strip() for p in args.providers.split(",") if p.strip()]
@@ -539,13 +551,9 @@ def main(argv: list[str] | None = None) -> int:
             ):
                 mine = [r for r in rows if r["case"].provider == provider]
                 if mine:
-                    comparison_figure(
-                        mine, OUT_DIR / f"{stem}.png", DOCS_IMG / f"{stem}.png", dpi=dpi
-                    )
+                    comparison_figure(mine, *figure_paths(stem, docs=args.docs), dpi=dpi)
             if any(c.name == "coins" for c in cases):
-                evolution_figure(
-                    cases, OUT_DIR / "levelset_evolution.png", DOCS_IMG / "levelset_evolution.png"
-                )
+                evolution_figure(cases, *figure_paths("levelset_evolution", docs=args.docs))
     summary = summarise(rows, skipped)
     if args.grid:
         for method, grid_rows in grid.items():

@@ -18,6 +18,7 @@ __all__ = [
     "RobotBusy",
     "RobotError",
     "SimError",
+    "TrajectoryTooLong",
     "Unreachable",
 ]
 
@@ -108,6 +109,28 @@ class JointLimitError(RobotError, ValueError):
         self.joint = joint
         self.value_rad = value_rad
         self.limits_rad = limits_rad
+
+
+class TrajectoryTooLong(RobotError, ValueError):
+    """A planned move would last longer, or need more samples, than the planners allow.
+
+    The bound keeps memory and playback time finite whatever the speed or the rate asked for.
+
+    Attributes
+    ----------
+    duration_s : float
+        Duration the plan would have, seconds.
+    samples : int
+        Samples the table would have.
+    """
+
+    code = "trajectory_too_long"
+    http_status = 422
+
+    def __init__(self, detail: str, *, duration_s: float, samples: int) -> None:
+        super().__init__(detail)
+        self.duration_s = duration_s
+        self.samples = samples
 
 
 class DriverError(RobotError):

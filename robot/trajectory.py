@@ -14,7 +14,9 @@ accelerations that a driver plays back.
 * :func:`sample_at_rate` resamples any trajectory at a driver's fixed rate.
 
 Every table these functions return has passed :func:`robot.model.check_joints`, the one
-joint-limit gate.
+joint-limit gate, and respects the size bounds :data:`MAX_DURATION_S` and
+:data:`MAX_SAMPLES` (checked before any table is allocated, so no speed or rate can make
+memory grow without bound); ``speed`` is at least :data:`MIN_SPEED`.
 """
 
 from __future__ import annotations
@@ -26,16 +28,67 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from robot.errors import TrajectoryTooLong
 from robot.model import ASEA, ArmModel, check_joints
 
 __all__ = [
+    "MAX_DURATION_S",
+    "MAX_RATE_HZ",
+    "MAX_SAMPLES",
+    "MIN_SPEED",
     "JointTrajectory",
+    "check_plan_size",
     "plan_joint_move",
     "quintic",
     "sample_at_rate",
 ]
 
 Profile = Literal["trapezoid", "quintic"]
+
+#: Slowest speed fraction a move may ask for.  At 0.01 the longest joint move of the ASEA
+#: arm (q1 across its 360 deg range, quintic profile) lasts about 750 s.
+MIN_SPEED = 0.01
+#: Longest trajectory any planner returns, seconds (one hour).
+MAX_DURATION_S = 3600.0
+#: Highest sampling rate a planner or a resampling accepts, Hz.
+MAX_RATE_HZ = 2000.0
+#: Most samples in one trajectory table (one hour at 100 Hz, plus the end point); a table
+#: of this size holds 3 x 5 float64 columns, about 43 MB.
+MAX_SAMPLES = 360_001
+
+
+def check_plan_size(duration_s: float, rate_hz: float) -> int:
+    """Number of samples of a plan lasting ``duration_s`` at ``rate_hz``, within the bounds.
+
+    Called before a table is allocated.
+
+    Returns
+    -------
+    int
+        ``ceil(duration_s * rate_hz) + 1`` (at least 2).
+
+    Raises
+    ------
+    TrajectoryTooLong
+        The duration exceeds :data:`MAX_DURATION_S` (or is not finite) or the sample count
+        exceeds :data:`MAX_SAMPLES`.
+    """
+    if not math.isfinite(duration_s) or duration_s > MAX_DURATION_S:
+        raise TrajectoryTooLong(
+            f"the move would last {duration_s:.6g} s, more than the {MAX_DURATION_S:g} s a "
+            "trajectory may last: raise the speed or split the move",
+            duration_s=float(duration_s),
+            samples=-1,
+        )
+    n = max(2, math.ceil(duration_s * rate_hz) + 1)
+    if n > MAX_SAMPLES:
+        raise TrajectoryTooLong(
+            f"the move would need {n} samples ({duration_s:.6g} s at {rate_hz:g} Hz), more "
+            f"than the {MAX_SAMPLES} a trajectory may hold: lower the rate",
+            duration_s=float(duration_s),
+            samples=n,
+        )
+    return n
 
 
 @dataclass(frozen=True)
@@ -70,6 +123,13 @@ class JointTrajectory:
             )
         if t.size > 1 and not np.all(np.diff(t) > 0):
             raise ValueError("t_s must be strictly increasing")
+        if t.size > MAX_SAMPLES or t[-1] - t[0] > MAX_DURATION_S:
+            raise TrajectoryTooLong(
+                f"a trajectory may hold {MAX_SAMPLES} samples over {MAX_DURATION_S:g} s, got "
+                f"{t.size} samples over {t[-1] - t[0]:.6g} s",
+                duration_s=float(t[-1] - t[0]),
+                samples=int(t.size),
+            )
         if self.qdd is None:
             qdd = np.gradient(qd, t, axis=0) if t.size > 1 else np.zeros((1, 5))
         else:
@@ -126,10 +186,10 @@ QUINTIC_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)
 
 
 def _check_speed_rate(speed: float, rate_hz: float) -> None:
-    if not (0.0 < speed <= 1.0) or not np.isfinite(speed):
-        raise ValueError(f"speed must be in (0, 1], got {speed!r}")
-    if not (rate_hz > 0.0) or not np.isfinite(rate_hz):
-        raise ValueError(f"rate_hz must be positive, got {rate_hz!r}")
+    if isinstance(speed, bool) or not (MIN_SPEED <= speed <= 1.0):
+        raise ValueError(f"speed must be in [{MIN_SPEED}, 1], got {speed!r}")
+    if isinstance(rate_hz, bool) or not (0.0 < rate_hz <= MAX_RATE_HZ):
+        raise ValueError(f"rate_hz must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
 
 
 def plan_joint_move(
@@ -147,7 +207,7 @@ def plan_joint_move(
     ----------
     q_start, q_goal : array_like of shape (5,)
         Start and goal configurations, radians; both are checked against the joint limits.
-    speed : float in (0, 1]
+    speed : float in [MIN_SPEED, 1]
         Fraction of the model's velocity limits (accelerations scale with ``speed**2`` so
         the profile keeps its shape).
     rate_hz : float
@@ -169,7 +229,11 @@ def plan_joint_move(
     Raises
     ------
     ValueError
-        ``speed`` outside (0, 1], ``rate_hz`` not positive or an unknown ``profile``.
+        ``speed`` outside [MIN_SPEED, 1], ``rate_hz`` outside (0, MAX_RATE_HZ] or an unknown
+        ``profile``.
+    TrajectoryTooLong
+        The move would last longer than :data:`MAX_DURATION_S` or need more than
+        :data:`MAX_SAMPLES` samples (checked before the table is built).
     JointLimitError
         Either end lies outside the joint ranges (a straight line in joint space between two
         in-range configurations stays in range, the ranges being boxes).
@@ -194,7 +258,7 @@ def plan_joint_move(
                 )
             )
         )
-        n = max(2, int(np.ceil(T * rate_hz)) + 1)
+        n = check_plan_size(T, rate_hz)
         t = np.linspace(0.0, T, n)
         sq, sdq, sddq = quintic(t / T)
         q = qs + sq[:, None] * dq
@@ -203,10 +267,12 @@ def plan_joint_move(
     # Per-joint minimum duration of a trapezoid (or triangle when vmax is never reached).
     tri = dist < vmax**2 / amax
     t_joint = np.where(tri, 2.0 * np.sqrt(dist / amax), dist / vmax + vmax / amax)
-    T, tb = _common_profile(dist, vmax, amax, float(t_joint.max()))
+    T0 = float(t_joint.max())
+    check_plan_size(T0, rate_hz)  # the common profile is at least as long as T0
+    T, tb = _common_profile(dist, vmax, amax, T0)
     v = dist / (T - tb)
     a = v / tb
-    n = max(2, int(np.ceil(T * rate_hz)) + 1)
+    n = check_plan_size(T, rate_hz)
     t = np.linspace(0.0, T, n)
     tt = t[:, None]
     s = np.where(
@@ -258,13 +324,16 @@ def sample_at_rate(traj: JointTrajectory, rate_hz: float) -> JointTrajectory:
     Raises
     ------
     ValueError
-        ``rate_hz`` not positive and finite.
+        ``rate_hz`` outside (0, MAX_RATE_HZ].
+    TrajectoryTooLong
+        The resampled table would hold more than :data:`MAX_SAMPLES` samples.
     JointLimitError
         The input table leaves the joint ranges.
     """
-    if not (rate_hz > 0.0) or not math.isfinite(rate_hz):
-        raise ValueError(f"rate_hz must be positive, got {rate_hz!r}")
+    if isinstance(rate_hz, bool) or not (0.0 < rate_hz <= MAX_RATE_HZ):
+        raise ValueError(f"rate_hz must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
     T = traj.duration_s
+    check_plan_size(T, rate_hz)
     n = math.floor(T * rate_hz + 1e-9) + 1
     t = np.arange(n, dtype=np.float64) / rate_hz
     if T - t[-1] > 1e-9:

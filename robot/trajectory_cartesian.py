@@ -39,6 +39,7 @@ from robot.trajectory import (
     QUINTIC_PEAK_VELOCITY,
     JointTrajectory,
     _check_speed_rate,
+    check_plan_size,
     quintic,
 )
 
@@ -81,7 +82,7 @@ def plan_cartesian_line(
         Goal ``(x, y, z, u, w)`` as for :func:`robot.kinematics.ik`.
     roll : float, optional
         Goal roll about the approach axis, radians; default: keep the start's q5.
-    speed : float in (0, 1]
+    speed : float in [MIN_SPEED, 1]
         Fraction of every speed limit (Cartesian and joint); accelerations scale with
         ``speed**2``.
     rate_hz : float
@@ -109,6 +110,9 @@ def plan_cartesian_line(
     ------
     ValueError
         Bad pose, speed, rate or limits.
+    TrajectoryTooLong
+        The line would last longer than ``robot.trajectory.MAX_DURATION_S`` or need more
+        than ``MAX_SAMPLES`` samples (checked before the table is built).
     JointLimitError
         ``q_start`` is outside the ranges.
     OutOfReach, JointLimitsBlock
@@ -233,7 +237,7 @@ def plan_cartesian_line(
     T = max(T, float(np.max(V / vmax)), math.sqrt(float(np.max(A / amax))), 1e-3)
     T *= 1.0 + 1e-6
     for _ in range(5):
-        n = max(2, math.ceil(T * rate_hz) + 1)
+        n = check_plan_size(T, rate_hz)
         t = np.linspace(0.0, T, n)
         s_o, sd_o, sdd_o = quintic(t / T)
         q = solve(s_o)

@@ -15,10 +15,11 @@ from backend.api.routes import (
     sim,
     users,
 )
+from backend.api.schemas import ERROR_RESPONSES
 
 __all__ = ["api_router"]
 
-api_router = APIRouter(prefix="/api")
+api_router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
 for _r in (
     health,
     robot,

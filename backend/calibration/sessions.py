@@ -23,7 +23,7 @@ from sqlalchemy.orm import selectinload
 from backend.db.models import CalibrationKind, CalibrationSample, CalibrationSession
 from backend.db.models import Cell as CellRow
 from vision.calibration import Board, Detection, board_from_dict, check_poses, detect_pattern
-from vision.errors import CalibrationError, VisionCellError
+from vision.errors import CalibrationError, Conflict, InvalidInput, NotFound
 
 __all__ = [
     "NotFound",
@@ -33,6 +33,7 @@ __all__ = [
     "add_samples",
     "cell_id_of",
     "check_own",
+    "count_sessions",
     "create_session",
     "get_session",
     "list_sessions",
@@ -45,14 +46,7 @@ __all__ = [
 ProgressFn = Callable[[float, str], None]
 
 
-class NotFound(VisionCellError):
-    """No row with that id."""
-
-    code = "not_found"
-    http_status = 404
-
-
-class OtherCell(VisionCellError):
+class OtherCell(Conflict):
     """The row belongs to another cell: this cell may read it, not change it."""
 
     code = "other_cell"
@@ -157,7 +151,7 @@ async def create_session(
     if source not in ("upload", "auto"):
         raise ValueError(f"source must be 'upload' or 'auto', got {source!r}")
     if kind is CalibrationKind.hand_eye and not board.orientation_unique:
-        raise ValueError(
+        raise InvalidInput(
             f"board {board.describe()} has no unique frame (square pattern, or rows + cols "
             "even): hand-eye calibration needs one; use e.g. 9x6 or a ChArUco board"
         )
@@ -191,16 +185,16 @@ async def add_samples(
     progress: ProgressFn | None = None,
 ) -> list[CalibrationSample]:
     """Detect the board in each image and store every sample, accepted or rejected with the
-    reason.  Hand-eye sessions need ``T_base_ee`` on every sample (else ``ValueError``,
+    reason.  Hand-eye sessions need ``T_base_ee`` on every sample (else ``InvalidInput``,
     nothing stored)."""
     if not samples:
-        raise ValueError("samples must not be empty")
+        raise InvalidInput("samples must not be empty")
     board = board_from_dict(cal_session.board)
     poses: list[NDArray[np.float64] | None] = []
     for k, s in enumerate(samples):
         if s.T_base_ee is None:
             if cal_session.kind is CalibrationKind.hand_eye:
-                raise ValueError(
+                raise InvalidInput(
                     f"sample {s.name!r} has no robot pose: hand-eye sessions need T_base_ee "
                     "for every image"
                 )
@@ -210,9 +204,9 @@ async def add_samples(
         if s.joints is not None:
             q = np.asarray(s.joints, dtype=np.float64).ravel()
             if not np.all(np.isfinite(q)):
-                raise ValueError(f"joints of sample {s.name!r} must be finite, got {q.tolist()}")
+                raise InvalidInput(f"joints of sample {s.name!r} must be finite, got {q.tolist()}")
         if k > 0 and samples[0].image.shape[:2] != s.image.shape[:2]:
-            raise ValueError(
+            raise InvalidInput(
                 f"images of one session must have one size: {samples[0].name!r} is "
                 f"{samples[0].image.shape[1]}x{samples[0].image.shape[0]}, {s.name!r} is "
                 f"{s.image.shape[1]}x{s.image.shape[0]}"
@@ -231,7 +225,7 @@ async def add_samples(
         w, h = png_size(existing)
         first = samples[0].image.shape
         if (first[1], first[0]) != (w, h):
-            raise ValueError(
+            raise InvalidInput(
                 f"images of one session must have one size: the session holds {w}x{h}, "
                 f"{samples[0].name!r} is {first[1]}x{first[0]}"
             )
@@ -276,6 +270,14 @@ async def list_sessions(
     if cell_id is not None:
         q = q.where(CalibrationSession.cell_id == cell_id)
     return list((await session.scalars(q)).all())
+
+
+async def count_sessions(session: AsyncSession, *, cell_id: int | None = None) -> int:
+    """How many sessions :func:`list_sessions` pages through."""
+    q = select(func.count()).select_from(CalibrationSession)
+    if cell_id is not None:
+        q = q.where(CalibrationSession.cell_id == cell_id)
+    return int(await session.scalar(q) or 0)
 
 
 def session_summary(s: CalibrationSession) -> dict[str, Any]:

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.calibration.sessions import (
@@ -46,6 +46,7 @@ __all__ = [
     "active_calibrations",
     "active_camera_calibration",
     "check_solvable",
+    "count_history",
     "get_calibration",
     "history",
     "result_of",
@@ -330,6 +331,16 @@ async def activate(session: AsyncSession, calibration_id: int) -> Calibration:
     return cal
 
 
+def _history_filter(q, *, cell_id, kind, session_id):  # type: ignore[no-untyped-def]
+    if cell_id is not None:
+        q = q.where(Calibration.cell_id == cell_id)
+    if kind is not None:
+        q = q.where(Calibration.kind == kind)
+    if session_id is not None:
+        q = q.where(Calibration.session_id == session_id)
+    return q
+
+
 async def history(
     session: AsyncSession,
     *,
@@ -337,16 +348,25 @@ async def history(
     kind: CalibrationKind | None = None,
     session_id: int | None = None,
     limit: int = 100,
+    offset: int = 0,
 ) -> list[Calibration]:
-    """Calibrations, newest first."""
-    q = select(Calibration).order_by(Calibration.id.desc()).limit(limit)
-    if cell_id is not None:
-        q = q.where(Calibration.cell_id == cell_id)
-    if kind is not None:
-        q = q.where(Calibration.kind == kind)
-    if session_id is not None:
-        q = q.where(Calibration.session_id == session_id)
+    """Calibrations, newest first (``limit`` of them after skipping ``offset``)."""
+    q = select(Calibration).order_by(Calibration.id.desc()).limit(limit).offset(offset)
+    q = _history_filter(q, cell_id=cell_id, kind=kind, session_id=session_id)
     return list((await session.scalars(q)).all())
+
+
+async def count_history(
+    session: AsyncSession,
+    *,
+    cell_id: int | None = None,
+    kind: CalibrationKind | None = None,
+    session_id: int | None = None,
+) -> int:
+    """How many calibrations :func:`history` pages through."""
+    q = select(func.count()).select_from(Calibration)
+    q = _history_filter(q, cell_id=cell_id, kind=kind, session_id=session_id)
+    return int(await session.scalar(q) or 0)
 
 
 async def active_calibrations(

@@ -42,8 +42,9 @@ from backend.jobs import current_job
 from robot.errors import RobotBusy
 from robot.kinematics import ik
 from robot.model import check_joints
-from robot.trajectory import JointTrajectory, plan_joint_move
+from robot.trajectory import MIN_SPEED, JointTrajectory, plan_joint_move
 from robot.trajectory_cartesian import plan_cartesian_line
+from vision.errors import InvalidInput
 from vision.sources import Frame
 
 if TYPE_CHECKING:
@@ -112,10 +113,10 @@ Target = ArrayLike | Pose
 
 def _check_speed(speed: float) -> float:
     if isinstance(speed, bool) or not isinstance(speed, int | float | np.floating):
-        raise ValueError(f"speed must be a number in [0.01, 1], got {speed!r}")
+        raise InvalidInput(f"speed must be a number in [{MIN_SPEED}, 1], got {speed!r}")
     s = float(speed)
-    if not (math.isfinite(s) and 0.01 <= s <= 1.0):
-        raise ValueError(f"speed must be in [0.01, 1], got {speed!r}")
+    if not (math.isfinite(s) and MIN_SPEED <= s <= 1.0):
+        raise InvalidInput(f"speed must be in [{MIN_SPEED}, 1], got {speed!r}")
     return s
 
 

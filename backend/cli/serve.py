@@ -69,6 +69,7 @@ async def _serve(settings: Settings) -> None:
     the last one."""
     import uvicorn
 
+    from backend.api.limits import uvicorn_options
     from backend.app import create_app
     from backend.runtime import CellRuntime
 
@@ -88,6 +89,7 @@ async def _serve(settings: Settings) -> None:
             log_level="warning" if settings.log_level == "info" else settings.log_level,
             timeout_graceful_shutdown=1,
             ws_ping_interval=10,
+            **uvicorn_options(),  # JSON answers for over-long or malformed requests
         )
         server = _Server(config)
         with _signals(server):

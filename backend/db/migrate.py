@@ -8,6 +8,7 @@ from alembic import command
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
+from sqlalchemy.engine import make_url
 
 from backend.resources import resource_dir
 
@@ -17,6 +18,7 @@ __all__ = [
     "current_revision",
     "downgrade",
     "head_revision",
+    "sqlite_file",
     "upgrade",
 ]
 
@@ -31,11 +33,28 @@ def alembic_config(database_url: str) -> Config:
     return cfg
 
 
+def sqlite_file(database_url: str) -> Path | None:
+    """The file of a SQLite URL (``sqlite+aiosqlite:///FILE``, also the ``file:`` URI form
+    with ``?uri=true``), or None for an in-memory database or another dialect."""
+    url = make_url(database_url)
+    if not url.get_backend_name().startswith("sqlite"):
+        return None
+    db = url.database or ""
+    if url.query.get("uri") in ("true", "1") and db.startswith("file:"):
+        db = db.removeprefix("file:").split("?", 1)[0]
+        if url.query.get("mode") == "memory":
+            return None
+    if not db or db == ":memory:":
+        return None
+    return Path(db)
+
+
 def _ensure_sqlite_dir(database_url: str) -> None:
-    if database_url.startswith("sqlite"):
-        path = database_url.split(":///", 1)[-1]
-        if path and path != ":memory:":
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
+    # Only the database file's own folder is created: never the settings' var_dir, and
+    # nothing at all for PostgreSQL or an in-memory database.
+    path = sqlite_file(database_url)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
 
 
 def upgrade(database_url: str, revision: str = "head") -> None:

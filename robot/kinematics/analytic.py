@@ -47,6 +47,8 @@ from robot.model import ASEA, ArmModel
 
 __all__ = [
     "BRANCHES",
+    "MAX_ABS_POSITION_M",
+    "MAX_ABS_ROLL_RAD",
     "UNIT_TOL",
     "IKSolution",
     "arm_constants",
@@ -61,6 +63,11 @@ TAU = 2.0 * math.pi
 LIMIT_TOL = 1e-9
 #: ``|hypot(u, w) - 1|`` above this is refused as not a direction.
 UNIT_TOL = 1e-6
+#: Largest |x|, |y|, |z| of a target, metres: the arm reaches about 1.5 m, so anything past
+#: this is a unit mistake (millimetres sent as metres), refused rather than solved.
+MAX_ABS_POSITION_M = 5.0
+#: Largest |roll| about the approach axis, radians (two turns either way; it wraps into q5).
+MAX_ABS_ROLL_RAD = 4.0 * math.pi
 #: ``|cos q3|`` may exceed 1 by this much (rounding at full stretch) before "out of reach".
 _REACH_EPS = 1e-12
 #: Below this horizontal distance, metres, the target is on the q1 axis.
@@ -149,16 +156,23 @@ class IKSolution:
 def check_pose(pose: Sequence[float] | ArrayLike) -> tuple[float, float, float, float, float]:
     """Validate a chapter pose ``(x, y, z, u, w)`` and return it as five floats.
 
-    Raises ``ValueError`` (quoting the pose) unless it holds five finite numbers with
-    ``|hypot(u, w) - 1| <= UNIT_TOL``.
+    Raises ``ValueError`` (quoting the pose) unless it holds five finite numbers (not
+    booleans) with ``|x|, |y|, |z| <= MAX_ABS_POSITION_M`` and ``|hypot(u, w) - 1| <= UNIT_TOL``.
     """
     if isinstance(pose, np.ndarray):
         pose = pose.tolist()
     try:
         x, y, z, u, w = pose  # type: ignore[misc]
+        if any(isinstance(v, bool | np.bool_) for v in (x, y, z, u, w)):
+            raise TypeError
         x, y, z, u, w = float(x), float(y), float(z), float(u), float(w)
     except (TypeError, ValueError):
         raise ValueError(f"pose must be five numbers (x, y, z, u, w), got {pose!r}") from None
+    if not all(abs(v) <= MAX_ABS_POSITION_M for v in (x, y, z)):
+        raise ValueError(
+            f"pose position must be finite and within {MAX_ABS_POSITION_M:g} m of the base on "
+            f"each axis, got (x, y, z) = ({x!r}, {y!r}, {z!r})"
+        )
     n = math.hypot(u, w)
     if not (abs(n - 1.0) <= UNIT_TOL) or not math.isfinite(x + y + z):
         raise ValueError(
@@ -185,9 +199,14 @@ def _unpack_seed(seed: ArrayLike | None, c: ArmConstants) -> tuple[float, ...]:
 
 
 def _check_roll(roll: float) -> float:
+    if isinstance(roll, bool | np.bool_):
+        raise ValueError(f"roll must be an angle in radians, not a boolean, got {roll!r}")
     r = float(roll)
-    if not math.isfinite(r):
-        raise ValueError(f"roll must be a finite angle in radians, got {roll!r}")
+    if not (abs(r) <= MAX_ABS_ROLL_RAD):
+        raise ValueError(
+            f"roll must be a finite angle within +-{MAX_ABS_ROLL_RAD:.6g} rad (two turns), "
+            f"got {roll!r}"
+        )
     return r
 
 
@@ -292,7 +311,8 @@ def ik(
     Raises
     ------
     ValueError
-        Malformed pose, non-unit ``(u, w)``, non-finite roll or bad seed.
+        Malformed pose, position beyond ``MAX_ABS_POSITION_M``, non-unit ``(u, w)``, roll
+        not finite or beyond ``MAX_ABS_ROLL_RAD``, or bad seed.
     OutOfReach
         The wrist centre is farther from (or nearer to) the shoulder than L2 + L3 (|L2 - L3|);
         the message gives the distance and the reachable annulus.

@@ -18,14 +18,41 @@ from numpy.typing import ArrayLike, NDArray
 
 from robot.model import ASEA, ArmModel
 
-__all__ = ["R_base_ee", "T_base_ee", "check_q", "fk", "joint_positions"]
+__all__ = ["MAX_ABS_JOINT_RAD", "R_base_ee", "T_base_ee", "check_q", "fk", "joint_positions"]
+
+#: Largest joint magnitude the kinematics accepts, radians (two turns either way): beyond
+#: it a value is a unit mistake, and ``cos``/``sin`` of huge arguments lose every digit.
+MAX_ABS_JOINT_RAD = 4.0 * np.pi
+
+
+def _has_bool(q: object) -> bool:
+    if isinstance(q, bool | np.bool_):
+        return True
+    if isinstance(q, list | tuple):
+        return any(_has_bool(v) for v in q)
+    return False
 
 
 def check_q(q: ArrayLike) -> NDArray[np.float64]:
-    """Return ``q`` as float64 of shape (5,) or (N, 5), or raise ``ValueError`` quoting the shape."""
-    qa = np.asarray(q, dtype=np.float64)
+    """Return ``q`` as float64 of shape (5,) or (N, 5), finite and within
+    :data:`MAX_ABS_JOINT_RAD`, or raise ``ValueError`` quoting the shape or the values.
+
+    Booleans are not joint values: a boolean array, or a list holding one, is refused.
+    """
+    if _has_bool(q) or (isinstance(q, np.ndarray) and q.dtype == np.bool_):
+        raise ValueError(f"q must hold numbers (radians), not booleans, got {q!r}")
+    try:
+        qa = np.asarray(q, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"q must be numbers of shape (5,) or (N, 5), got {q!r}") from None
     if qa.ndim not in (1, 2) or qa.shape[-1] != 5:
         raise ValueError(f"q must have shape (5,) or (N, 5), got {qa.shape}")
+    bad = ~(np.abs(qa) <= MAX_ABS_JOINT_RAD)  # also catches NaN
+    if bad.any():
+        vals = qa[bad][:5].tolist()
+        raise ValueError(
+            f"q must be finite with |q| <= {MAX_ABS_JOINT_RAD:.6g} rad (two turns), got {vals}"
+        )
     return qa
 
 

@@ -35,7 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 from robot.errors import Unreachable
 from robot.kinematics.analytic import check_pose, ik
 from robot.kinematics.batch import _check_batch, ik_batch
-from robot.kinematics.forward import fk
+from robot.kinematics.forward import MAX_ABS_JOINT_RAD, fk
 from robot.kinematics.fuzzy import SugenoIK
 from robot.model import ASEA, ArmModel
 
@@ -179,7 +179,12 @@ class HybridIKResult:
 def _errors(
     target: NDArray[np.float64], phi_t: NDArray[np.float64], q: NDArray[np.float64], model: ArmModel
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    a = fk(q, model)
+    # An estimator may give up (NaN) or run away on a row; fk refuses such joints, so those
+    # rows get NaN errors (never converged) and the others are evaluated.
+    a = np.full(q.shape, np.nan)
+    ok = np.all(np.abs(q) <= MAX_ABS_JOINT_RAD, axis=1)
+    if ok.any():
+        a[ok] = fk(q[ok], model)
     dp = target[:, :3] - a[:, :3]
     dphi = np.angle(np.exp(1j * (phi_t - np.arctan2(a[:, 4], a[:, 3]))))
     return dp, dphi

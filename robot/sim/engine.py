@@ -43,10 +43,25 @@ from robot.sim.render import RenderWorker
 from robot.sim.truth import BoardTruth, ObjectTruth, SimTruth
 from robot.sim.world import BeltItem, Conveyor, ConveyorState, cleat_positions
 from robot.trajectory import JointTrajectory
+from vision.errors import InvalidInput
 
 __all__ = ["ArmSample", "SimEngine", "Snapshot"]
 
 log = logging.getLogger(__name__)
+
+#: Largest |yaw| of a spawned object, radians (one turn either way).
+MAX_ABS_YAW_RAD = 2.0 * math.pi
+#: Largest |x|, |y|, |z| of a placed board, metres (the cell is a few metres across).
+MAX_ABS_POSITION_M = 5.0
+
+
+def _not_number(v: object) -> bool:
+    """True unless ``v`` is a real number (booleans are not); NaN and infinity pass here
+    and fail the range checks that follow."""
+    return isinstance(v, bool | np.bool_) or not isinstance(
+        v, int | float | np.integer | np.floating
+    )
+
 
 _CHUNK_STEPS = 20  # most steps per lock hold
 _TICK_S = 0.002  # wall-clock period of the physics loop when it keeps up
@@ -403,20 +418,26 @@ class SimEngine:
     ) -> ObjectTruth:
         """Put a catalogue object on the belt ``s_m`` from its entry; returns its true pose.
 
-        ``yaw_rad`` defaults to a seeded random angle.
+        ``yaw_rad`` defaults to a seeded random angle.  Every value is checked before the
+        world changes (:class:`~vision.errors.InvalidInput`, a ``ValueError``, quoting it).
         """
         if name not in CATALOGUE:
-            raise ValueError(
+            raise InvalidInput(
                 f"unknown catalogue name {name!r}; valid names: {', '.join(CATALOGUE)}"
             )
         spec = self.config.layout.conveyor
-        if not (math.isfinite(s_m) and 0.0 <= s_m <= spec.length_m):
-            raise ValueError(
+        if _not_number(s_m) or not (0.0 <= s_m <= spec.length_m):
+            raise InvalidInput(
                 f"position along the belt must be in [0, {spec.length_m:g}] m, got {s_m!r}"
             )
         half = spec.width_m / 2.0
-        if not (math.isfinite(lateral_m) and abs(lateral_m) <= half):
-            raise ValueError(f"lateral offset must be within +-{half:g} m, got {lateral_m!r}")
+        if _not_number(lateral_m) or not (abs(lateral_m) <= half):
+            raise InvalidInput(f"lateral offset must be within +-{half:g} m, got {lateral_m!r}")
+        if yaw_rad is not None and (_not_number(yaw_rad) or not (abs(yaw_rad) <= MAX_ABS_YAW_RAD)):
+            raise InvalidInput(
+                f"yaw_rad must be a finite angle within +-{MAX_ABS_YAW_RAD:.6g} rad (one turn), "
+                f"got {yaw_rad!r}"
+            )
         with self._lock:
             if not self._free[name]:
                 raise SimError(
@@ -517,16 +538,24 @@ class SimEngine:
         """Show the board of ``kind`` at ``T_base_board`` (4x4, see :mod:`robot.sim.boards`)."""
         if kind not in self._boards:
             raise SimError(f"no {kind!r} board in this cell; boards: {', '.join(self._boards)}")
-        T = np.asarray(T_base_board, dtype=np.float64)
+        try:
+            T = np.asarray(T_base_board, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InvalidInput(f"T_base_board must be a 4x4 matrix, got {T_base_board!r}") from None
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise ValueError(f"T_base_board must be a finite 4x4 matrix, got shape {T.shape}")
+            raise InvalidInput(f"T_base_board must be a finite 4x4 matrix, got shape {T.shape}")
         R = T[:3, :3]
         if (
             not np.allclose(R @ R.T, np.eye(3), atol=1e-6)
             or np.linalg.det(R) < 0
             or not np.allclose(T[3], [0, 0, 0, 1])
         ):
-            raise ValueError(f"T_base_board must be a rigid transform, got {T.tolist()}")
+            raise InvalidInput(f"T_base_board must be a rigid transform, got {T.tolist()}")
+        if not np.all(np.abs(T[:3, 3]) <= MAX_ABS_POSITION_M):
+            raise InvalidInput(
+                f"T_base_board must place the board within {MAX_ABS_POSITION_M:g} m of the base "
+                f"on each axis, got position {T[:3, 3].tolist()}"
+            )
         T = T.copy()
         T.setflags(write=False)
         with self._lock:
@@ -551,9 +580,9 @@ class SimEngine:
     def set_light(self, name: str, intensity: float) -> None:
         """Scale light ``name`` (or the ``"ambient"`` headlight) to ``intensity`` times its default."""
         if name not in self._intensity:
-            raise ValueError(f"unknown light {name!r}; lights: {', '.join(self._intensity)}")
-        if not (math.isfinite(intensity) and 0.0 <= intensity <= 5.0):
-            raise ValueError(f"intensity must be in [0, 5], got {intensity!r}")
+            raise InvalidInput(f"unknown light {name!r}; lights: {', '.join(self._intensity)}")
+        if _not_number(intensity) or not (0.0 <= intensity <= 5.0):
+            raise InvalidInput(f"intensity must be in [0, 5], got {intensity!r}")
         with self._lock:
             self._intensity[name] = float(intensity)
 

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from robot.sim import textures as tx
 from robot.sim.builder import MjcfBuilder, fmt
+from vision.errors import InvalidInput
 
 __all__ = [
     "BeltItem",
@@ -222,21 +223,29 @@ class Conveyor:
         """Change any of running, speed, mode and dwell (``"keep"`` leaves dwell unchanged).
 
         Starting the belt while it is halted (:meth:`halt`) raises :class:`~robot.errors.SimError`.
+        Every value is checked before anything changes (:class:`~vision.errors.InvalidInput`,
+        a ``ValueError``, quoting the bad one).
         """
+        if running is not None and not isinstance(running, bool | np.bool_):
+            raise InvalidInput(f"running must be true or false, got {running!r}")
+        if speed_m_s is not None and (isinstance(speed_m_s, bool) or not (0.0 <= speed_m_s <= 2.0)):
+            raise InvalidInput(f"speed_m_s must be in [0, 2] m/s, got {speed_m_s!r}")
         if running and self.halted:
             from robot.errors import SimError
 
             raise SimError("the conveyor is halted by the emergency stop: reset the cell first")
-        if speed_m_s is not None and (not math.isfinite(speed_m_s) or not 0.0 <= speed_m_s <= 2.0):
-            raise ValueError(f"speed_m_s must be in [0, 2] m/s, got {speed_m_s!r}")
         if mode is not None and mode not in CONVEYOR_MODES:
-            raise ValueError(f"mode must be one of {CONVEYOR_MODES}, got {mode!r}")
+            raise InvalidInput(f"mode must be one of {CONVEYOR_MODES}, got {mode!r}")
         if (
             dwell_s != "keep"
             and dwell_s is not None
-            and (not isinstance(dwell_s, int | float) or not 0.0 <= float(dwell_s) <= 3600.0)
+            and (
+                isinstance(dwell_s, bool)
+                or not isinstance(dwell_s, int | float)
+                or not 0.0 <= float(dwell_s) <= 3600.0
+            )
         ):
-            raise ValueError(f"dwell_s must be in [0, 3600] s or None, got {dwell_s!r}")
+            raise InvalidInput(f"dwell_s must be in [0, 3600] s or None, got {dwell_s!r}")
         if speed_m_s is not None:
             self.speed_m_s = float(speed_m_s)
         if mode is not None and mode != self.mode:

@@ -86,7 +86,10 @@ def test_out_of_range_joint_is_422_naming_joint_and_limit(
     ("body", "fragment"),
     [
         ({"joints": [0, 1, -1.5]}, "joints: joints must have 5 values (q1..q5), got 3"),
-        ({"joints": [0, 1.5, -1.5, 0, 0], "speed": 0}, "speed: Input should be greater than 0"),
+        (
+            {"joints": [0, 1.5, -1.5, 0, 0], "speed": 0},
+            "speed: Input should be greater than or equal to 0.01",
+        ),
         (
             {"joints": [0, 1.5, -1.5, 0, 0], "speed": 1.5},
             "speed: Input should be less than or equal to 1",

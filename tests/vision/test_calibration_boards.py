@@ -1,5 +1,7 @@
 """Board definitions and the text forms the CLI and the API accept."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -55,13 +57,13 @@ def test_chessboard_geometry():
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        ((2, 6, 0.02), "cols must be an integer >= 3 (inner corners), got 2"),
-        ((9, 6, 0.0), "square_m must be a positive length in metres, got 0.0"),
-        ((9, 6, float("nan")), "square_m must be a positive length"),
+        ((2, 6, 0.02), "cols must be an integer in [3, 100] (inner corners), got 2"),
+        ((9, 6, 0.0), "square_m must be a length in [0.001, 1] m, got 0.0"),
+        ((9, 6, float("nan")), "square_m must be a length in"),
     ],
 )
 def test_bad_chessboard(args, message):
-    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)")):
+    with pytest.raises(ValueError, match=re.escape(message)):
         Chessboard(*args)
 
 

@@ -13,6 +13,9 @@
 
 from vision.calibration.boards import (
     ARUCO_DICTIONARIES,
+    MAX_BOARD_SIDE,
+    MAX_SQUARE_M,
+    MIN_SQUARE_M,
     Board,
     CharucoBoard,
     Chessboard,
@@ -57,6 +60,9 @@ __all__ = [
     "ALL_METHODS",
     "ARUCO_DICTIONARIES",
     "HAND_EYE_METHODS",
+    "MAX_BOARD_SIDE",
+    "MAX_SQUARE_M",
+    "MIN_SQUARE_M",
     "ROBOT_WORLD_METHODS",
     "Board",
     "CharucoBoard",

@@ -17,6 +17,9 @@ from numpy.typing import NDArray
 
 __all__ = [
     "ARUCO_DICTIONARIES",
+    "MAX_BOARD_SIDE",
+    "MAX_SQUARE_M",
+    "MIN_SQUARE_M",
     "Board",
     "CharucoBoard",
     "Chessboard",
@@ -47,11 +50,36 @@ ARUCO_DICTIONARIES = (
 )
 
 
+#: Most inner corners (chessboard) or squares (ChArUco) along one side of a board: real
+#: targets have a few dozen; OpenCV's detectors slow down sharply past this.
+MAX_BOARD_SIDE = 100
+#: Side of a square, metres: from 1 mm (printed micro-targets) to 1 m (a wall board).
+MIN_SQUARE_M = 1e-3
+MAX_SQUARE_M = 1.0
+
+
 def _positive_length(name: str, value: float) -> float:
+    if isinstance(value, bool | np.bool_):
+        raise ValueError(f"{name} must be a length in metres, not a boolean, got {value!r}")
     v = float(value)
-    if not (np.isfinite(v) and v > 0.0):
-        raise ValueError(f"{name} must be a positive length in metres, got {value!r}")
+    if not (MIN_SQUARE_M <= v <= MAX_SQUARE_M):
+        raise ValueError(
+            f"{name} must be a length in [{MIN_SQUARE_M:g}, {MAX_SQUARE_M:g}] m, got {value!r}"
+        )
     return v
+
+
+def _side(name: str, value: int, what: str) -> int:
+    if (
+        isinstance(value, bool | np.bool_)
+        or not isinstance(value, int | np.integer | float)
+        or int(value) != value
+        or not (3 <= value <= MAX_BOARD_SIDE)
+    ):
+        raise ValueError(
+            f"{name} must be an integer in [3, {MAX_BOARD_SIDE}] ({what}), got {value!r}"
+        )
+    return int(value)
 
 
 @dataclass(frozen=True)
@@ -61,11 +89,11 @@ class Chessboard:
     Attributes
     ----------
     cols : int
-        Inner corners along a row (OpenCV's ``patternSize.width``), at least 3.
+        Inner corners along a row (OpenCV's ``patternSize.width``), 3 .. MAX_BOARD_SIDE.
     rows : int
-        Inner corners along a column (``patternSize.height``), at least 3.
+        Inner corners along a column (``patternSize.height``), 3 .. MAX_BOARD_SIDE.
     square_m : float
-        Side of one square, metres.
+        Side of one square, metres, MIN_SQUARE_M .. MAX_SQUARE_M.
     """
 
     cols: int
@@ -74,9 +102,7 @@ class Chessboard:
 
     def __post_init__(self) -> None:
         for name in ("cols", "rows"):
-            v = getattr(self, name)
-            if int(v) != v or v < 3:
-                raise ValueError(f"{name} must be an integer >= 3 (inner corners), got {v!r}")
+            object.__setattr__(self, name, _side(name, getattr(self, name), "inner corners"))
         object.__setattr__(self, "square_m", _positive_length("square_m", self.square_m))
 
     @property
@@ -155,9 +181,7 @@ class CharucoBoard:
 
     def __post_init__(self) -> None:
         for name in ("squares_x", "squares_y"):
-            v = getattr(self, name)
-            if int(v) != v or v < 3:
-                raise ValueError(f"{name} must be an integer >= 3 (squares), got {v!r}")
+            object.__setattr__(self, name, _side(name, getattr(self, name), "squares"))
         object.__setattr__(self, "square_m", _positive_length("square_m", self.square_m))
         object.__setattr__(self, "marker_m", _positive_length("marker_m", self.marker_m))
         if self.marker_m >= self.square_m:

@@ -6,25 +6,42 @@ The work itself is in :mod:`backend.calibration`.
 
 from __future__ import annotations
 
-import math
 from pathlib import PurePath
 from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
-from fastapi import APIRouter, File, Form, Query, UploadFile, status
+from fastapi import APIRouter, File, Form, Path, Query, UploadFile, status
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, Field, model_validator
 
 from backend import calibration as svc
 from backend.api.deps import CellDep, DatabaseDep, EngineerUser, SessionDep, SimDep, ViewerUser
 from backend.api.errors import ApiError, error_body
+from backend.api.schemas import JobOut, Page
+from backend.api.types import (
+    MAX_ABS_JOINT_API_RAD,
+    MAX_DB_ID,
+    DbId,
+    DbIdQuery,
+    DbIndex,
+    Limit,
+    Matrix4,
+    Offset,
+    Speed,
+    StrictBool,
+    bounded_float,
+    bounded_int,
+)
 from backend.db.models import CalibrationKind
 from backend.jobs import Job, JobState
 from robot.collision import CollisionWorld
 from vision.calibration import (
     ALL_METHODS,
     ARUCO_DICTIONARIES,
+    MAX_BOARD_SIDE,
+    MAX_SQUARE_M,
+    MIN_SQUARE_M,
     Board,
     CharucoBoard,
     Chessboard,
@@ -32,34 +49,58 @@ from vision.calibration import (
     IntrinsicsOptions,
 )
 from vision.calibration.io import parse_poses
+from vision.errors import InvalidInput, NotFound
 
 router = APIRouter(prefix="/calibration", tags=["calibration"])
 
 #: File types an upload may contain (by suffix; the content must decode as an image too).
 IMAGE_TYPES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 MAX_IMAGES_PER_UPLOAD = 200
+PlotName = Annotated[str, Path(max_length=64, description="residuals, coverage or consistency")]
+
+
+Side = Annotated[int, bounded_int(3, MAX_BOARD_SIDE, "Count along one side of the board")]
+LengthMm = Annotated[
+    float,
+    bounded_float(MIN_SQUARE_M * 1e3, MAX_SQUARE_M * 1e3, "Length on the board, mm"),
+]
 
 
 class BoardIn(BaseModel):
     """A calibration target; lengths in millimetres."""
 
     type: Literal["chessboard", "charuco"] = "chessboard"
-    cols: int | None = Field(None, ge=3, description="Chessboard: inner corners per row")
-    rows: int | None = Field(None, ge=3, description="Chessboard: inner corners per column")
-    squares_x: int | None = Field(None, ge=3, description="ChArUco: squares along x")
-    squares_y: int | None = Field(None, ge=3, description="ChArUco: squares along y")
-    square_mm: float = Field(gt=0, description="Side of one square, mm")
-    marker_mm: float | None = Field(None, gt=0, description="ChArUco: marker side, mm")
-    dictionary: str = Field("DICT_5X5_100", description=f"ChArUco: one of {ARUCO_DICTIONARIES}")
-    legacy: bool = False
+    cols: Side | None = Field(None, description="Chessboard: inner corners per row")
+    rows: Side | None = Field(None, description="Chessboard: inner corners per column")
+    squares_x: Side | None = Field(None, description="ChArUco: squares along x")
+    squares_y: Side | None = Field(None, description="ChArUco: squares along y")
+    square_mm: LengthMm = Field(description="Side of one square, mm")
+    marker_mm: LengthMm | None = Field(None, description="ChArUco: marker side, mm")
+    dictionary: Literal[ARUCO_DICTIONARIES] = Field(  # type: ignore[valid-type]
+        "DICT_5X5_100", description="ChArUco: the ArUco dictionary"
+    )
+    legacy: StrictBool = False
+
+    @model_validator(mode="after")
+    def _complete(self) -> BoardIn:
+        if self.type == "chessboard" and (self.cols is None or self.rows is None):
+            raise ValueError("a chessboard needs cols and rows (inner corners)")
+        if self.type == "charuco" and (
+            self.squares_x is None or self.squares_y is None or self.marker_mm is None
+        ):
+            raise ValueError("a ChArUco board needs squares_x, squares_y and marker_mm")
+        try:
+            self.to_board()
+        except ValueError as exc:  # the board's own checks (marker size, dictionary size)
+            raise ValueError(str(exc)) from None
+        return self
 
     def to_board(self) -> Board:
         if self.type == "chessboard":
-            if self.cols is None or self.rows is None:
-                raise ValueError("board: a chessboard needs cols and rows (inner corners)")
+            assert self.cols is not None and self.rows is not None  # checked above
             return Chessboard(self.cols, self.rows, self.square_mm / 1e3)
-        if self.squares_x is None or self.squares_y is None or self.marker_mm is None:
-            raise ValueError("board: a ChArUco board needs squares_x, squares_y and marker_mm")
+        assert self.squares_x is not None and self.squares_y is not None
+        assert self.marker_mm is not None
         return CharucoBoard(
             self.squares_x,
             self.squares_y,
@@ -76,22 +117,51 @@ class SessionIn(BaseModel):
     note: str = Field("", max_length=2000)
 
 
+Open = Annotated[dict[str, Any], Field(description="See the endpoint's summary")]
+
+
+class SessionOut(BaseModel):
+    session: Open
+
+
+class SessionDetailOut(BaseModel):
+    session: Open
+    samples: list[Open]
+    calibrations: list[Open]
+
+
+class SamplesOut(Page[Open]):
+    accepted: int
+    rejected: int
+
+
+class CalibrationOut(BaseModel):
+    calibration: Open
+
+
 class SolveIn(BaseModel):
     """Options of a solve (see ``IntrinsicsOptions`` and ``HandEyeOptions``)."""
 
-    radial_only: bool = Field(False, description="Hold p1 = p2 = 0 (chapter: radial only)")
-    k3: bool = Field(False, description="Also estimate k3")
-    fix_aspect_ratio: bool = Field(False, description="fx = fy")
-    reject_outliers: bool = True
-    min_views: int = Field(4, ge=3)
-    methods: list[str] = Field(list(ALL_METHODS), description=f"Hand-eye solvers, of {ALL_METHODS}")
-    refine: bool = Field(True, description="Hand-eye: refine by reprojection error")
+    radial_only: StrictBool = Field(False, description="Hold p1 = p2 = 0 (chapter: radial only)")
+    k3: StrictBool = Field(False, description="Also estimate k3")
+    fix_aspect_ratio: StrictBool = Field(False, description="fx = fy")
+    reject_outliers: StrictBool = True
+    min_views: Annotated[int, bounded_int(3, 1000, "Fewest accepted views to solve")] = 4
+    methods: list[str] = Field(
+        list(ALL_METHODS),
+        max_length=len(ALL_METHODS),
+        description=f"Hand-eye solvers, of {ALL_METHODS}",
+    )
+    refine: StrictBool = Field(True, description="Hand-eye: refine by reprojection error")
     loss: Literal["linear", "huber", "soft_l1", "cauchy"] = "linear"
-    intrinsics: Literal["session", "active"] | int = Field(
+    intrinsics: (
+        Literal["session", "active"]
+        | Annotated[int, bounded_int(1, MAX_DB_ID, "Id of an intrinsic calibration")]
+    ) = Field(
         "session",
         description="Hand-eye: intrinsics from this session's images, the active ones, or a calibration id",
     )
-    activate: bool = Field(False, description="Activate the result at once")
+    activate: StrictBool = Field(False, description="Activate the result at once")
 
     @model_validator(mode="after")
     def _known_methods(self) -> SolveIn:
@@ -149,15 +219,23 @@ def _joints(text: str | None, n: int) -> list[list[float] | None]:
     try:
         rows = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"joints must be a JSON list of joint vectors (radians): {exc}") from None
+        raise InvalidInput(
+            f"joints must be a JSON list of joint vectors (radians): {exc}"
+        ) from None
     if not isinstance(rows, list) or len(rows) != n:
-        raise ValueError(f"joints must list one joint vector per image ({n}), got {text[:80]!r}")
+        raise InvalidInput(f"joints must list one joint vector per image ({n}), got {text[:80]!r}")
     out: list[list[float] | None] = []
     for k, q in enumerate(rows):
-        if not isinstance(q, list) or not all(isinstance(v, int | float) for v in q):
-            raise ValueError(f"joints[{k}] must be a list of numbers, got {q!r}")
-        if not all(math.isfinite(v) for v in q):
-            raise ValueError(f"joints[{k}] must be finite, got {q!r}")
+        if (
+            not isinstance(q, list)
+            or len(q) != 5
+            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in q)
+        ):
+            raise InvalidInput(f"joints[{k}] must be a list of 5 numbers, got {q!r}")
+        if not all(abs(v) <= MAX_ABS_JOINT_API_RAD for v in q):
+            raise InvalidInput(
+                f"joints[{k}] must be finite, within +-{MAX_ABS_JOINT_API_RAD:.6g} rad, got {q!r}"
+            )
         out.append([float(v) for v in q])
     return out
 
@@ -166,7 +244,10 @@ def _joints(text: str | None, n: int) -> list[list[float] | None]:
 
 
 @router.post(
-    "/sessions", status_code=status.HTTP_201_CREATED, summary="Start a calibration session"
+    "/sessions",
+    status_code=status.HTTP_201_CREATED,
+    summary="Start a calibration session",
+    response_model=SessionOut,
 )
 async def create_calibration_session(
     _: EngineerUser, session: SessionDep, cell: CellDep, body: SessionIn
@@ -180,18 +261,16 @@ async def create_calibration_session(
     return {"session": svc.session_summary(row)}
 
 
-@router.get("/sessions", summary="This cell's calibration sessions, newest first")
+@router.get(
+    "/sessions", summary="This cell's calibration sessions, newest first", response_model=Page[Open]
+)
 async def read_calibration_sessions(
-    _: ViewerUser,
-    session: SessionDep,
-    cell: CellDep,
-    limit: Annotated[int, Query(ge=1, le=500)] = 100,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    _: ViewerUser, session: SessionDep, cell: CellDep, limit: Limit = 100, offset: Offset = 0
 ) -> dict[str, Any]:
     cell_id = await svc.cell_id_of(session, cell.name)
     rows = await svc.list_sessions(session, cell_id=cell_id, limit=limit, offset=offset)
     data = [svc.session_summary(r) for r in rows]
-    return {"data": data, "count": len(data)}
+    return {"data": data, "count": await svc.count_sessions(session, cell_id=cell_id)}
 
 
 def _sample_public(s: Any) -> dict[str, Any]:
@@ -207,9 +286,13 @@ def _sample_public(s: Any) -> dict[str, Any]:
     }
 
 
-@router.get("/sessions/{session_id}", summary="One session with its samples and calibrations")
+@router.get(
+    "/sessions/{session_id}",
+    summary="One session with its samples and calibrations",
+    response_model=SessionDetailOut,
+)
 async def read_calibration_session(
-    _: ViewerUser, session: SessionDep, session_id: int
+    _: ViewerUser, session: SessionDep, session_id: DbId
 ) -> dict[str, Any]:
     row = await svc.get_session(session, session_id)
     cals = sorted(row.calibrations, key=lambda c: c.id, reverse=True)
@@ -224,12 +307,13 @@ async def read_calibration_session(
     "/sessions/{session_id}/samples",
     status_code=status.HTTP_201_CREATED,
     summary="Upload images (and robot poses for hand-eye) to a session",
+    response_model=SamplesOut,
 )
 async def create_calibration_samples(
     _: EngineerUser,
     session: SessionDep,
     cell: CellDep,
-    session_id: int,
+    session_id: DbId,
     images: Annotated[list[UploadFile], File(description="PNG, JPEG, BMP or TIFF images")],
     poses: Annotated[
         UploadFile | None,
@@ -243,7 +327,7 @@ async def create_calibration_samples(
     cal = await svc.get_session(session, session_id)
     svc.check_own("session", cal.id, cal.cell_id, await svc.cell_id_of(session, cell.name))
     if not images:
-        raise ApiError(422, "validation_error", "images: upload at least one image")
+        raise InvalidInput("images: upload at least one image")
     if len(images) > MAX_IMAGES_PER_UPLOAD:
         raise ApiError(
             413,
@@ -257,11 +341,14 @@ async def create_calibration_samples(
     T: list[np.ndarray | None] = [None] * len(decoded)
     if poses is not None:
         text = (await poses.read()).decode("utf-8", errors="replace")
-        P = parse_poses(
-            text, unit_m=1e-3 if poses_unit == "mm" else 1.0, source=poses.filename or "poses"
-        )
+        try:
+            P = parse_poses(
+                text, unit_m=1e-3 if poses_unit == "mm" else 1.0, source=poses.filename or "poses"
+            )
+        except ValueError as exc:  # the file's content is user input
+            raise InvalidInput(str(exc)) from None
         if P.shape[0] != len(decoded):
-            raise ValueError(
+            raise InvalidInput(
                 f"poses has {P.shape[0]} poses but {len(decoded)} images were uploaded: "
                 "give one pose per image, in the same order"
             )
@@ -289,27 +376,34 @@ async def create_calibration_samples(
     "/sessions/{session_id}/samples/{index}/image.png",
     summary="The stored image of a sample",
     response_class=Response,
+    responses={200: {"content": {"image/png": {}}, "description": "The image"}},
 )
 async def read_calibration_sample_image(
-    _: ViewerUser, session: SessionDep, session_id: int, index: int
+    _: ViewerUser, session: SessionDep, session_id: DbId, index: DbIndex
 ) -> Response:
     row = await svc.get_session(session, session_id)
     for s in row.samples:
         if s.index == index:
             return Response(s.image_png, media_type="image/png")
-    raise ApiError(404, "not_found", f"session {session_id} has no sample {index}")
+    raise NotFound(f"session {session_id} has no sample {index}")
 
 
 @router.post(
     "/sessions/{session_id}/solve",
     summary="Solve the session as a job (202 with the job, or 200/422 with ?wait=true)",
+    status_code=status.HTTP_202_ACCEPTED,
+    response_class=JSONResponse,
+    responses={
+        200: {"model": JobOut, "description": "With ?wait=true: the finished job"},
+        202: {"model": JobOut, "description": "The job, started"},
+    },
 )
 async def create_calibration_solve(
     _: EngineerUser,
     session: SessionDep,
     db: DatabaseDep,
     cell: CellDep,
-    session_id: int,
+    session_id: DbId,
     body: SolveIn | None = None,
     wait: Annotated[bool, Query(description="Answer when the solve has ended")] = False,
 ) -> JSONResponse:
@@ -353,24 +447,32 @@ async def create_calibration_solve(
 # -- calibrations -------------------------------------------------------------------------
 
 
-@router.get("/calibrations", summary="This cell's calibration history, newest first")
+@router.get(
+    "/calibrations", summary="This cell's calibration history, newest first", response_model=Page[Open]
+)
 async def read_calibrations(
     _: ViewerUser,
     session: SessionDep,
     cell: CellDep,
     kind: CalibrationKind | None = None,
-    session_id: int | None = None,
-    limit: Annotated[int, Query(ge=1, le=500)] = 100,
+    session_id: DbIdQuery = None,
+    limit: Limit = 100,
+    offset: Offset = 0,
 ) -> dict[str, Any]:
     cell_id = await svc.cell_id_of(session, cell.name)
     rows = await svc.history(
-        session, cell_id=cell_id, kind=kind, session_id=session_id, limit=limit
+        session, cell_id=cell_id, kind=kind, session_id=session_id, limit=limit, offset=offset
     )
     data = [svc.calibration_public(r) for r in rows]
-    return {"data": data, "count": len(data)}
+    total = await svc.count_history(session, cell_id=cell_id, kind=kind, session_id=session_id)
+    return {"data": data, "count": total}
 
 
-@router.get("/active", summary="The active calibration of each kind in this cell")
+@router.get(
+    "/active",
+    summary="The active calibration of each kind in this cell",
+    response_model=dict[str, Open | None],
+)
 async def read_active_calibrations(
     _: ViewerUser, session: SessionDep, cell: CellDep
 ) -> dict[str, Any]:
@@ -379,18 +481,24 @@ async def read_active_calibrations(
     return {k.value: (svc.calibration_public(v) if v else None) for k, v in act.items()}
 
 
-@router.get("/calibrations/{calibration_id}", summary="One calibration")
+@router.get(
+    "/calibrations/{calibration_id}", summary="One calibration", response_model=CalibrationOut
+)
 async def read_calibration(
-    _: ViewerUser, session: SessionDep, calibration_id: int
+    _: ViewerUser, session: SessionDep, calibration_id: DbId
 ) -> dict[str, Any]:
     return {
         "calibration": svc.calibration_public(await svc.get_calibration(session, calibration_id))
     }
 
 
-@router.get("/calibrations/{calibration_id}/report", summary="Report: summary and plot links")
+@router.get(
+    "/calibrations/{calibration_id}/report",
+    summary="Report: summary and plot links",
+    response_model=Open,
+)
 async def read_calibration_report(
-    _: ViewerUser, session: SessionDep, calibration_id: int
+    _: ViewerUser, session: SessionDep, calibration_id: DbId
 ) -> dict[str, Any]:
     return svc.calibration_report(await svc.get_calibration(session, calibration_id))
 
@@ -399,9 +507,10 @@ async def read_calibration_report(
     "/calibrations/{calibration_id}/report/{plot}.png",
     summary="Report plot: residuals, coverage or consistency (hand-eye)",
     response_class=Response,
+    responses={200: {"content": {"image/png": {}}, "description": "The plot"}},
 )
 async def read_calibration_plot(
-    _: ViewerUser, session: SessionDep, calibration_id: int, plot: str
+    _: ViewerUser, session: SessionDep, calibration_id: DbId, plot: PlotName
 ) -> Response:
     import asyncio
 
@@ -410,9 +519,13 @@ async def read_calibration_plot(
     return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 
-@router.post("/calibrations/{calibration_id}/activate", summary="Make this calibration active")
+@router.post(
+    "/calibrations/{calibration_id}/activate",
+    summary="Make this calibration active",
+    response_model=CalibrationOut,
+)
 async def update_calibration_activate(
-    _: EngineerUser, session: SessionDep, cell: CellDep, calibration_id: int
+    _: EngineerUser, session: SessionDep, cell: CellDep, calibration_id: DbId
 ) -> dict[str, Any]:
     row = await svc.get_calibration(session, calibration_id)
     svc.check_own("calibration", row.id, row.cell_id, await svc.cell_id_of(session, cell.name))
@@ -432,31 +545,23 @@ class AutoIn(BaseModel):
     pattern: BoardIn | None = Field(
         None, description="The board's pattern; default: the simulated cell's board of that kind"
     )
-    T_base_board: list[list[float]] | None = Field(
+    T_base_board: Matrix4 | None = Field(
         None,
         description="Where the board roughly is (4x4, metres); default: where the simulated "
         "cell's board was placed.  The first view measures it again.",
     )
-    n_poses: int = Field(25, ge=3, le=60, description="Views to plan")
-    n_reserve: int = Field(10, ge=0, le=60, description="Reserve views while criteria are unmet")
-    activate: bool = Field(False, description="Activate the solution")
-    seed: int = Field(0, ge=0, description="Seed of the view planner")
-    speed: float = Field(0.6, gt=0, le=1, description="Fraction of the arm's speed limits")
-
-    @model_validator(mode="after")
-    def _pose_shape(self) -> AutoIn:
-        T = self.T_base_board
-        if T is not None:
-            a = np.asarray(T, dtype=np.float64)
-            if a.shape != (4, 4) or not np.isfinite(a).all():
-                raise ValueError("T_base_board must be a finite 4x4 matrix")
-        return self
+    n_poses: Annotated[int, bounded_int(3, 60, "Views to plan")] = 25
+    n_reserve: Annotated[int, bounded_int(0, 60, "Reserve views while criteria are unmet")] = 10
+    activate: StrictBool = Field(False, description="Activate the solution")
+    seed: Annotated[int, bounded_int(0, 2**32 - 1, "Seed of the view planner")] = 0
+    speed: Speed = 0.6
 
 
 @router.post(
     "/auto",
     status_code=status.HTTP_202_ACCEPTED,
     summary="Start an automatic calibration run (a motion job; 409 while the arm is busy)",
+    response_model=JobOut,
 )
 async def create_calibration_auto(
     _: EngineerUser, db: DatabaseDep, cell: CellDep, sim: SimDep, body: AutoIn
@@ -499,18 +604,16 @@ def _auto_board(body: AutoIn, sim: Any) -> tuple[Board, np.ndarray]:
     elif sim is not None:
         spec = next((s for s in sim.config.boards if s.kind == body.board), None)
         if spec is None:
-            raise ApiError(404, "not_found", f"this cell has no {body.board} board")
+            raise NotFound(f"this cell has no {body.board} board")
         from backend.calibration.auto import pattern_of_sim_board
 
         board = pattern_of_sim_board(spec)
     else:
-        raise ApiError(422, "validation_error", "pattern: give the board's pattern (no simulator)")
+        raise InvalidInput("pattern: give the board's pattern (no simulator)")
     if body.T_base_board is not None:
         return board, np.asarray(body.T_base_board, dtype=np.float64)
     if placed is None:
-        raise ApiError(
-            422,
-            "validation_error",
-            f"T_base_board: give where the board is; no {body.board} board is placed in the cell",
+        raise InvalidInput(
+            f"T_base_board: give where the board is; no {body.board} board is placed in the cell"
         )
     return board, np.asarray(placed.T_base_board, dtype=np.float64)

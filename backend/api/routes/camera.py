@@ -6,6 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter
 from fastapi.responses import Response
+from pydantic import BaseModel
 
 from backend.api.deps import CellDep, ViewerUser
 from backend.api.errors import ApiError
@@ -13,7 +14,20 @@ from backend.api.errors import ApiError
 router = APIRouter(prefix="/camera", tags=["camera"])
 
 
-@router.get("/frame.jpg", summary="The latest camera frame as JPEG", response_class=Response)
+class CameraStatusOut(BaseModel):
+    name: str
+    ok: bool
+    frames: int
+    fps: float
+    error: str
+
+
+@router.get(
+    "/frame.jpg",
+    summary="The latest camera frame as JPEG",
+    response_class=Response,
+    responses={200: {"content": {"image/jpeg": {}}, "description": "The frame"}},
+)
 async def read_frame(_: ViewerUser, cell: CellDep) -> Response:
     jpeg = cell.latest_jpeg()
     if jpeg is None:
@@ -22,6 +36,6 @@ async def read_frame(_: ViewerUser, cell: CellDep) -> Response:
     return Response(jpeg, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
 
 
-@router.get("/status", summary="Camera health and rate")
+@router.get("/status", summary="Camera health and rate", response_model=CameraStatusOut)
 async def read_camera_status(_: ViewerUser, cell: CellDep) -> dict[str, Any]:
     return cell.camera_status().as_dict()

@@ -6,6 +6,7 @@ import platform
 from typing import Any
 
 from fastapi import APIRouter
+from pydantic import BaseModel
 
 from backend import __version__
 from backend.api.deps import CellDep, DatabaseDep, SettingsDep, View3DDep, ViewerUser
@@ -14,7 +15,24 @@ from backend.db.migrate import current_revision, head_revision
 router = APIRouter(tags=["health"])
 
 
-@router.get("/health", summary="Liveness; needs no token")
+class HealthOut(BaseModel):
+    status: str
+    version: str
+    viser_port: int | None
+
+
+class StatusOut(BaseModel):
+    """Driver, camera, database, 3D view, running jobs and library versions."""
+
+    driver: dict[str, Any]
+    camera: dict[str, Any]
+    database: dict[str, Any]
+    view3d: dict[str, Any]
+    jobs: dict[str, Any]
+    versions: dict[str, str]
+
+
+@router.get("/health", summary="Liveness; needs no token", response_model=HealthOut)
 async def read_health(view: View3DDep) -> dict[str, Any]:
     return {
         "status": "ok",
@@ -39,7 +57,7 @@ def _versions() -> dict[str, str]:
     }
 
 
-@router.get("/status", summary="Driver, camera, database and versions")
+@router.get("/status", summary="Driver, camera, database and versions", response_model=StatusOut)
 async def read_status(
     _: ViewerUser, settings: SettingsDep, db: DatabaseDep, cell: CellDep, view: View3DDep
 ) -> dict[str, Any]:

@@ -2,37 +2,48 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Depends, Path
 
 from backend.api.deps import CellDep, OperatorUser, ViewerUser
-from backend.api.errors import ApiError
+from backend.api.schemas import JobOut, JobPublic, Page, page
+from backend.api.types import Limit, Offset
+from backend.jobs import Job
+from vision.errors import NotFound
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
-
-@router.get("", summary="Recent jobs, newest first")
-async def read_jobs(_: ViewerUser, cell: CellDep) -> dict[str, Any]:
-    data = [j.public() for j in cell.jobs.list()]
-    return {"data": data, "count": len(data)}
+JobId = Annotated[
+    str, Path(min_length=1, max_length=64, description="Job id from the answer that started it")
+]
 
 
-def _job(cell: Any, job_id: str) -> Any:
+def get_job(cell: CellDep, job_id: JobId) -> Job:
+    """The job with this id; :class:`NotFound` if it is unknown or forgotten."""
     job = cell.jobs.get(job_id)
     if job is None:
-        raise ApiError(404, "not_found", f"no job with id {job_id!r}")
+        raise NotFound(f"no job with id {job_id!r}")
     return job
 
 
-@router.get("/{job_id}", summary="One job")
-async def read_job(_: ViewerUser, cell: CellDep, job_id: str) -> dict[str, Any]:
-    return {"job": _job(cell, job_id).public()}
+JobDep = Annotated[Job, Depends(get_job)]
 
 
-@router.post("/{job_id}/cancel", summary="Cancel a running job")
-async def cancel_job(_: OperatorUser, cell: CellDep, job_id: str) -> dict[str, Any]:
-    job = _job(cell, job_id)
+@router.get("", summary="Recent jobs, newest first", response_model=Page[JobPublic])
+async def read_jobs(
+    _: ViewerUser, cell: CellDep, limit: Limit = 100, offset: Offset = 0
+) -> dict[str, Any]:
+    return page([j.public() for j in cell.jobs.list()], limit=limit, offset=offset)
+
+
+@router.get("/{job_id}", summary="One job", response_model=JobOut)
+async def read_job(_: ViewerUser, job: JobDep) -> dict[str, Any]:
+    return {"job": job.public()}
+
+
+@router.post("/{job_id}/cancel", summary="Cancel a running job", response_model=JobOut)
+async def cancel_job(_: OperatorUser, cell: CellDep, job: JobDep) -> dict[str, Any]:
     if job.motion:
         await cell.stop_motion()
     await cell.jobs.cancel(job)

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from fastapi import APIRouter
-from pydantic import BaseModel, Field, field_validator
+from pydantic import BaseModel, Field
 
 from backend.api.deps import ViewerUser
-from backend.api.schemas import JointsIn, PoseIn
+from backend.api.schemas import JointsIn, PoseIn, PoseOut
+from backend.api.types import RollRad
 from robot.kinematics import T_base_ee, fk, ik_solutions
 
 router = APIRouter(prefix="/kinematics", tags=["kinematics"])
@@ -17,19 +17,33 @@ router = APIRouter(prefix="/kinematics", tags=["kinematics"])
 
 class IKIn(BaseModel):
     pose: PoseIn
-    roll: float = Field(
+    roll: RollRad = Field(
         0.0, description="Rotation about the approach axis, radians (q5 for the front branches)"
     )
 
-    @field_validator("roll")
-    @classmethod
-    def _finite(cls, v: float) -> float:
-        if not math.isfinite(v):
-            raise ValueError(f"roll must be finite, got {v!r}")
-        return v
+
+class FKOut(BaseModel):
+    pose: PoseOut
+    T_base_ee: list[list[float]] = Field(description="Pose of the flange in the base frame, 4x4")
 
 
-@router.post("/fk", summary="Forward kinematics: joints -> (x, y, z, u, w) and T_base_ee")
+class IKSolutionOut(BaseModel):
+    joints: list[float]
+    within_limits: bool
+    branch: str
+    violated_joints: list[int]
+    detail: str
+
+
+class IKOut(BaseModel):
+    solutions: list[IKSolutionOut]
+
+
+@router.post(
+    "/fk",
+    summary="Forward kinematics: joints -> (x, y, z, u, w) and T_base_ee",
+    response_model=FKOut,
+)
 async def create_fk(_: ViewerUser, body: JointsIn) -> dict[str, Any]:
     x, y, z, u, w = (float(v) for v in fk(body.joints))
     return {
@@ -38,7 +52,11 @@ async def create_fk(_: ViewerUser, body: JointsIn) -> dict[str, Any]:
     }
 
 
-@router.post("/ik", summary="Inverse kinematics: every branch with its joint-limit status")
+@router.post(
+    "/ik",
+    summary="Inverse kinematics: every branch with its joint-limit status",
+    response_model=IKOut,
+)
 async def create_ik(_: ViewerUser, body: IKIn) -> dict[str, Any]:
     solutions = ik_solutions(body.pose.as_tuple(), roll=body.roll)
     return {"solutions": [s.as_dict() for s in solutions]}

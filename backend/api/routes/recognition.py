@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
 from fastapi import APIRouter
 from pydantic import BaseModel, Field
 from sqlalchemy import select
 
 from backend.api.deps import EngineerUser, SessionDep, ViewerUser
+from backend.api.types import bounded_float
 from backend.db.models import RecognitionSettings
 
 router = APIRouter(prefix="/recognition", tags=["recognition"])
@@ -17,10 +18,17 @@ DEFAULT_THRESHOLD = 0.5
 
 
 class RecognitionSettingsIn(BaseModel):
-    global_threshold: float = Field(
-        ge=0.0, le=1.0, description="Score above which a model is reported"
-    )
+    global_threshold: Annotated[
+        float, bounded_float(0.0, 1.0, "Score above which a model is reported")
+    ]
     note: str = Field("", max_length=500)
+
+
+class RecognitionSettingsOut(BaseModel):
+    global_threshold: float
+    chosen_by: str
+    detail: dict[str, Any]
+    created_at: str | None
 
 
 def _public(row: RecognitionSettings | None) -> dict[str, Any]:
@@ -46,12 +54,20 @@ async def latest_settings(session: Any) -> RecognitionSettings | None:
     )
 
 
-@router.get("/settings", summary="The recognition settings in force")
+@router.get(
+    "/settings",
+    summary="The recognition settings in force",
+    response_model=RecognitionSettingsOut,
+)
 async def read_recognition_settings(_: ViewerUser, session: SessionDep) -> dict[str, Any]:
     return _public(await latest_settings(session))
 
 
-@router.put("/settings", summary="Set the global threshold by hand (engineer)")
+@router.put(
+    "/settings",
+    summary="Set the global threshold by hand (engineer)",
+    response_model=RecognitionSettingsOut,
+)
 async def update_recognition_settings(
     user: EngineerUser, session: SessionDep, body: RecognitionSettingsIn
 ) -> dict[str, Any]:

@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import math
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, status
 from fastapi.responses import JSONResponse
-from pydantic import BaseModel, Field, field_validator, model_validator
+from pydantic import BaseModel, Field, model_validator
 
 from backend.api.deps import CellDep, OperatorUser, ViewerUser
-from backend.api.schemas import PoseIn, check_joint_list
+from backend.api.schemas import JobOut, PoseIn, RobotStateOut
+from backend.api.types import JointList, RollRad, Speed
 from backend.jobs import Job
 
 router = APIRouter(prefix="/robot", tags=["robot"])
@@ -22,31 +22,15 @@ class MoveIn(BaseModel):
     Exactly one of ``joints`` and ``pose`` must be given.
     """
 
-    joints: list[float] | None = Field(
-        None, description="q1..q5 in radians", examples=[[0.0, 1.5708, -1.5708, 0.0, 0.0]]
-    )
+    joints: JointList | None = None
     pose: PoseIn | None = Field(
         None, description="Flange target (x, y, z in metres, u = cos phi, w = sin phi)"
     )
-    roll: float = Field(0.0, description="With pose: rotation about the approach axis, radians")
+    roll: RollRad = 0.0
     path: Literal["joint", "line"] = Field(
         "joint", description="With pose: joint-space move or straight line"
     )
-    speed: float | None = Field(
-        None, gt=0.0, le=1.0, description="0 < speed <= 1 (default: the cell's speed)"
-    )
-
-    @field_validator("joints")
-    @classmethod
-    def _five_finite(cls, v: list[float] | None) -> list[float] | None:
-        return None if v is None else check_joint_list(v)
-
-    @field_validator("roll")
-    @classmethod
-    def _finite_roll(cls, v: float) -> float:
-        if not math.isfinite(v):
-            raise ValueError(f"roll must be finite, got {v!r}")
-        return v
+    speed: Speed | None = Field(None, description="Speed fraction (default: the cell's speed)")
 
     @model_validator(mode="after")
     def _one_target(self) -> MoveIn:
@@ -56,7 +40,21 @@ class MoveIn(BaseModel):
 
 
 class SpeedIn(BaseModel):
-    speed: float | None = Field(None, gt=0.0, le=1.0)
+    speed: Speed | None = None
+
+
+class StateOut(BaseModel):
+    state: RobotStateOut
+    speed: float = Field(description="The cell's default speed fraction")
+    driver: str
+
+
+class StateOnlyOut(BaseModel):
+    state: RobotStateOut
+
+
+class SpeedOut(BaseModel):
+    speed: float
 
 
 async def _answer(cell: Any, job: Job, wait: bool) -> JSONResponse:
@@ -67,15 +65,23 @@ async def _answer(cell: Any, job: Job, wait: bool) -> JSONResponse:
 
 
 WaitQuery = Annotated[bool, Query(description="Answer when the move has ended instead of at once")]
+_JOB_ANSWERS: dict[int | str, dict[str, Any]] = {
+    200: {"model": JobOut, "description": "With ?wait=true: the finished job"},
+    202: {"model": JobOut, "description": "The job, started"},
+}
 
 
-@router.get("/state", summary="Latest joint state")
+@router.get("/state", summary="Latest joint state", response_model=StateOut)
 async def read_state(_: ViewerUser, cell: CellDep) -> dict[str, Any]:
     return {"state": cell.driver.state.as_dict(), "speed": cell.speed, "driver": cell.driver.name}
 
 
 @router.post(
-    "/move", summary="Move to a joint or Cartesian target (202 with a job, or 200 with ?wait=true)"
+    "/move",
+    summary="Move to a joint or Cartesian target (202 with a job, or 200 with ?wait=true)",
+    status_code=status.HTTP_202_ACCEPTED,
+    response_class=JSONResponse,
+    responses=_JOB_ANSWERS,
 )
 async def create_move(
     _: OperatorUser, cell: CellDep, body: MoveIn, wait: WaitQuery = False
@@ -87,7 +93,13 @@ async def create_move(
     return await _answer(cell, job, wait)
 
 
-@router.post("/home", summary="Move to the home configuration")
+@router.post(
+    "/home",
+    summary="Move to the home configuration",
+    status_code=status.HTTP_202_ACCEPTED,
+    response_class=JSONResponse,
+    responses=_JOB_ANSWERS,
+)
 async def create_home(
     _: OperatorUser, cell: CellDep, body: SpeedIn | None = None, wait: WaitQuery = False
 ) -> JSONResponse:
@@ -95,25 +107,31 @@ async def create_home(
     return await _answer(cell, job, wait)
 
 
-@router.post("/stop", summary="Controlled stop of the current move")
+@router.post("/stop", summary="Controlled stop of the current move", response_model=StateOnlyOut)
 async def create_stop(_: OperatorUser, cell: CellDep) -> dict[str, Any]:
     await cell.stop_motion()
     return {"state": cell.driver.state.as_dict()}
 
 
-@router.post("/estop", summary="Emergency stop (any signed-in user may press it)")
+@router.post(
+    "/estop",
+    summary="Emergency stop (any signed-in user may press it)",
+    response_model=StateOnlyOut,
+)
 async def create_estop(_: ViewerUser, cell: CellDep) -> dict[str, Any]:
     await cell.estop()
     return {"state": cell.driver.state.as_dict()}
 
 
-@router.post("/reset", summary="Clear an emergency stop")
+@router.post("/reset", summary="Clear an emergency stop", response_model=StateOnlyOut)
 async def create_reset(_: OperatorUser, cell: CellDep) -> dict[str, Any]:
     await cell.reset()
     return {"state": cell.driver.state.as_dict()}
 
 
-@router.put("/speed", summary="Default speed for moves, 0 < speed <= 1")
+@router.put(
+    "/speed", summary="Default speed for moves, 0.01 <= speed <= 1", response_model=SpeedOut
+)
 async def update_speed(_: OperatorUser, cell: CellDep, body: SpeedIn) -> dict[str, Any]:
     if body.speed is not None:
         cell.speed = body.speed

@@ -10,11 +10,23 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-from fastapi import APIRouter, Depends, Response, status
-from pydantic import BaseModel, Field, field_validator
+from fastapi import APIRouter, Depends, Path, Response, status
+from pydantic import BaseModel, Field, field_validator, model_validator
 
 from backend.api.deps import CellDep, EngineerUser, SettingsDep, get_sim_or_none
 from backend.api.errors import ApiError
+from backend.api.schemas import Page, page
+from backend.api.types import (
+    MAX_DB_ID,
+    MAX_NAME_LENGTH,
+    Limit,
+    Matrix4,
+    NameStr,
+    Offset,
+    StrictBool,
+    bounded_float,
+)
+from vision.errors import NotFound
 
 if TYPE_CHECKING:
     from robot.sim import SimEngine
@@ -49,27 +61,43 @@ SimDep = Annotated[Any, Depends(get_sim)]
 class ConveyorIn(BaseModel):
     """Belt settings; fields left out keep their value."""
 
-    running: bool | None = Field(None, description="Run or stop the belt")
-    speed_m_s: float | None = Field(None, ge=0.0, le=2.0, description="Belt speed, m/s")
+    running: StrictBool | None = Field(None, description="Run or stop the belt")
+    speed_m_s: Annotated[float, bounded_float(0.0, 2.0, "Belt speed, m/s")] | None = None
     mode: Literal["continuous", "index"] | None = Field(
         None, description="continuous, or index: stop each object at the station"
     )
-    dwell_s: float | None = Field(
-        None, ge=0.0, le=3600.0, description="Index mode: seconds at the station"
-    )
+    dwell_s: (
+        Annotated[float, bounded_float(0.0, 3600.0, "Index mode: seconds at the station")] | None
+    ) = None
 
 
 class ObjectIn(BaseModel):
     """An object to put on the belt."""
 
     name: str = Field(
-        description="Catalogue name (GET /api/sim/catalogue)", examples=["wheel-5spoke"]
+        max_length=MAX_NAME_LENGTH,
+        description="Catalogue name (GET /api/sim/catalogue)",
+        examples=["wheel-5spoke"],
     )
-    position_along_belt_m: float | None = Field(
-        None, description="Distance from the belt's entry, m (default: the entry)"
-    )
-    lateral_m: float = Field(0.0, description="Offset from the belt's centre line, m")
-    yaw_rad: float | None = Field(None, description="Rotation about the vertical (default: random)")
+    position_along_belt_m: (
+        Annotated[
+            float,
+            bounded_float(0.0, 100.0, "Distance from the belt's entry, m (default: the entry)"),
+        ]
+        | None
+    ) = None
+    lateral_m: Annotated[
+        float, bounded_float(-5.0, 5.0, "Offset from the belt's centre line, m")
+    ] = 0.0
+    yaw_rad: (
+        Annotated[
+            float,
+            bounded_float(
+                -2 * math.pi, 2 * math.pi, "Rotation about the vertical, rad (default: random)"
+            ),
+        ]
+        | None
+    ) = None
 
     @field_validator("name")
     @classmethod
@@ -81,45 +109,84 @@ class ObjectIn(BaseModel):
 
 
 class LightIn(BaseModel):
-    intensity: float = Field(ge=0.0, le=5.0, description="Factor on the light's default intensity")
+    intensity: Annotated[float, bounded_float(0.0, 5.0, "Factor on the light's default intensity")]
 
 
 class BoardIn(BaseModel):
     """Where to place a board: a 4x4 ``T_base_board`` or a preset."""
 
-    T_base_board: list[list[float]] | None = Field(
+    T_base_board: Matrix4 | None = Field(
         None, description="Pose of the board frame in the base frame (4x4, metres)"
     )
     preset: Literal["table", "station"] | None = Field(
         None, description="table: face up on the table; station: face up on the belt at the station"
     )
 
-    @field_validator("T_base_board")
-    @classmethod
-    def _shape(cls, v: list[list[float]] | None) -> list[list[float]] | None:
-        if v is not None and (len(v) != 4 or any(len(row) != 4 for row in v)):
-            raise ValueError("T_base_board must be a 4x4 matrix")
-        if v is not None and not all(math.isfinite(x) for row in v for x in row):
-            raise ValueError("T_base_board must be finite")
-        return v
+    @model_validator(mode="after")
+    def _one(self) -> BoardIn:
+        if (self.T_base_board is None) == (self.preset is None):
+            raise ValueError("give exactly one of T_base_board and preset")
+        return self
 
 
 class CameraIn(BaseModel):
     """Sensor settings of the simulated camera; fields left out keep their value."""
 
-    exposure_s: float | None = Field(None, gt=0.0, le=1.0)
-    gain: float | None = Field(None, gt=0.0, le=16.0)
-    noise_std_dn: float | None = Field(None, ge=0.0, le=50.0)
-    motion_blur: bool | None = None
+    exposure_s: Annotated[float, bounded_float(1e-5, 1.0, "Exposure time, s")] | None = None
+    gain: Annotated[float, bounded_float(0.01, 16.0, "Analogue gain")] | None = None
+    noise_std_dn: Annotated[float, bounded_float(0.0, 50.0, "Read noise, DN")] | None = None
+    motion_blur: StrictBool | None = None
+
+
+class CameraOut(BaseModel):
+    exposure_s: float
+    gain: float
+    noise_std_dn: float
+    motion_blur: bool
+
+
+Open = Annotated[dict[str, Any], Field(description="See the endpoint's summary")]
+
+
+class ConveyorOut(BaseModel):
+    conveyor: Open
+
+
+class ObjectOut(BaseModel):
+    object: Open
+
+
+class LightOut(BaseModel):
+    name: str
+    intensity: float
+
+
+class BoardOut(BaseModel):
+    board: Open
+
+
+class BoardsOut(Page[Open]):
+    kinds: list[str]
+
+
+ObjectId = Annotated[int, Path(ge=1, le=MAX_DB_ID, description="Object id, 1 .. 2^63 - 1")]
 
 
 # -- conveyor --------------------------------------------------------------------------------
-@router.get("/conveyor", summary="Belt settings and whether an object waits at the station")
+@router.get(
+    "/conveyor",
+    summary="Belt settings and whether an object waits at the station",
+    response_model=ConveyorOut,
+)
 async def read_conveyor(_: EngineerUser, sim: SimDep) -> dict[str, Any]:
     return {"conveyor": sim.conveyor_state.as_dict()}
 
 
-@router.post("/conveyor", summary="Start/stop the belt, set its speed, mode and dwell")
+@router.post(
+    "/conveyor",
+    summary="Start/stop the belt, set its speed, mode and dwell",
+    response_model=ConveyorOut,
+)
 async def update_conveyor(_: EngineerUser, sim: SimDep, body: ConveyorIn) -> dict[str, Any]:
     dwell: float | str | None = "keep" if "dwell_s" not in body.model_fields_set else body.dwell_s
     state = sim.configure_conveyor(
@@ -128,26 +195,41 @@ async def update_conveyor(_: EngineerUser, sim: SimDep, body: ConveyorIn) -> dic
     return {"conveyor": state.as_dict()}
 
 
-@router.post("/conveyor/release", summary="Index mode: let the object at the station go on")
+@router.post(
+    "/conveyor/release",
+    summary="Index mode: let the object at the station go on",
+    response_model=ConveyorOut,
+)
 async def create_release(_: EngineerUser, sim: SimDep) -> dict[str, Any]:
     sim.release_conveyor()
     return {"conveyor": sim.conveyor_state.as_dict()}
 
 
 # -- catalogue and objects -------------------------------------------------------------------
-@router.get("/catalogue", summary="Objects that can be spawned")
-async def read_catalogue(_: EngineerUser, sim: SimDep) -> dict[str, Any]:
+@router.get("/catalogue", summary="Objects that can be spawned", response_model=Page[Open])
+async def read_catalogue(
+    _: EngineerUser, sim: SimDep, limit: Limit = 100, offset: Offset = 0
+) -> dict[str, Any]:
     data = [entry.summary() for entry in _catalogue().values()]
-    return {"data": data, "count": len(data)}
+    return page(data, limit=limit, offset=offset)
 
 
-@router.get("/objects", summary="Objects on the belt with their true poses")
-async def read_objects(_: EngineerUser, sim: SimDep) -> dict[str, Any]:
+@router.get(
+    "/objects", summary="Objects on the belt with their true poses", response_model=Page[Open]
+)
+async def read_objects(
+    _: EngineerUser, sim: SimDep, limit: Limit = 100, offset: Offset = 0
+) -> dict[str, Any]:
     data = [o.as_dict() for o in sim.objects()]
-    return {"data": data, "count": len(data)}
+    return page(data, limit=limit, offset=offset)
 
 
-@router.post("/objects", status_code=status.HTTP_201_CREATED, summary="Put an object on the belt")
+@router.post(
+    "/objects",
+    status_code=status.HTTP_201_CREATED,
+    summary="Put an object on the belt",
+    response_model=ObjectOut,
+)
 async def create_object(_: EngineerUser, sim: SimDep, body: ObjectIn) -> dict[str, Any]:
     obj = sim.spawn(
         body.name,
@@ -158,12 +240,20 @@ async def create_object(_: EngineerUser, sim: SimDep, body: ObjectIn) -> dict[st
     return {"object": obj.as_dict()}
 
 
-@router.get("/objects/{obj_id}", summary="One object's true pose")
-async def read_object(_: EngineerUser, sim: SimDep, obj_id: int) -> dict[str, Any]:
+def get_object(sim: SimDep, obj_id: ObjectId) -> Any:
+    """The object on the belt with this id; :class:`NotFound` otherwise."""
     for o in sim.objects():
         if o.id == obj_id:
-            return {"object": o.as_dict()}
-    raise ApiError(404, "not_found", f"no object with id {obj_id} on the belt")
+            return o
+    raise NotFound(f"no object with id {obj_id} on the belt")
+
+
+ObjectDep = Annotated[Any, Depends(get_object)]
+
+
+@router.get("/objects/{obj_id}", summary="One object's true pose", response_model=ObjectOut)
+async def read_object(_: EngineerUser, obj: ObjectDep) -> dict[str, Any]:
+    return {"object": obj.as_dict()}
 
 
 @router.delete(
@@ -171,26 +261,46 @@ async def read_object(_: EngineerUser, sim: SimDep, obj_id: int) -> dict[str, An
     status_code=status.HTTP_204_NO_CONTENT,
     summary="Take an object off the belt",
 )
-async def delete_object(_: EngineerUser, sim: SimDep, obj_id: int) -> Response:
-    if obj_id not in {o.id for o in sim.objects()}:
-        raise ApiError(404, "not_found", f"no object with id {obj_id} on the belt")
-    sim.remove(obj_id)
+async def delete_object(_: EngineerUser, sim: SimDep, obj: ObjectDep) -> Response:
+    sim.remove(obj.id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 # -- lights ----------------------------------------------------------------------------------
-@router.get("/lights", summary="Intensity factor of each light")
-async def read_lights(_: EngineerUser, sim: SimDep) -> dict[str, Any]:
+@router.get("/lights", summary="Intensity factor of each light", response_model=Page[LightOut])
+async def read_lights(
+    _: EngineerUser, sim: SimDep, limit: Limit = 100, offset: Offset = 0
+) -> dict[str, Any]:
     data = [{"name": k, "intensity": v} for k, v in sim.lights().items()]
-    return {"data": data, "count": len(data)}
+    return page(data, limit=limit, offset=offset)
 
 
-@router.put("/lights/{name}", summary="Set a light's intensity (1 = default, 0 = off)")
-async def update_light(_: EngineerUser, sim: SimDep, name: str, body: LightIn) -> dict[str, Any]:
+def get_light(sim: SimDep, name: NameStr) -> str:
+    """The name of an existing light; :class:`NotFound` otherwise."""
     if name not in sim.lights():
-        raise ApiError(
-            404, "not_found", f"no light named {name!r}; lights: {', '.join(sim.lights())}"
-        )
+        raise NotFound(f"no light named {name!r}; lights: {', '.join(sim.lights())}")
+    return name
+
+
+def get_board_kind(sim: SimDep, kind: NameStr) -> str:
+    """A kind of board this cell has; :class:`NotFound` otherwise."""
+    if kind not in sim.board_kinds:
+        raise NotFound(f"no {kind!r} board; boards: {', '.join(sim.board_kinds)}")
+    return kind
+
+
+LightDep = Annotated[str, Depends(get_light)]
+BoardKindDep = Annotated[str, Depends(get_board_kind)]
+
+
+@router.put(
+    "/lights/{name}",
+    summary="Set a light's intensity (1 = default, 0 = off)",
+    response_model=LightOut,
+)
+async def update_light(
+    _: EngineerUser, sim: SimDep, name: LightDep, body: LightIn
+) -> dict[str, Any]:
     sim.set_light(name, body.intensity)
     return {"name": name, "intensity": sim.lights()[name]}
 
@@ -208,32 +318,40 @@ def _preset(sim: SimEngine, preset: str) -> list[list[float]]:
     return [[1, 0, 0, pos[0]], [0, -1, 0, pos[1]], [0, 0, -1, pos[2]], [0, 0, 0, 1]]
 
 
-@router.get("/boards", summary="Placed calibration boards with their true poses")
-async def read_boards(_: EngineerUser, sim: SimDep) -> dict[str, Any]:
+@router.get(
+    "/boards", summary="Placed calibration boards with their true poses", response_model=BoardsOut
+)
+async def read_boards(
+    _: EngineerUser, sim: SimDep, limit: Limit = 100, offset: Offset = 0
+) -> dict[str, Any]:
     data = [b.as_dict() for b in sim.boards()]
-    return {"data": data, "count": len(data), "kinds": list(sim.board_kinds)}
+    return {**page(data, limit=limit, offset=offset), "kinds": list(sim.board_kinds)}
 
 
-@router.put("/boards/{kind}", summary="Place a calibration board (chessboard or charuco)")
-async def update_board(_: EngineerUser, sim: SimDep, kind: str, body: BoardIn) -> dict[str, Any]:
-    if kind not in sim.board_kinds:
-        raise ApiError(404, "not_found", f"no {kind!r} board; boards: {', '.join(sim.board_kinds)}")
-    if (body.T_base_board is None) == (body.preset is None):
-        raise ApiError(422, "validation_error", "give exactly one of T_base_board and preset")
+@router.put(
+    "/boards/{kind}",
+    summary="Place a calibration board (chessboard or charuco)",
+    response_model=BoardOut,
+)
+async def update_board(
+    _: EngineerUser, sim: SimDep, kind: BoardKindDep, body: BoardIn
+) -> dict[str, Any]:
     T = body.T_base_board if body.T_base_board is not None else _preset(sim, body.preset or "")
     return {"board": sim.place_board(kind, T).as_dict()}
 
 
 @router.delete("/boards/{kind}", status_code=status.HTTP_204_NO_CONTENT, summary="Remove a board")
-async def delete_board(_: EngineerUser, sim: SimDep, kind: str) -> Response:
-    if kind not in sim.board_kinds:
-        raise ApiError(404, "not_found", f"no {kind!r} board; boards: {', '.join(sim.board_kinds)}")
+async def delete_board(_: EngineerUser, sim: SimDep, kind: BoardKindDep) -> Response:
     sim.remove_board(kind)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 # -- camera sensor ---------------------------------------------------------------------------
-@router.put("/camera", summary="Exposure, gain, noise and motion blur of the simulated camera")
+@router.put(
+    "/camera",
+    summary="Exposure, gain, noise and motion blur of the simulated camera",
+    response_model=CameraOut,
+)
 async def update_camera(
     _: EngineerUser, sim: SimDep, cell: CellDep, body: CameraIn
 ) -> dict[str, Any]:
