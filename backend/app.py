@@ -77,10 +77,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             await cell.start()
             app.state.cell = cell
             if settings.view3d_enabled:
-                from backend.view3d import View3D
+                from backend.view3d import View3D, ViewAccess
 
+                access = ViewAccess(
+                    db,
+                    secret=settings.secret_key.get_secret_value(),
+                    auth_enabled=settings.auth_enabled,
+                )
                 view = View3D(
-                    cell, host=settings.viser_host, port=settings.viser_port, sim=hardware.sim
+                    cell,
+                    host=settings.viser_host,
+                    port=settings.viser_port,
+                    sim=hardware.sim,
+                    access=access,
                 )
                 await view.start()
                 app.state.view3d = view

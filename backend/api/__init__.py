@@ -14,6 +14,7 @@ from backend.api.routes import (
     robot,
     sim,
     users,
+    view3d,
 )
 
 __all__ = ["api_router"]
@@ -31,5 +32,6 @@ for _r in (
     calibration,
     sim,
     live,
+    view3d,
 ):
     api_router.include_router(_r.router)
