@@ -44,6 +44,7 @@ function pageForHash() {
 function route() {
   if (!user) return;
   const page = pageForHash();
+  if (page && location.hash !== `#${page.id}`) history.replaceState(null, "", `#${page.id}`);
   if (page === current) return;
   if (current) {
     try { current.unmount(); } catch (e) { console.error(e); }
@@ -54,7 +55,6 @@ function route() {
   for (const a of document.querySelectorAll("#nav-pages a")) a.classList.toggle("active", a.dataset.page === page?.id);
   if (!page) return;
   document.title = `${page.title} · VisionCell`;
-  if (location.hash !== `#${page.id}`) history.replaceState(null, "", `#${page.id}`);
   page.mount(root, ctx);
 }
 
