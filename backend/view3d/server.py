@@ -258,11 +258,9 @@ class View3D:
     def _build_panel(self, server: viser.ViserServer) -> None:
         gui = server.gui
         self._status_md = gui.add_markdown("**Driver:** starting")
+        # Read-outs as text: the shared panel has no input any client could send values to.
         with gui.add_folder("Joints (deg)"):
-            self._joint_numbers = [
-                gui.add_number(f"q{i + 1}", initial_value=0.0, disabled=True, step=0.01)
-                for i in range(5)
-            ]
+            self._joints_md = gui.add_markdown("")
         server.on_client_connect(self._on_connect)
         server.on_client_disconnect(self._on_disconnect)
 
@@ -370,7 +368,8 @@ class View3D:
         if state.fault:
             flags.append(f"fault: {state.fault}")
         self._status_md.content = f"**Driver:** {self.cell.driver.name} ({', '.join(flags)})"
-        for number, value in zip(self._joint_numbers, state.q, strict=True):
-            deg = round(math.degrees(value), 2)
-            if number.value != deg:
-                number.value = deg
+        text = "  \n".join(
+            f"q{i + 1}: {math.degrees(value):8.2f}" for i, value in enumerate(state.q)
+        )
+        if self._joints_md.content != text:
+            self._joints_md.content = text

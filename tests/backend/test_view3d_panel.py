@@ -84,9 +84,11 @@ async def test_an_anonymous_client_moves_nothing(rig):
             anon = await _panel(view, {op.client.client_id})
             assert anon.grant is None
             assert set(anon.controls) == ANONYMOUS_CONTROLS  # never sent a control
-            # A hostile client presses everything it can name: every shared GUI input and
-            # the operator's own buttons (by uuid), then moves the speed slider.
+            # The shared panel holds read-outs only: no input anyone could press or set.
             shared = list(view.server.gui._gui_input_handle_from_uuid)
+            assert shared == []
+            # A hostile client presses what it can name: the operator's own buttons (by
+            # uuid), then moves the operator's speed slider.
             theirs = [uuid_of(op.controls[k]) for k in ("home", "estop", "reset", "stop")]
             for uuid in shared + theirs:
                 await anon_client.press(uuid)
@@ -227,3 +229,49 @@ async def test_without_auth_every_client_gets_the_engineer_panel(settings):
         await view.stop()
         await cell.stop()
         await db.dispose()
+
+
+class _FakeBelt:
+    """Stands in for the simulator's conveyor (the MuJoCo cell has its own tests)."""
+
+    def __init__(self) -> None:
+        self.running = False
+        self.releases = 0
+
+    @property
+    def conveyor_state(self):
+        return self
+
+    def configure_conveyor(self, *, running: bool) -> None:
+        self.running = running
+
+    def release_conveyor(self) -> None:
+        self.releases += 1
+
+
+async def test_only_engineers_get_the_conveyor_controls(rig):
+    view, _, _, tokens = rig
+    belt = _FakeBelt()
+    view.sim = belt  # read by the panels of clients that connect from now on
+    async with RawViserClient(view.port) as op_client:
+        op = await _panel(view, set())
+        async with RawViserClient(view.port) as eng_client:
+            eng = await _panel(view, {op.client.client_id})
+            await _sign_in(op_client, op, tokens["operator"])
+            await _sign_in(eng_client, eng, tokens["engineer"])
+            await _until(lambda: "home" in op.controls and "home" in eng.controls, what="sign-in")
+            await _engineer_and_operator(belt, op, eng, op_client, eng_client)
+
+
+async def _engineer_and_operator(belt, op, eng, op_client, eng_client) -> None:
+    """The engineer runs the belt; the operator's connection cannot reach those controls."""
+    assert "conveyor_running" not in op.controls and "conveyor_release" not in op.controls
+    await eng_client.update(uuid_of(eng.controls["conveyor_running"]), value=True)
+    await _until(lambda: belt.running, what="the belt to start")
+    await eng_client.press(uuid_of(eng.controls["conveyor_release"]))
+    await _until(lambda: belt.releases == 1, what="the release")
+    # The operator's connection cannot reach the engineer's controls.
+    await op_client.update(uuid_of(eng.controls["conveyor_running"]), value=False)
+    await op_client.press(uuid_of(eng.controls["conveyor_release"]))
+    await asyncio.sleep(0.5)
+    assert belt.running and belt.releases == 1

@@ -16,7 +16,9 @@ _SINKS = re.compile(
     r"\.(innerHTML|outerHTML)\b|insertAdjacentHTML|document\.write|\beval\s*\(|new\s+Function\s*\("
     r"|createContextualFragment|DOMParser"
 )
-_IMPORT = re.compile(r"""^\s*import\s[^'"]*?from\s+["']([^"']+)["']|^\s*import\s+["']([^"']+)["']""", re.M)
+_IMPORT = re.compile(
+    r"""^\s*import\s[^'"]*?from\s+["']([^"']+)["']|^\s*import\s+["']([^"']+)["']""", re.M
+)
 
 
 def _code(path: Path) -> str:
@@ -28,7 +30,14 @@ def _code(path: Path) -> str:
 
 def test_the_console_is_split_into_modules():
     names = {p.relative_to(WEB / "js").as_posix() for p in JS}
-    assert {"main.js", "api.js", "live.js", "dom.js", "pages/cell.js", "pages/calibration.js"} <= names
+    assert {
+        "main.js",
+        "api.js",
+        "live.js",
+        "dom.js",
+        "pages/cell.js",
+        "pages/calibration.js",
+    } <= names
     assert not (WEB / "app.js").exists()
     html = (WEB / "index.html").read_text()
     assert '<script type="module" src="/static/js/main.js"></script>' in html
@@ -47,7 +56,7 @@ def test_no_string_is_parsed_as_html_or_code(path):
 
 def test_the_sink_check_catches_an_assignment(tmp_path):
     bad = tmp_path / "bad.js"
-    bad.write_text('// innerHTML is fine in a comment\nnode.innerHTML = text;\n')
+    bad.write_text("// innerHTML is fine in a comment\nnode.innerHTML = text;\n")
     assert [n for n, line in enumerate(_code(bad).splitlines(), 1) if _SINKS.search(line)] == [2]
 
 

@@ -98,7 +98,8 @@ async function loadView() {
 async function openViewTab(ev) {
   ev.preventDefault();
   if (!view3dPort) return;
-  const win = window.open("about:blank", "_blank", "noopener");
+  const win = window.open("", "_blank");  // opened now, inside the click (popup rules)
+  if (win) win.opener = null;
   const url = await signedViewUrl(view3dPort);
   if (win) win.location.href = url;
 }
