@@ -50,9 +50,10 @@ function renderState(s, speed) {
 function renderJob(job) {
   if (!root) return;
   const list = $("#jobs", root);
-  let li = list.querySelector(`li[data-job="${Number(job.id)}"]`);
+  const id = String(job.id);
+  let li = list.querySelector(`li[data-job="${CSS.escape(id)}"]`);
   if (!li) {
-    li = el("li", { id: `job-${Number(job.id)}`, dataset: { job: Number(job.id) } });
+    li = el("li", { id: `job-${id}`, dataset: { job: id } });
     list.prepend(li);
     while (list.children.length > MAX_JOBS) list.lastElementChild.remove();
   }
