@@ -45,12 +45,19 @@ def test_jobs_arrive_as_events_and_the_link_reconnects(browser, server):
     assert not [u for u in requests if f"/api/jobs/{job_id}" in u]
     assert sum(1 for u in requests if u.endswith("/api/jobs")) == 1  # the list, once on mount
 
-    # The module on its own: a dropped socket comes back with backoff and says so.
+    page.close()
+
+    # The module on its own, in a page without the 3D view (its software rendering slows
+    # everything else): a dropped socket comes back with backoff and says so.
+    page = browser.new_page()
+    page.goto(server.base + "/")
     page.evaluate(_LIVE_PROBE, token)
-    page.wait_for_function("() => window.__probe.seen.some(([t]) => t === 'hello')")
+    page.wait_for_function("() => window.__probe.seen.some(([t]) => t === 'hello')", polling=250)
     page.evaluate("() => window.__probe.live.ws.close(4000, 'test drop')")
     page.wait_for_function(
-        "() => window.__probe.seen.some(([t, r]) => t === 'open' && r === true)", timeout=20_000
+        "() => window.__probe.seen.some(([t, r]) => t === 'open' && r === true)",
+        timeout=20_000,
+        polling=250,
     )
     kinds = [t for t, _ in page.evaluate("() => window.__probe.seen")]
     assert kinds.count("open") == 2 and kinds.count("close") == 1, kinds
@@ -58,7 +65,9 @@ def test_jobs_arrive_as_events_and_the_link_reconnects(browser, server):
 
     # A bad token: one "unauthorized", no retry loop.
     page.evaluate(_LIVE_PROBE, "vc_revoked")
-    page.wait_for_function("() => window.__probe.seen.some(([t]) => t === 'unauthorized')")
+    page.wait_for_function(
+        "() => window.__probe.seen.some(([t]) => t === 'unauthorized')", polling=250
+    )
     page.wait_for_timeout(2000)
     assert [t for t, _ in page.evaluate("() => window.__probe.seen")] == ["unauthorized"]
     page.close()

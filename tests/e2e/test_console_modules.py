@@ -23,7 +23,8 @@ def _frames_requested(requests: list[str]) -> int:
     return sum(1 for u in requests if u.endswith("/api/camera/frame.jpg"))
 
 
-def test_back_and_forward_move_between_pages_and_unmount_stops_polling(browser, server):
+def test_back_and_forward_move_between_pages_and_unmount_stops_polling(browser, shared_server):
+    server = shared_server
     token = server.token("e2e-router", "operator")
     page = browser.new_page(viewport={"width": 1400, "height": 900})
     requests: list[str] = []
@@ -31,7 +32,9 @@ def test_back_and_forward_move_between_pages_and_unmount_stops_polling(browser, 
     _sign_in(page, server, token)
     page.wait_for_selector("#cell-page")
     assert page.url.endswith("#cell")
-    page.wait_for_function("() => document.querySelector('#camera').src.startsWith('blob:')")
+    page.wait_for_function(
+        "() => document.querySelector('#camera').src.startsWith('blob:')", polling=250
+    )
     assert page.eval_on_selector_all("#nav-pages a", "as => as.map(a => a.textContent)") == [
         "Cell",
         "Calibration",
@@ -60,7 +63,7 @@ def test_back_and_forward_move_between_pages_and_unmount_stops_polling(browser, 
 
     # An unknown page falls back to the first one; the live link stayed up throughout.
     page.evaluate("() => { location.hash = '#nowhere'; }")
-    page.wait_for_function("() => location.hash === '#cell'")
+    page.wait_for_function("() => location.hash === '#cell'", polling=250)
     assert page.inner_text("#conn") == "live"
 
     # Each page module has the registry's shape.
@@ -83,7 +86,8 @@ def test_back_and_forward_move_between_pages_and_unmount_stops_polling(browser, 
     page.close()
 
 
-def test_the_camera_is_polled_only_while_the_image_is_visible(browser, server):
+def test_the_camera_is_polled_only_while_the_image_is_visible(browser, shared_server):
+    server = shared_server
     token = server.token("e2e-camera", "viewer")
     # One column under 1100 px: the camera card sits below the fold of a short window.
     page = browser.new_page(viewport={"width": 900, "height": 500})
@@ -99,7 +103,9 @@ def test_the_camera_is_polled_only_while_the_image_is_visible(browser, server):
 
     page.eval_on_selector("#camera", "img => img.scrollIntoView()")
     page.wait_for_function(
-        "() => document.querySelector('#camera').src.startsWith('blob:')", timeout=15_000
+        "() => document.querySelector('#camera').src.startsWith('blob:')",
+        timeout=15_000,
+        polling=250,
     )
     for _ in range(100):  # polling, while on screen (slowly: the 3D view renders in software)
         if _frames_requested(requests) >= 3:
@@ -115,7 +121,8 @@ def test_the_camera_is_polled_only_while_the_image_is_visible(browser, server):
     page.close()
 
 
-def test_the_console_makes_no_request_off_localhost(browser, server):
+def test_the_console_makes_no_request_off_localhost(browser, shared_server):
+    server = shared_server
     token = server.token("e2e-offline", "engineer")
     page = browser.new_page(viewport={"width": 1400, "height": 900})
     urls: list[str] = []

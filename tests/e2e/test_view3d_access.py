@@ -38,7 +38,8 @@ def _close_to(q: list[float], target: list[float]) -> bool:
     return all(abs(a - b) < 1e-4 for a, b in zip(q, target, strict=True))
 
 
-def test_anonymous_viser_page_shows_no_controls_and_a_token_signs_it_in(browser, server):
+def test_anonymous_viser_page_shows_no_controls_and_a_token_signs_it_in(browser, shared_server):
+    server = shared_server
     op = server.token("e2e-view-op", "operator")
     eng = server.token("e2e-view-eng", "engineer")
     ready = _move_ready(server, op)
@@ -81,7 +82,8 @@ def test_anonymous_viser_page_shows_no_controls_and_a_token_signs_it_in(browser,
     view.close()
 
 
-def test_the_console_view_arrives_signed_in_and_moves_the_arm(browser, server):
+def test_the_console_view_arrives_signed_in_and_moves_the_arm(browser, shared_server):
+    server = shared_server
     op = server.token("e2e-embed-op", "operator")
     ready = _move_ready(server, op)
     page = browser.new_page(viewport={"width": 1400, "height": 900})
@@ -90,7 +92,9 @@ def test_the_console_view_arrives_signed_in_and_moves_the_arm(browser, server):
     page.click("#login")
     page.wait_for_selector("#cell-page")
     src = page.wait_for_function(
-        "() => document.querySelector('#view3d').src.includes('vc-link')", timeout=30_000
+        "() => document.querySelector('#view3d').src.includes('vc-link')",
+        timeout=30_000,
+        polling=250,
     )
     assert src
     frame = page.frame_locator("#view3d")
