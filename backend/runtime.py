@@ -208,9 +208,14 @@ class CellRuntime:
         self._cell = cell
 
         if self._want_view:
-            from backend.view3d import View3D
+            from backend.view3d import View3D, ViewAccess
 
-            view = View3D(cell, host=s.viser_host, port=s.viser_port, sim=hardware.sim)
+            access = ViewAccess(
+                db, secret=s.secret_key.get_secret_value(), auth_enabled=s.auth_enabled
+            )
+            view = View3D(
+                cell, host=s.viser_host, port=s.viser_port, sim=hardware.sim, access=access
+            )
             await view.start()
             stack.push_async_callback(view.stop)
             self.view3d = view

@@ -14,6 +14,7 @@ from backend.api.routes import (
     robot,
     sim,
     users,
+    view3d,
 )
 from backend.api.schemas import ERROR_RESPONSES
 
@@ -32,5 +33,6 @@ for _r in (
     calibration,
     sim,
     live,
+    view3d,
 ):
     api_router.include_router(_r.router)

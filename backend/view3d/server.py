@@ -1,10 +1,15 @@
 """The viser 3D view: the arm drawn from the model, the camera frustum with the live image,
-the simulated conveyor and objects, a control panel.
+the simulated conveyor and objects, a control panel per client.
 
-viser runs its own web server (own port, own thread).  Its GUI callbacks run on viser's
-thread; they hand work to the application's event loop with
-``asyncio.run_coroutine_threadsafe``, through the same :class:`~backend.cell.Cell` methods
-the REST endpoints use.
+viser runs its own web server (own port, own thread) with no authentication hook.  The
+shared panel holds read-outs only (driver status, joints); every control lives in a
+per-client panel (:mod:`backend.view3d.panel`) that follows the client's grant
+(:mod:`backend.view3d.access`): anonymous clients see the scene only.  A client signs in
+with an API token typed into its panel, or arrives signed in through a short-lived link
+that the console puts into its embedded view's websocket URL
+(``?websocket=ws://HOST:PORT/vc-link/LINK``).  GUI callbacks run on viser's threads; they
+hand work to the application's event loop with ``asyncio.run_coroutine_threadsafe``,
+through the same :class:`~backend.cell.Cell` methods the REST endpoints use.
 """
 
 from __future__ import annotations
@@ -14,7 +19,6 @@ import contextlib
 import logging
 import math
 import time
-from collections.abc import Coroutine
 from typing import TYPE_CHECKING, Any
 
 import cv2
@@ -24,10 +28,11 @@ import viser.transforms as vtf
 
 from backend.calibration.autoplan import NOMINAL_T_EE_CAM
 from backend.cell import Cell
+from backend.view3d.access import ViewAccess, link_from_path
 from backend.view3d.arm import arm_shapes, link_poses
 from backend.view3d.calibviews import CalibrationFrusta
+from backend.view3d.panel import ClientPanel
 from backend.view3d.simscene import SimScene
-from vision.errors import VisionCellError
 
 if TYPE_CHECKING:
     from robot.sim import SimEngine
@@ -43,6 +48,20 @@ T_EE_CAM_PLACEHOLDER = NOMINAL_T_EE_CAM
 
 def _wxyz(R: np.ndarray) -> np.ndarray:
     return vtf.SO3.from_matrix(R).wxyz
+
+
+def _request_path(server: viser.ViserServer | None, client_id: int) -> str | None:
+    """The path (with query) of a client's websocket request, or None.
+
+    viser 1.1 has no public accessor for it; the connection object it keeps per client
+    (a ``websockets`` ``ServerConnection``) carries the opening request.  If a later viser
+    changes these internals, this answers None and clients sign in with a token instead.
+    """
+    ws_server = getattr(server, "_websock_server", None)
+    conn = getattr(ws_server, "_live_connections", {}).get(client_id)
+    request = getattr(conn, "request", None)
+    path = getattr(request, "path", None)
+    return path if isinstance(path, str) else None
 
 
 class View3D:
@@ -63,6 +82,11 @@ class View3D:
         How often the frustum's image is refreshed with the newest camera frame.
     sim_rate_hz : float
         How often the simulated objects' poses are refreshed.
+    access : ViewAccess, optional
+        Who may do what (:mod:`backend.view3d.access`).  Without it every client sees the
+        scene only: no control is ever shown.
+    recheck_s : float
+        How often signed-in clients' tokens are looked up again (revocation, role changes).
     """
 
     def __init__(
@@ -75,8 +99,16 @@ class View3D:
         sim: SimEngine | None = None,
         image_rate_hz: float = 5.0,
         sim_rate_hz: float = 10.0,
+        access: ViewAccess | None = None,
+        recheck_s: float = 2.0,
     ) -> None:
+        if not 0.05 <= recheck_s <= 60.0:
+            raise ValueError(f"recheck_s must be in [0.05, 60] s, got {recheck_s!r}")
         self.cell = cell
+        self.access = access
+        self.recheck_s = float(recheck_s)
+        #: The panel of each connected client, by viser client id.
+        self.panels: dict[int, ClientPanel] = {}
         self.host = host
         self.requested_port = port
         self.rate_hz = rate_hz
@@ -85,6 +117,7 @@ class View3D:
         self.sim = sim
         self.server: viser.ViserServer | None = None
         self._task: asyncio.Task[None] | None = None
+        self._recheck_task: asyncio.Task[None] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._handles: list[Any] = []
         self._frustum: Any = None
@@ -158,13 +191,15 @@ class View3D:
         self._build_scene(server)
         self._build_panel(server)
         self._task = asyncio.create_task(self._update_loop(), name="view3d-update")
+        self._recheck_task = asyncio.create_task(self._recheck_loop(), name="view3d-access")
 
     async def stop(self) -> None:
         """Stop the update task and the server."""
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
+        for task in (self._task, self._recheck_task):
+            if task is not None:
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
         if self._calib_frusta is not None:
             self._calib_frusta.close()
         if self.server is not None:
@@ -222,57 +257,59 @@ class View3D:
     def _build_panel(self, server: viser.ViserServer) -> None:
         gui = server.gui
         self._status_md = gui.add_markdown("**Driver:** starting")
+        # Read-outs as text: the shared panel has no input any client could send values to.
         with gui.add_folder("Joints (deg)"):
-            self._joint_numbers = [
-                gui.add_number(f"q{i + 1}", initial_value=0.0, disabled=True, step=0.01)
-                for i in range(5)
-            ]
-        self._speed = gui.add_slider(
-            "Speed", min=0.05, max=1.0, step=0.05, initial_value=self.cell.speed
-        )
-        home = gui.add_button("Home")
-        stop = gui.add_button("Stop")
-        estop = gui.add_button("E-STOP", color="red")
-        reset = gui.add_button("Reset E-STOP")
-        self._message_md = gui.add_markdown("")
+            self._joints_md = gui.add_markdown("")
+        server.on_client_connect(self._on_connect)
+        server.on_client_disconnect(self._on_disconnect)
 
-        @self._speed.on_update
-        def _(_: Any) -> None:
-            self.cell.speed = float(self._speed.value)
-
-        @home.on_click
-        def _(_: Any) -> None:
-            self._submit(self._home())
-
-        @stop.on_click
-        def _(_: Any) -> None:
-            self._submit(self.cell.stop_motion())
-
-        @estop.on_click
-        def _(_: Any) -> None:
-            self._submit(self.cell.estop())
-
-        @reset.on_click
-        def _(_: Any) -> None:
-            self._submit(self.cell.reset())
-
-    async def _home(self) -> None:
-        self.cell.home()
-
-    def _submit(self, coro: Coroutine[Any, Any, Any]) -> None:
-        """Run ``coro`` on the application loop (called from viser's thread)."""
+    # -- per-client panels ---------------------------------------------------------------
+    def _on_connect(self, client: viser.ClientHandle) -> None:
+        """A browser connected (viser's thread): anonymous until a grant arrives."""
         assert self._loop is not None
-        fut = asyncio.run_coroutine_threadsafe(coro, self._loop)
+        panel = ClientPanel(
+            client, cell=self.cell, access=self.access, loop=self._loop, sim=self.sim
+        )
+        open_grant = self.access.open_grant() if self.access is not None else None
+        panel.apply(open_grant)
+        self.panels[client.client_id] = panel
+        link = link_from_path(_request_path(self.server, client.client_id))
+        access = self.access
+        if access is not None and link is not None and open_grant is None:
 
-        def done(f: Any) -> None:
-            exc = f.exception()
-            if exc is not None and self.server is not None:
-                text = exc.detail if isinstance(exc, VisionCellError) else str(exc)
-                self._message_md.content = f"**Refused:** {text}"
-            elif self.server is not None:
-                self._message_md.content = ""
+            async def from_link() -> None:
+                grant = await access.from_link(link)
+                if grant is None:
+                    panel.say("The console link has expired or is not valid: sign in with a token.")
+                else:
+                    panel.apply(grant)
 
-        fut.add_done_callback(done)
+            panel.submit(from_link(), clear=False)
+
+    def _on_disconnect(self, client: viser.ClientHandle) -> None:
+        panel = self.panels.pop(client.client_id, None)
+        if panel is not None:
+            panel.close()
+
+    async def _recheck_loop(self) -> None:
+        """Follow token revocation, disabled users and role changes of signed-in clients."""
+        while True:
+            await asyncio.sleep(self.recheck_s)
+            if self.access is None:
+                continue
+            for panel in list(self.panels.values()):
+                grant = panel.grant
+                if grant is None or grant.token_id is None:
+                    continue
+                try:
+                    fresh = await self.access.recheck(grant)
+                except Exception:  # a database hiccup must not end the loop
+                    log.exception("3D view: re-checking a client's grant failed")
+                    continue
+                if fresh != grant and panel.grant == grant:
+                    panel.apply(fresh)
+                    if fresh is None:
+                        panel.say("Signed out: the token was revoked or the user disabled.")
 
     # -- updates -------------------------------------------------------------------------
     async def _update_loop(self) -> None:
@@ -330,7 +367,8 @@ class View3D:
         if state.fault:
             flags.append(f"fault: {state.fault}")
         self._status_md.content = f"**Driver:** {self.cell.driver.name} ({', '.join(flags)})"
-        for number, value in zip(self._joint_numbers, state.q, strict=True):
-            deg = round(math.degrees(value), 2)
-            if number.value != deg:
-                number.value = deg
+        text = "  \n".join(
+            f"q{i + 1}: {math.degrees(value):8.2f}" for i, value in enumerate(state.q)
+        )
+        if self._joints_md.content != text:
+            self._joints_md.content = text

@@ -58,10 +58,7 @@ async def test_view_starts_on_its_pinned_port_and_tracks_the_arm(cell):
         assert view.updates > before + 2, (view.updates, before, job.result)
         ee = view._handles[-1]
         np.testing.assert_allclose(ee.position, T_base_ee(ASEA.q_ready)[:3, 3], atol=1e-6)
-        # The panel's buttons run on viser's thread and reach the cell through the loop.
-        await asyncio.to_thread(view._submit, cell.estop())
-        await asyncio.sleep(0.1)
-        assert cell.driver.state.estopped
+        # The panel's buttons are per client and follow roles: tests/backend/test_view3d_panel.py.
     finally:
         await view.stop()
 

@@ -130,3 +130,11 @@ def server(tmp_path) -> Iterator[Server]:
     s = start_server(tmp_path)
     yield s
     s.stop()
+
+
+@pytest.fixture(scope="module")
+def shared_server(tmp_path_factory) -> Iterator[Server]:
+    """One server for a module's tests that only read or make their own users."""
+    s = start_server(tmp_path_factory.mktemp("shared-server"))
+    yield s
+    s.stop()

@@ -1,0 +1,69 @@
+// DOM helpers: every text goes in as a text node, never as HTML.
+
+/** The first element matching `sel` under `root` (default: the document). */
+export const $ = (sel, root = document) => root.querySelector(sel);
+
+/** All elements matching `sel` under `root`, as an array. */
+export const $$ = (sel, root = document) => Array.from(root.querySelectorAll(sel));
+
+/**
+ * Build an element: `el("td", {className: "x", dataset: {id: 3}}, "text", child, ...)`.
+ * Strings and numbers become text nodes; null/undefined/false children are skipped.
+ */
+export function el(tag, props = {}, ...children) {
+  const node = document.createElement(tag);
+  for (const [key, value] of Object.entries(props || {})) {
+    if (value === undefined || value === null) continue;
+    if (key === "dataset") Object.assign(node.dataset, value);
+    else if (key === "on") for (const [ev, fn] of Object.entries(value)) node.addEventListener(ev, fn);
+    else if (key === "className" || key === "id" || key === "title" || key === "hidden"
+      || key === "colSpan" || key === "href" || key === "type" || key === "value") node[key] = value;
+    else node.setAttribute(key, String(value));
+  }
+  append(node, ...children);
+  return node;
+}
+
+/** Append children (strings become text nodes). */
+export function append(node, ...children) {
+  for (const child of children.flat()) {
+    if (child === undefined || child === null || child === false) continue;
+    node.append(child instanceof Node ? child : document.createTextNode(String(child)));
+  }
+  return node;
+}
+
+/** Set the text of the element matching `sel` under `root`. */
+export function setText(sel, text, root = document) {
+  const node = typeof sel === "string" ? $(sel, root) : sel;
+  if (node) node.textContent = text === undefined || text === null ? "" : String(text);
+}
+
+/** A deep copy of the `<template id=...>` content (static markup from index.html). */
+export function fromTemplate(id) {
+  const tpl = document.getElementById(id);
+  if (!(tpl instanceof HTMLTemplateElement)) throw new Error(`no template #${id}`);
+  return tpl.content.cloneNode(true);
+}
+
+/** Hide every `[data-min-role]` element under `root` that `role` may not use. */
+export function applyRoles(root, role, rank) {
+  for (const node of $$("[data-min-role]", root)) node.hidden = rank(role) < rank(node.dataset.minRole);
+}
+
+/**
+ * Show a fetched image blob in `img`, freeing the previous object URL.
+ * Returns the new URL.
+ */
+export function showBlob(img, blob) {
+  const url = URL.createObjectURL(blob);
+  const old = img.src;
+  img.src = url;
+  if (old.startsWith("blob:")) URL.revokeObjectURL(old);
+  return url;
+}
+
+/** Free an image's object URL (on unmount). */
+export function releaseBlob(img) {
+  if (img && img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
+}
