@@ -61,18 +61,25 @@ def latency_vs_size(latency: list[dict[str, Any]], path: Path) -> Path:
 
 
 def policies(rows: list[dict[str, Any]], path: Path) -> Path:
-    """Views visited and accuracy per viewpoint policy."""
-    fig = _fig(6.0, 3.0)
+    """Views visited and correct outcomes per viewpoint policy, one bar group per scenario."""
+    fig = _fig(7.0, 3.0)
     ax1, ax2 = fig.subplots(1, 2)
-    names = [r["policy"] for r in rows]
-    ax1.bar(names, [r["mean_views"] for r in rows], color="tab:blue")
+    scen = list(dict.fromkeys(r["scenario"] for r in rows))
+    pols = list(dict.fromkeys(r["policy"] for r in rows))
+    width = 0.8 / len(scen)
+    for i, sc in enumerate(scen):
+        by = {r["policy"]: r for r in rows if r["scenario"] == sc}
+        x = [j + (i - (len(scen) - 1) / 2) * width for j in range(len(pols))]
+        ax1.bar(x, [by[p]["mean_views"] for p in pols], width, label=sc)
+        ax2.bar(x, [100 * by[p]["accuracy"] for p in pols], width, label=sc)
     ax1.set_ylabel("mean views visited")
-    ax2.bar(names, [100 * r["accuracy"] for r in rows], color="tab:green")
     ax2.set_ylabel("correct outcome (%)")
-    ax2.set_ylim(min(100 * r["accuracy"] for r in rows) - 5, 100)
+    ax2.set_ylim(max(0, min(100 * r["accuracy"] for r in rows) - 10), 100)
     for ax in (ax1, ax2):
+        ax.set_xticks(range(len(pols)), pols)
         ax.tick_params(axis="x", labelsize=7, rotation=20)
         ax.grid(alpha=0.3, axis="y")
+    ax1.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     return path

@@ -60,6 +60,7 @@ __all__ = [
     "Candidate",
     "Recognition",
     "decide",
+    "decide_with",
     "recognise",
     "resolve_threshold",
 ]
@@ -230,6 +231,18 @@ def decide(
         Passing models within the margin of the best, best first.
     """
     glob, per_model = resolve_threshold(threshold)
+    return decide_with(scores, glob, per_model, margin=margin)
+
+
+def decide_with(
+    scores: Mapping[str, float],
+    threshold: float,
+    per_model: Mapping[str, float],
+    *,
+    margin: float = DEFAULT_MARGIN,
+) -> tuple[str, str | None, tuple[str, ...]]:
+    """:func:`decide` with the thresholds given as a global value and a per-model mapping."""
+    glob = threshold
     margin = _check_unit(margin, "margin")
     if margin >= 1.0:
         raise ValueError(f"margin must be below 1, got {margin!r}")
@@ -406,6 +419,10 @@ def recognise(
     ):
         if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= hi:
             raise ValueError(f"{name} must be an int in 1..{hi}, got {value!r}")
+    from vision.recognition.threshold import ThresholdChoice
+
+    if isinstance(threshold, ThresholdChoice) and viewpoint is not None:
+        threshold = threshold.at(viewpoint)
     glob, per_model = resolve_threshold(threshold)
     _check_unit(margin, "margin")
     if models is not None and (

@@ -23,7 +23,11 @@ Policies
 
 Fused score
     After several views, a model's score is the mean of its scores over the visited views
-    (0 where it was not verified); the decision rule of section 3.5.1 is applied to it.
+    (0 where it was not verified), and its threshold the mean of its thresholds there
+    (:meth:`ThresholdChoice.at` each viewpoint); the decision rule of section 3.5.1 is
+    applied to them. A top view that passes no threshold still sends the models above the
+    choice's ``candidate`` bar (within the margin of the best) to a side view: models alike
+    from the top raise the top threshold beyond reach, and only the side view can decide.
 """
 
 from __future__ import annotations
@@ -42,6 +46,7 @@ from vision.recognition.recognise import (
     DEFAULT_MARGIN,
     Recognition,
     decide,
+    decide_with,
     recognise,
     resolve_threshold,
 )
@@ -191,10 +196,18 @@ async def recognise_views(
         raise ValueError(f"confusion_limit must be in [0, 1], got {confusion_limit!r}")
     decide({}, threshold=threshold, margin=margin)  # validates threshold and margin before moving
     choice = threshold if isinstance(threshold, ThresholdChoice) else None
-    glob, per_model = resolve_threshold(threshold)
 
-    def bar(model: str) -> float:
+    def at(vp: int) -> float | ThresholdChoice | None:
+        return choice.at(vp) if choice is not None else threshold
+
+    def bar(model: str, vp: int) -> float:
+        glob, per_model = resolve_threshold(at(vp))
         return per_model.get(model, glob)
+
+    def fused_decision(models: list[str]) -> tuple[dict[str, float], tuple]:
+        fused = _fuse(views, models)
+        bars = {m: float(np.mean([bar(m, vp) for vp in visited])) for m in models}
+        return fused, decide_with(fused, 1.0, bars, margin=margin)
 
     visited: list[int] = []
     views: list[Recognition] = []
@@ -207,7 +220,7 @@ async def recognise_views(
             image,
             viewpoint=viewpoint,
             mask=mask,
-            threshold=threshold,
+            threshold=at(vp),
             margin=margin,
             models=models,
         )
@@ -241,9 +254,20 @@ async def recognise_views(
         return single(r)
 
     top = await see(1, 1)
-    if policy == "top-only" or max_views == 1 or top.decision == "unknown":
+    if policy == "top-only" or max_views == 1:
         return single(top)
     contenders = top.contenders
+    if top.decision == "unknown":
+        # Nothing certain from the top; models above the candidate bar are worth a side view.
+        cand = at(1).candidate if choice is not None else bar("", 1)
+        best = top.score
+        contenders = tuple(
+            m
+            for m in sorted(top.scores, key=lambda m: (-top.scores[m], m))
+            if top.scores[m] > cand and top.scores[m] >= (1.0 - margin) * best
+        )
+        if not contenders:
+            return single(top)
     if policy == "best-next" and top.decision == "recognized":
         assert choice is not None
         alike = _top_confusers(choice, top.model, float(confusion_limit))
@@ -255,16 +279,14 @@ async def recognise_views(
         if len(visited) >= max_views:
             break
         side = await see(vp, vp, models)
-        fused = _fuse(views, models)
-        decision, model, cont = decide(fused, threshold=threshold, margin=margin)
-        if decision == "recognized" and side.scores.get(model, 0.0) > bar(model):
+        fused, (decision, model, cont) = fused_decision(models)
+        if decision == "recognized" and side.scores.get(model, 0.0) > bar(model, vp):
             return result(decision, model, fused, cont)
         if cont:
             models = list(cont)
     if len(visited) == 1:  # no contender has side views: the top view is all there is
         return single(top)
-    fused = _fuse(views, models)
-    decision, model, cont = decide(fused, threshold=threshold, margin=margin)
+    fused, (decision, model, cont) = fused_decision(models)
     if decision == "recognized":
         # The side check did not confirm the winner on its own view: report the doubt.
         decision, model, cont = "ambiguous", None, cont
