@@ -239,7 +239,9 @@ def scenarios() -> dict[
     11..15 presented as unknown. ``twin-tops``: ten models whose top views come in pairs
     (model ``tTsS`` shows COIL object T from the top, 1..5, each T shared by two models, and
     object S from the sides, 6..15), the chapter's case of models alike from the top; the
-    unknowns are untrained combinations (a trained top with another model's sides).
+    unknowns are untrained combinations (a trained top with another model's sides). The
+    second model of a pair is trained from the top at -5, +5, +15 degrees instead of -10, 0,
+    +10, so that the twins' training photographs differ.
     """
     coil_layout = {_name(o): dict.fromkeys(VIEW_K, o) for o in range(1, 11)}
     coil_trials = [(_name(o), dict.fromkeys(VIEW_K, o)) for o in range(1, 11)]
@@ -262,9 +264,14 @@ def policies(images, feats, *, quick: bool) -> tuple[list[dict[str, Any]], dict[
     shifts = (-3, -1, 1, 3) if not quick else (-1, 3)
     for scenario, (layout, presentations) in scenarios().items():
         ix = ViewIndex("sift")
+        taken: set[tuple[int, int]] = set()
         for model, vps in layout.items():
             for vp, o in vps.items():
-                for dk in (-2, 0, 2):
+                # A top shared by two models is trained at other angles for the second one
+                # (two parts alike from the top, never the same photographs).
+                offsets = (-1, 1, 3) if (vp, o) in taken else (-2, 0, 2)
+                taken.add((vp, o))
+                for dk in offsets:
                     ix.add(model, feats[(o, (VIEW_K[vp] + dk) % rd.N_VIEWS)], viewpoint=vp)
         choice = choose_threshold(
             ix, target_far=TARGET_FAR, progress=Progress(f"{scenario} threshold", 2 * len(ix))

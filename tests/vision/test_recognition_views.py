@@ -167,3 +167,49 @@ async def test_look_returning_junk_is_refused(index):
         await recognise_views(lambda vp: "picture", index, policy="top-only")
     with pytest.raises(ValueError, match="uint8"):
         await recognise_views(lambda vp: np.zeros((64, 64)), index, policy="top-only")
+
+
+@pytest.fixture(scope="module")
+def twin_index() -> ViewIndex:
+    """A and B share their top view; two trained views per model and viewpoint."""
+    ix = ViewIndex("sift")
+    for m in ("A", "B", "C"):
+        for angle in (-10.0, 10.0):
+            ix.add(m, rotated(textured(TOP[m]), angle), viewpoint=1)
+            for vp in (2, 3):
+                ix.add(m, rotated(textured(SIDE[(m, vp)]), angle), viewpoint=vp)
+    return ix
+
+
+@pytest.fixture(scope="module")
+def twin_choice(twin_index):
+    from vision.recognition import choose_threshold
+
+    return choose_threshold(twin_index, target_far=0.1)
+
+
+def test_twins_raise_the_top_threshold_not_the_candidate_bar(twin_choice):
+    ch = twin_choice
+    assert set(ch.per_viewpoint) == {1, 2, 3}
+    # A's top view explains B's as well as B's own: an untrained look-alike would pass
+    assert ch.per_viewpoint[1] > 0.5
+    assert ch.per_viewpoint[2] < 0.2 and ch.per_viewpoint[3] < 0.2
+    # ... but without the twins, impostors score low: the bar for asking a side view
+    assert ch.candidate_viewpoint[1] < 0.2 and ch.candidate <= ch.threshold
+    assert ch.confusion[1]["A"]["B"] == 1.0 and ch.confusion[1]["A"]["C"] == 0.0
+    assert ch.confusion[2]["A"]["B"] == 0.0
+    top = ch.at(1)
+    assert top.threshold == ch.per_viewpoint[1] and top.per_model == ch.per_model_viewpoint[1]
+    assert ch.at(2).threshold == ch.per_viewpoint[2]
+
+
+@pytest.mark.parametrize("policy", ["two-views", "best-next"])
+async def test_side_view_decides_between_twins(twin_index, twin_choice, policy):
+    r = await recognise_views(Script("B"), twin_index, policy=policy, threshold=twin_choice)
+    assert (r.decision, r.model) == ("recognized", "B")
+    assert r.viewpoints[0] == 1 and len(r.viewpoints) >= 2
+    assert r.views[0].decision != "recognized"  # the top view alone cannot tell
+    r = await recognise_views(Script("C"), twin_index, policy=policy, threshold=twin_choice)
+    assert r.model == "C"
+    r = await recognise_views(Script(None), twin_index, policy=policy, threshold=twin_choice)
+    assert r.decision != "recognized" and r.viewpoints == (1,)

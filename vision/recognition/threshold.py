@@ -36,7 +36,8 @@ Per viewpoint
     viewpoint's threshold up, as they should: the top view cannot tell them apart, a side
     view must. ``candidate`` is the lower bar for *considering* a model worth a side view:
     the same rule on the impostor scores without *twins*, the other models that explained a
-    held-out view at least as well as its own model did in the leave-one-view-out run (they
+    held-out view about as well as its own model did (within the ambiguity margin
+    :data:`DEFAULT_MARGIN`, or better) in the leave-one-view-out run (they
     are indistinguishable from it at that viewpoint, so their scores say nothing about an
     untrained object); at most ``threshold``.
 
@@ -57,7 +58,7 @@ import numpy as np
 
 from vision.features import Features
 from vision.recognition.index import ViewIndex
-from vision.recognition.recognise import evaluate
+from vision.recognition.recognise import DEFAULT_MARGIN, evaluate
 
 __all__ = [
     "RULES",
@@ -322,9 +323,14 @@ def choose_threshold(
             genuine_vps.append(v.viewpoint)
             lovo.append((v.viewpoint, v.model, scores))
             g_v = scores.get(v.model, 0.0)
-            # Models explaining the held-out view at least as well as its own model does are
-            # indistinguishable from it at this viewpoint ("twins").
-            twins[v.view_id] = {b for b, s in scores.items() if b != v.model and s > 0 and s >= g_v}
+            # Models explaining the held-out view about as well as its own model does (within
+            # the decision's ambiguity margin, or better) are indistinguishable from it at this
+            # viewpoint ("twins").
+            twins[v.view_id] = {
+                b
+                for b, s in scores.items()
+                if b != v.model and s > 0 and s >= (1.0 - DEFAULT_MARGIN) * g_v
+            }
         tick()
     if not genuine:
         raise ValueError("no model has two trained views of one viewpoint: nothing to hold out")

@@ -26,7 +26,8 @@ Fused score
     (0 where it was not verified), and its threshold the mean of its thresholds there
     (:meth:`ThresholdChoice.at` each viewpoint); the decision rule of section 3.5.1 is
     applied to them. A top view that passes no threshold still sends the models above the
-    choice's ``candidate`` bar (within the margin of the best) to a side view: models alike
+    choice's ``candidate`` bar (the best :data:`MAX_CONTENDERS`) to a side view, and then only
+    the side views are fused: models alike
     from the top raise the top threshold beyond reach, and only the side view can decide.
 """
 
@@ -58,6 +59,9 @@ POLICIES = ("naive", "top-only", "two-views", "best-next")
 #: ``best-next`` accepts a top-view recognition when every other model passes on less than
 #: this share of the model's held-out top views.
 DEFAULT_CONFUSION_LIMIT = 0.05
+
+#: Side views are checked against at most this many contenders from an inconclusive top view.
+MAX_CONTENDERS = 8
 
 LookResult = np.ndarray | Features | tuple[np.ndarray, np.ndarray | None]
 Look = Callable[[int], LookResult | Awaitable[LookResult]]
@@ -204,9 +208,12 @@ async def recognise_views(
         glob, per_model = resolve_threshold(at(vp))
         return per_model.get(model, glob)
 
+    skip_top = False  # set when the top view only shortlisted (it could not rank)
+
     def fused_decision(models: list[str]) -> tuple[dict[str, float], tuple]:
-        fused = _fuse(views, models)
-        bars = {m: float(np.mean([bar(m, vp) for vp in visited])) for m in models}
+        first = 1 if skip_top and len(views) > 1 else 0
+        fused = _fuse(views[first:], models)
+        bars = {m: float(np.mean([bar(m, vp) for vp in visited[first:]])) for m in models}
         return fused, decide_with(fused, 1.0, bars, margin=margin)
 
     visited: list[int] = []
@@ -259,15 +266,14 @@ async def recognise_views(
     contenders = top.contenders
     if top.decision == "unknown":
         # Nothing certain from the top; models above the candidate bar are worth a side view.
+        # The top view could not rank them, so the margin does not prune here.
         cand = at(1).candidate if choice is not None else bar("", 1)
-        best = top.score
         contenders = tuple(
-            m
-            for m in sorted(top.scores, key=lambda m: (-top.scores[m], m))
-            if top.scores[m] > cand and top.scores[m] >= (1.0 - margin) * best
-        )
+            m for m in sorted(top.scores, key=lambda m: (-top.scores[m], m)) if top.scores[m] > cand
+        )[:MAX_CONTENDERS]
         if not contenders:
             return single(top)
+        skip_top = True
     if policy == "best-next" and top.decision == "recognized":
         assert choice is not None
         alike = _top_confusers(choice, top.model, float(confusion_limit))
