@@ -31,18 +31,18 @@ class IndexFormatError(VisionCellError, ValueError):
     http_status = 422
 
 
-def dump(self: ViewIndex) -> bytes:
-    """Serialise ``self`` (views and options, not the ANN structures)."""
-    views = self.views
+def dump(index: ViewIndex) -> bytes:
+    """Serialise ``index`` (views and options, not the ANN structures)."""
+    views = index.views
     header = {
         "format": FORMAT,
         "version": FORMAT_VERSION,
-        "method": self.method,
-        "max_features": self.max_features,
-        "geometry": self.geometry,
-        "feature_options": self.feature_options,
-        "min_features": self.min_features,
-        "next_id": self.next_id,
+        "method": index.method,
+        "max_features": index.max_features,
+        "geometry": index.geometry,
+        "feature_options": index.feature_options,
+        "min_features": index.min_features,
+        "next_id": index.next_id,
         "views": [
             {
                 "id": v.view_id,
