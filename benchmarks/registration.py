@@ -7,8 +7,15 @@ Per method and sequence: extraction time per image, matching time (exact ratio t
 mutual check), recall at 1-precision = 0.1, area under the recall vs 1-precision curve and best
 recall (Mikolajczyk and Schmid 2005, chapter eqs. 24-25; see ``vision.evaluation``). OpenCV SIFT
 is the baseline measured in the same run (ratios vs SIFT). Sequences: Oxford graf, boat, bikes
-(pairs 1-N), illumination changes of scikit-image photos, synthetic rescaling (Figure 12) and
-simulated wheel views (Figure 15/16). Every image is capped at ``--max-features`` strongest
+(pairs 1-N), illumination changes of scikit-image photos, synthetic rescaling (Figure 12),
+simulated wheel views (Figure 15/16) and real light changes seen by a fixed camera (issue 17:
+MIMO lab scenes as 8-bit sRGB and as 16-bit linear RGB, SFU scenes as dark 8-bit linear RGB;
+every lamp combination against a reference, identity geometry, see
+``registration_data.real_illumination_pairs``). On the 16-bit set the grey methods and
+OpponentSIFT see its 8-bit sRGB encoding, the colour methods the linear values; keypoints are
+the same. Labels ``color-sift:chapter`` / ``color-surf:chapter`` are the chapter's layout (the
+colour descriptor as first built), ``color-sift:srgb`` / ``color-surf:srgb`` linearise the
+sRGB set before the ratios (run on the 8-bit sRGB set only). Every image is capped at ``--max-features`` strongest
 keypoints (default 2000) for all methods alike; matching times are the best of 3 runs. Methods whose module is not importable are
 skipped with the reason. Plots go to ``--plots`` (default ``var/bench/registration``).
 """
@@ -35,6 +42,7 @@ from benchmarks import registration_data as rd
 from benchmarks import registration_figures as figs
 from vision.evaluation import evaluate_pair
 from vision.features import METHODS, extract
+from vision.features.colour_input import srgb8_from_linear
 from vision.registration import match, verify
 
 REPO = Path(__file__).resolve().parents[1]
@@ -43,13 +51,24 @@ err = Console(stderr=True)
 BASELINE = "sift"
 COLOUR_BASE = {"color-sift": "sift", "color-surf": "surf"}
 FULL_SUFFIX = ":full"
+#: Label suffixes: the colour descriptor with other options, run beside the default one.
+VARIANTS: dict[str, dict[str, Any]] = {
+    FULL_SUFFIX: {"reduce": False},
+    ":chapter": {"layout": "chapter"},
+    ":srgb": {"transfer": "srgb"},
+}
+#: Variants that only make sense on some sets (sRGB linearisation on sRGB images).
+VARIANT_SETS = {":srgb": ("mimo-srgb8",)}
+REAL = rd.REAL_ILLUMINATION_SETS
 DOCS_MAX_BYTES = 300_000  # README images stay small
+WHITE = rd.MIMO_WHITE_LEVEL  # the only uint16 images are MIMO's
 ALL_SEQUENCES = (
     *rd.OXFORD_SEQUENCES,
     "illumination",
     "scale",
     "sim-wheel",
-)  # the colour descriptor with reduce=False (no PCA)
+    *rd.REAL_ILLUMINATION_SETS,
+)
 
 
 def _log(msg: str) -> None:
@@ -57,9 +76,25 @@ def _log(msg: str) -> None:
 
 
 def _spec(label: str) -> tuple[str, dict[str, Any]]:
-    if label.endswith(FULL_SUFFIX):
-        return label.removesuffix(FULL_SUFFIX), {"reduce": False}
+    for suffix, opts in VARIANTS.items():
+        if label.endswith(suffix):
+            return label.removesuffix(suffix), dict(opts)
     return label, {}
+
+
+def _suffix(label: str) -> str:
+    return next((s for s in VARIANTS if label.endswith(s)), "")
+
+
+def _extract(img: np.ndarray, method: str, max_features: int, opts: dict[str, Any]):
+    """``extract`` as each method sees a pair's image: a uint16 (linear) image goes to the
+    colour methods as it is, with the set's white level, and to the others as its 8-bit sRGB
+    encoding (what the camera's 8-bit output shows; the colour methods detect on the same)."""
+    if img.dtype == np.uint16:
+        if method in COLOUR_BASE:
+            return extract(img, method, max_features=max_features, white_level=WHITE, **opts)
+        img = srgb8_from_linear(img, white_level=WHITE)
+    return extract(img, method, max_features=max_features, **opts)
 
 
 def available(label: str, max_features: int) -> str | None:
@@ -97,6 +132,17 @@ def load_pairs(args: argparse.Namespace) -> tuple[list[rd.ImagePair], dict[str, 
     factors = (2.0, 3.0) if quick else (1.25, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0)
     if "scale" in wanted:
         pairs += rd.scale_pairs(rd.skimage_photo("astronaut"), factors)
+    real = tuple(s for s in rd.REAL_ILLUMINATION_SETS if s in wanted)
+    if real:
+        got, why = rd.real_illumination_pairs(args.data_dir, real)
+        if quick:  # two scenes of each set
+            keep = {(p.sequence, p.name.split("/")[0]) for p in got}
+            first = {}
+            for seq, scene in sorted(keep):
+                first.setdefault(seq, []).append(scene)
+            got = [p for p in got if p.name.split("/")[0] in first[p.sequence][:2]]
+        pairs += got
+        skipped.update(why)
     if "sim-wheel" not in wanted:
         pass
     elif quick and not args.sim:
@@ -126,12 +172,15 @@ def run_method(
     """Extract, match (best of ``match_repeats`` timings) and evaluate every pair."""
     method, opts = _spec(label)
     cache: dict[int, tuple[Any, float]] = {}
+    only = VARIANT_SETS.get(_suffix(label))
+    if only is not None:
+        pairs = [p for p in pairs if p.sequence in only]
 
     def feats(img: np.ndarray) -> tuple[Any, float]:
         key = id(img)
         if key not in cache:
             t = time.perf_counter()
-            f = extract(img, method, max_features=max_features, **opts)
+            f = _extract(img, method, max_features, opts)
             cache[key] = (f, time.perf_counter() - t)
         return cache[key]
 
@@ -214,6 +263,13 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, dict[str, float
         for s in seqs.values():
             for k in ("recall_at_01", "auc", "best_recall", "extract_ms", "match_ms"):
                 s[k] /= s["n"]
+    for label, seqs in summary.items():
+        grey = COLOUR_BASE.get(_spec(label)[0])
+        for seq, s in seqs.items():
+            g = summary.get(grey, {}).get(seq) if grey else None
+            if g and g["recall_at_01"]:
+                s["recall_vs_base"] = s["recall_at_01"] / g["recall_at_01"]
+                s["extract_vs_base"] = s["extract_ms"] / g["extract_ms"]
     base = summary.get(BASELINE, {})
     for seqs in summary.values():
         for seq, s in seqs.items():
@@ -245,6 +301,67 @@ def _held_out(rows: list[dict[str, Any]], colour: str, grey: str) -> tuple[float
             return None
         out.append(float(np.mean(r)))
     return out[0], out[1]
+
+
+def real_comparison(rows: list[dict[str, Any]], colour: str, grey: str) -> dict[str, Any]:
+    """Per-pair comparison of a colour label with its grey base on the real illumination sets:
+    mean recall@0.1 of both, the share of pairs where the colour one is >= the grey one, per
+    set and over all real pairs."""
+    g = {(r["sequence"], r["pair"]): r["recall_at_01"] for r in rows if r["method"] == grey}
+    out: dict[str, Any] = {}
+    for seq in (*REAL, "all"):
+        c = [
+            (r["recall_at_01"], g[(r["sequence"], r["pair"])])
+            for r in rows
+            if r["method"] == colour
+            and (r["sequence"] == seq or (seq == "all" and r["sequence"] in REAL))
+            and (r["sequence"], r["pair"]) in g
+        ]
+        if c:
+            a = np.array(c)
+            out[seq] = {
+                "pairs": len(a),
+                "colour": float(a[:, 0].mean()),
+                "grey": float(a[:, 1].mean()),
+                "share_ge": float((a[:, 0] >= a[:, 1]).mean()),
+            }
+    return out
+
+
+def real_targets(rows, timing) -> list[dict[str, Any]]:
+    """Issue 17: the colour descriptor >= its grey base on the real illumination pairs (mean,
+    and on >= 80 % of the pairs); extraction <= 2x the grey base's (640x480)."""
+    out_t = []
+    for colour, grey in COLOUR_BASE.items():
+        cmp = real_comparison(rows, colour, grey)
+        if "all" not in cmp:
+            out_t.append(_target(f"{colour} vs {grey} on real light changes", None, "not run"))
+        for seq, c in cmp.items():
+            where = "all real pairs" if seq == "all" else seq
+            out_t.append(
+                _target(
+                    f"{colour} recall@0.1 >= {grey} on {where} (mean)",
+                    c["colour"] >= c["grey"],
+                    f"{c['colour']:.3f} vs {c['grey']:.3f} ({c['pairs']} pairs)",
+                )
+            )
+            out_t.append(
+                _target(
+                    f"{colour} >= {grey} on >= 80 % of {where}",
+                    c["share_ge"] >= 0.8,
+                    f"{100 * c['share_ge']:.0f} % of {c['pairs']} pairs",
+                )
+            )
+        if colour in timing and grey in timing:
+            r = timing[colour]["extract_ms"] / timing[grey]["extract_ms"]
+            out_t.append(
+                _target(
+                    f"{colour} extraction <= 2x {grey} (640x480)",
+                    r <= 2.0,
+                    f"{r:.2f}x ({timing[colour]['extract_ms']:.0f} vs {timing[grey]['extract_ms']:.0f} ms)",
+                )
+            )
+    return out_t
 
 
 def _target(name: str, ok: bool | None, figure: str) -> dict[str, Any]:
@@ -347,7 +464,7 @@ def targets(rows, summary, timing, labels) -> list[dict[str, Any]]:
             _target("sift extract+match+verify <= 80 ms (640x480 pair)", ms <= 80.0, f"{ms:.0f} ms")
         )
     del labels
-    return out_t
+    return out_t + real_targets(rows, timing)
 
 
 def _no_nan(v: Any) -> Any:
@@ -380,6 +497,8 @@ def write_plots(rows, labels, pairs, plot_dir: Path, docs_img: Path | None) -> l
     ]
     for seq in (*rd.OXFORD_SEQUENCES, "illumination", "sim-wheel"):
         paths.append(figs.figure_sequence(rows, grey, seq, plot_dir / f"recall_{seq}.png"))
+    pairs_real = [(c, COLOUR_BASE[_spec(c)[0]]) for c in labels if _spec(c)[0] in COLOUR_BASE]
+    paths.append(figs.figure_real(rows, pairs_real, REAL, plot_dir / "real_illumination.png"))
     paths = [p for p in paths if p is not None]
     if docs_img is not None:
         docs_img.mkdir(parents=True, exist_ok=True)
@@ -405,6 +524,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--docs-img", type=Path, default=None, help="also copy the plots here")
     ap.add_argument("--max-features", type=int, default=2000)
     ap.add_argument("--no-plots", action="store_true")
+    ap.add_argument(
+        "--no-variants",
+        action="store_true",
+        help="skip the colour descriptor's :chapter and :srgb variants",
+    )
     args = ap.parse_args(argv)
 
     unknown = [m for m in args.methods if _spec(m)[0] not in METHODS]
@@ -412,6 +536,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unknown methods {unknown}; choose from {', '.join(METHODS)}")
     labels = list(dict.fromkeys([BASELINE, *args.methods]))
     labels += [c + FULL_SUFFIX for c in COLOUR_BASE if c in labels]
+    if not args.no_variants:
+        labels += [c + v for v in (":chapter", ":srgb") for c in COLOUR_BASE if c in labels]
     skipped: dict[str, str] = {}
     run: list[str] = []
     for label in labels:
@@ -446,6 +572,7 @@ def main(argv: list[str] | None = None) -> int:
         "best recall",
         "recall/SIFT",
         "extract/SIFT",
+        "recall/base",
     ):
         t.add_column(col, justify="left" if col in ("method", "sequence") else "right")
     for m, seqs in summary.items():
@@ -461,6 +588,7 @@ def main(argv: list[str] | None = None) -> int:
                 _f(s["best_recall"]),
                 _f(s.get("recall_vs_sift", float("nan")), 2),
                 _f(s.get("extract_vs_sift", float("nan")), 2),
+                _f(s.get("recall_vs_base", float("nan")), 2),
             )
     out.print(t)
     t2 = Table(title=f"640x480 timing ({timing['source']})")
@@ -471,7 +599,7 @@ def main(argv: list[str] | None = None) -> int:
             m, _f(timing[m]["extract_ms"], 1), _f(timing[m]["pair_ms"], 1), str(timing[m]["n"])
         )
     out.print(t2)
-    t3 = Table(title="Issue 6 targets")
+    t3 = Table(title="Targets (issues 6 and 17)")
     for col in ("target", "status", "figure"):
         t3.add_column(col)
     for x in tgt:
@@ -490,6 +618,11 @@ def main(argv: list[str] | None = None) -> int:
             "summary": summary,
             "timing_640": timing,
             "targets": tgt,
+            "real_illumination": {
+                lab: real_comparison(rows, lab, COLOUR_BASE.get(_spec(lab)[0], BASELINE))
+                for lab in run
+                if lab not in COLOUR_BASE.values()
+            },
             "plots": plots,
             "rows": [{k: v for k, v in r.items() if not k.startswith("curve")} for r in rows],
         }

@@ -324,3 +324,156 @@ def sim_wheel_pairs(
         return pairs
     finally:
         engine.stop()
+
+
+# -- real illumination changes seen by a fixed camera ------------------------------------------
+#: The real illumination sets and what the methods receive (``data/illumination``, see its
+#: README): MIMO as 8-bit sRGB and as 16-bit linear camera RGB (Beigpour et al., IEEE TIP
+#: 23(1), 2014), SFU as dark 8-bit linear RGB (Barnard et al., Color Res. Appl. 27(3), 2002).
+REAL_ILLUMINATION_SETS = ("mimo-srgb8", "mimo-linear16", "sfu-linear8")
+#: Reference lamp combination of every MIMO scene (``<lamp1>_<lamp2>``, b/r/w = blue, red,
+#: white): the one combination that every scene has and that did not move.
+MIMO_REFERENCE = "b_r"
+#: White level of the 16-bit MIMO files, fixed for the whole set so that the pairs keep their
+#: real exposure differences: the brightest value in the 58 files is 9918 (the 8-bit sRGB files
+#: are instead each scaled to their own brightest pixel, measured here).
+MIMO_WHITE_LEVEL = 10000.0
+#: SFU reference lamp (4100 K) and the two lamps compared with it.
+SFU_REFERENCE = "solux-4100"
+SFU_LAMPS = ("syl-50MR16Q", "solux-4700+3202")
+#: Images left out, with the reason (measured by phase correlation of log-gradient images
+#: against the reference; the overlap-error test tolerates the 0.4-1.2 px shifts of the rest).
+REAL_LEFT_OUT: dict[str, str] = {
+    "mimo/pmug_w_b": "camera moved: 6.8 px against pmug_b_r (data README: about 4 px)",
+    "mimo/pmug_w_r": "camera moved: 6.7 px against pmug_b_r (data README: about 4 px)",
+    "sfu/ball": "camera moved: 3.2 px between the lamps (data README: ball 3 px)",
+}
+
+
+def _read_any(path: Path) -> np.ndarray:
+    """RGB image at ``path`` with its stored bit depth (uint8 or uint16), read-only."""
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None or img.ndim != 3 or img.shape[2] < 3:
+        raise FileNotFoundError(f"cannot read an RGB image from {path}")
+    img = np.ascontiguousarray(img[..., 2::-1])
+    img.setflags(write=False)
+    return img
+
+
+@functools.cache
+def _read_real(path: Path) -> np.ndarray:
+    return _read_any(path)
+
+
+def _mean_ratio(a: np.ndarray, b: np.ndarray) -> float:
+    return float(b.astype(np.float64).mean() / max(a.astype(np.float64).mean(), 1e-9))
+
+
+def mimo_pairs(data_dir: Path, variant: str = "srgb8") -> list[ImagePair]:
+    """Every lamp combination of each MIMO scene against :data:`MIMO_REFERENCE`.
+
+    Parameters
+    ----------
+    data_dir : Path
+        The shared data directory (``data_dir/illumination/mimo`` is read).
+    variant : {"srgb8", "linear16"}
+        ``srgb8``: the 8-bit sRGB files (each scaled to its brightest pixel); ``linear16``:
+        the 16-bit linear camera RGB (uint16 images; white level :data:`MIMO_WHITE_LEVEL`).
+
+    Returns
+    -------
+    list of ImagePair
+        Sequence ``mimo-<variant>``, name ``<scene>/<combination>``, identity ``H``, ``param``
+        = mean brightness of ``b`` over ``a`` (linear values); the images in
+        :data:`REAL_LEFT_OUT` are left out.
+
+    Raises
+    ------
+    FileNotFoundError
+        The folder is absent.
+    ValueError
+        Unknown variant.
+    """
+    if variant not in ("srgb8", "linear16"):
+        raise ValueError(f"variant must be 'srgb8' or 'linear16', got {variant!r}")
+    folder = Path(data_dir) / "illumination" / "mimo"
+    files = sorted((folder / variant).glob("*.png"))
+    if not files or not (folder / "linear16").is_dir():
+        raise FileNotFoundError(f"{folder / variant} is absent (see ../shared/data/README.md)")
+    scenes = sorted({f.stem.split("_")[0] for f in files})
+    pairs = []
+    for scene in scenes:
+        ref = folder / variant / f"{scene}_{MIMO_REFERENCE}.png"
+        if not ref.is_file():
+            continue
+        a = _read_real(ref)
+        a_lin = _read_real(folder / "linear16" / ref.name)
+        for f in files:
+            combo = f.stem.removeprefix(scene + "_")
+            if not f.stem.startswith(scene + "_") or combo == MIMO_REFERENCE:
+                continue
+            if f"mimo/{f.stem}" in REAL_LEFT_OUT:
+                continue
+            b = _read_real(f)
+            ratio = _mean_ratio(a_lin, _read_real(folder / "linear16" / f.name))
+            note = f"MIMO {scene}: lamps {combo} against {MIMO_REFERENCE}, {variant}"
+            pairs.append(
+                ImagePair(f"mimo-{variant}", f"{scene}/{combo}", a, b, np.eye(3), ratio, None, note)
+            )
+    return pairs
+
+
+def sfu_pairs(data_dir: Path) -> list[ImagePair]:
+    """Each SFU scene under :data:`SFU_LAMPS` against :data:`SFU_REFERENCE` (8-bit linear).
+
+    Returns pairs of sequence ``sfu-linear8``, name ``<scene>/<lamp>``, identity ``H``,
+    ``param`` = mean brightness of ``b`` over ``a``; scenes in :data:`REAL_LEFT_OUT` are left
+    out. Raises ``FileNotFoundError`` when the folder is absent.
+    """
+    folder = Path(data_dir) / "illumination" / "sfu"
+    refs = sorted(folder.glob(f"*_{SFU_REFERENCE}.tif"))
+    if not refs:
+        raise FileNotFoundError(f"{folder} is absent (see ../shared/data/README.md)")
+    pairs = []
+    for ref in refs:
+        scene = ref.name.removesuffix(f"_{SFU_REFERENCE}.tif")
+        if f"sfu/{scene}" in REAL_LEFT_OUT:
+            continue
+        a = _read_real(ref)
+        for lamp in SFU_LAMPS:
+            path = folder / f"{scene}_{lamp}.tif"
+            if not path.is_file():
+                continue
+            b = _read_real(path)
+            note = f"SFU {scene}: {lamp} against {SFU_REFERENCE}, 8-bit linear"
+            pairs.append(
+                ImagePair(
+                    "sfu-linear8", f"{scene}/{lamp}", a, b, np.eye(3), _mean_ratio(a, b), None, note
+                )
+            )
+    return pairs
+
+
+def real_illumination_pairs(data_dir: Path, sets: tuple[str, ...] = REAL_ILLUMINATION_SETS):
+    """The pairs of the named real illumination sets, and for each absent set the reason.
+
+    Returns
+    -------
+    pairs : list of ImagePair
+    skipped : dict
+        Set name -> why it is absent.
+    """
+    bad = [s for s in sets if s not in REAL_ILLUMINATION_SETS]
+    if bad:
+        raise ValueError(f"sets must be among {REAL_ILLUMINATION_SETS}, got {bad}")
+    pairs: list[ImagePair] = []
+    skipped: dict[str, str] = {}
+    for s in sets:
+        try:
+            if s == "sfu-linear8":
+                pairs += sfu_pairs(data_dir)
+            else:
+                pairs += mimo_pairs(data_dir, s.removeprefix("mimo-"))
+        except FileNotFoundError as exc:
+            skipped[s] = str(exc)
+    return pairs, skipped

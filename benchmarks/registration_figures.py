@@ -150,3 +150,36 @@ def figure_pairs(pairs: list[Any], path: Path) -> Path | None:
         ax.set_title(name, fontsize=9)
         ax.axis("off")
     return _save(fig, path)
+
+
+def figure_real(
+    records: list[dict[str, Any]], pairs: list[tuple[str, str]], sets: tuple[str, ...], path: Path
+) -> Path | None:
+    """Issue 17: recall at 1-precision 0.1 of each colour label against its grey base, one
+    point per real illumination pair, one panel per set (above the diagonal: colour wins)."""
+    present = [s for s in sets if _by(records, sequence=s)]
+    pairs = [(c, g) for c, g in pairs if _by(records, method=c) and _by(records, method=g)]
+    if not present or not pairs:
+        return None
+    fig, axes = plt.subplots(1, len(present), figsize=(3.3 * len(present), 3.4), squeeze=False)
+    markers = "os^vDP*X"
+    for ax, seq in zip(axes[0], present, strict=True):
+        for k, (c, g) in enumerate(pairs):
+            grey = {r["pair"]: r["recall_at_01"] for r in _by(records, method=g, sequence=seq)}
+            pts = [
+                (grey[r["pair"]], r["recall_at_01"])
+                for r in _by(records, method=c, sequence=seq)
+                if r["pair"] in grey
+            ]
+            if pts:
+                x, y = zip(*pts, strict=True)
+                ax.plot(x, y, markers[k % len(markers)], ms=3.5, alpha=0.7, label=f"{c} vs {g}")
+        ax.plot([0, 1], [0, 1], "k--", lw=0.8)
+        ax.set_xlim(0, 1)
+        ax.set_ylim(0, 1)
+        ax.set_xlabel("grey base recall@0.1")
+        ax.set_ylabel("colour recall@0.1")
+        ax.set_title(seq, fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=6, loc="lower right")
+    return _save(fig, path)

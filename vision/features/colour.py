@@ -16,11 +16,22 @@ subtract each m-image's median, which makes the m-images themselves gain-invaria
 (:data:`EPS` = 1 digital number) keeps ``log(0)`` finite; it breaks the invariance only for
 pixels within a few DN of black, which carry no colour information anyway.
 
-Keypoints are detected on the grey image with the base method; the base descriptor is
-computed on M1, M2, M3 at the same keypoints, the three are concatenated (3 x 128 = 384 for
-SIFT, 3 x 64 = 192 for SURF) and reduced with a trained PCA basis (equations 18-19) to 128
-(SIFT) or 64 (SURF) -- the base descriptor's own length, so matching costs the same as the
-grey base. ``reduce=False`` keeps the full concatenation.
+Keypoints are detected on the grey image with the base method, the same keypoints the grey
+base finds. Two layouts of the descriptor (``layout=``):
+
+* ``"chapter"``: the base descriptor of M1, M2, M3 at the keypoints, concatenated (3 x 128 =
+  384 for SIFT, 3 x 64 = 192 for SURF), as first built (issue 6). It wins under synthetic
+  changes and loses to the grey base under real light changes (issue 17);
+* ``"joint"`` (default, :mod:`vision.features.colour_joint`): the grey base descriptor, then
+  the descriptors of *noise-aware* m-images M1 and M3 (a floor set from the measured noise
+  before the logarithm, clipped pixels neutralised, optional sRGB linearisation), each
+  weighted by its colour contrast -- same length, 384 / 192.
+
+Either is reduced with its trained PCA basis (equations 18-19) to 128 (SIFT) or 64 (SURF) --
+the base descriptor's own length, so matching costs the same as the grey base.
+``reduce=False`` keeps the full concatenation. The colour ratios are illuminant-invariant for
+linear sensor values only: an sRGB (gamma) camera needs ``transfer="srgb"``; uint16 input is
+taken as linear values with ``white_level`` (default 65535) as full scale.
 """
 
 from __future__ import annotations
@@ -28,17 +39,24 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from vision.features.colour_input import TRANSFERS, check_white_level, srgb8_from_linear
+from vision.features.colour_joint import NOISE_FLOOR, SATURATION, joint_raw
 from vision.features.patches import detect_sift
 from vision.features.pca import PcaBasis, default_basis
 from vision.features.types import Features
 
 __all__ = [
+    "COLOUR_WEIGHT",
     "EPS",
+    "LAYOUTS",
     "M_SCALE",
+    "NOISE_FLOOR",
+    "SATURATION",
     "colour_features",
     "colour_raw_sift",
     "colour_raw_surf",
     "describe_colour_sift",
+    "detection_grey",
     "m_images",
     "m_images_uint8",
 ]
@@ -49,8 +67,17 @@ EPS = 1.0
 #: It covers log ratios in [-3.2, +3.2] (colour ratios up to 24:1 around the image's median)
 #: with a step of 1/40 = 0.025 (2.5 % in the ratio); stronger ratios saturate.
 M_SCALE = 40.0
+#: Descriptor layouts: ``"joint"`` (default) is the grey base descriptor followed by the
+#: contrast-weighted descriptors of the noise-aware m-images M1 and M3; ``"chapter"`` the
+#: three m-image descriptors of equations 15-17 alone, as first built (issue 6).
+LAYOUTS = ("joint", "chapter")
+#: Weight of the m-image blocks against the grey block in the joint layout: chosen by
+#: leave-one-scene-out cross-validation over {0.25, 0.5, 0.75, 1, 1.5} on the real
+#: illumination scenes (issue 17; README, features section), for SIFT and SURF alike.
+COLOUR_WEIGHT = 0.25
 _BASES = {"sift": 128, "surf": 64}
 _VERSION_RAW = "color-{base}-raw-1"
+_VERSION_JOINT_RAW = "color-{base}-joint-raw-1"
 
 
 def m_images(rgb: np.ndarray, *, eps: float = EPS) -> np.ndarray:
@@ -134,6 +161,37 @@ def colour_raw_surf(
     return kp, np.concatenate(parts, axis=1)
 
 
+def _check_options(
+    layout: str, transfer: str, noise_floor: float, saturation: float, colour_weight: float
+) -> None:
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
+    if transfer not in TRANSFERS:
+        raise ValueError(f"transfer must be one of {', '.join(TRANSFERS)}, got {transfer!r}")
+    for name, v, lo, hi in (
+        ("noise_floor", noise_floor, 0.0, 100.0),
+        ("saturation", saturation, 0.5, 1.0),
+        ("colour_weight", colour_weight, 0.0, 10.0),
+    ):
+        if isinstance(v, bool) or not isinstance(v, int | float | np.number):
+            raise ValueError(f"{name} must be a number, got {v!r}")
+        if not (np.isfinite(v) and lo <= v <= hi):
+            raise ValueError(f"{name} must be in [{lo:g}, {hi:g}], got {v!r}")
+    if layout == "chapter" and transfer != "linear":
+        raise ValueError(
+            f"layout 'chapter' reads the values as given; transfer {transfer!r} needs layout 'joint'"
+        )
+
+
+def detection_grey(rgb: np.ndarray, *, white_level: float | None = None) -> np.ndarray:
+    """The grey uint8 image the colour methods detect keypoints on: ITU-R BT.601 grey of the
+    image as delivered for uint8 input (the grey base sees the same); for uint16 linear input,
+    of its 8-bit sRGB encoding (:func:`~vision.features.colour_input.srgb8_from_linear`)."""
+    if rgb.dtype == np.uint16:
+        rgb = srgb8_from_linear(rgb, white_level=white_level)
+    return cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+
+
 def colour_features(
     rgb: np.ndarray,
     *,
@@ -143,22 +201,49 @@ def colour_features(
     max_features: int | None = None,
     threshold: float | None = None,
     mask: np.ndarray | None = None,
+    layout: str = "joint",
+    transfer: str = "linear",
+    white_level: float | None = None,
+    noise_floor: float = NOISE_FLOOR,
+    saturation: float = SATURATION,
+    colour_weight: float = COLOUR_WEIGHT,
     **base_options,
 ) -> Features:
     """Colour-invariant descriptor of the chapter (equations 15-19) on a SIFT or SURF base.
 
     Parameters
     ----------
-    rgb : ndarray of shape (H, W, 3), uint8
+    rgb : ndarray of shape (H, W, 3), uint8 or uint16
+        RGB image; uint16 holds linear sensor values (keypoints are then detected on its
+        8-bit sRGB encoding, :func:`detection_grey`).
     base : {"sift", "surf"}
         Base detector/descriptor (OpenCV SIFT; VisionCell's SURF).
     reduce : bool
-        Project the concatenated descriptor with the PCA basis (default); False keeps all
-        384 (SIFT) / 192 (SURF) dimensions.
+        Project the raw descriptor with the PCA basis (default); False keeps all 384 (SIFT) /
+        192 (SURF) dimensions.
     basis : PcaBasis, optional
-        Default: the shipped ``color-sift`` / ``color-surf`` basis.
+        Default: the shipped basis of the layout (``color-sift``, ``color-surf``, or
+        ``color-sift-chapter``, ``color-surf-chapter``).
     max_features, threshold, mask
         Detector options of the base method (on the grey image).
+    layout : {"joint", "chapter"}
+        ``"joint"``: grey base descriptor, then the descriptors of the noise-aware m-images
+        M1 = log(R/G) and M3 = log(G/B), each weighted by its colour contrast
+        (:func:`block_contrast`) times ``colour_weight``. ``"chapter"``: the descriptors of
+        M1, M2, M3 with a 1 DN guard, as in equations 15-17.
+    transfer : {"linear", "srgb"}
+        How the values encode light: ``"srgb"`` linearises 8-bit sRGB with the IEC 61966-2-1
+        curve before the ratios (for cameras that apply a gamma); the ratios are invariant to
+        the illuminant only on linear values.
+    white_level : float, optional
+        Value of full scale (default the dtype's maximum: 255 or 65535).
+    noise_floor : float
+        Floor added before the logarithms, in units of the image's measured noise sigma
+        (quantisation included); 0 keeps only a 1e-6 guard.
+    saturation : float
+        Relative level in [0.5, 1] at which a channel counts as clipped; 1 turns the mask off.
+    colour_weight : float
+        Weight of the m-image blocks against the grey block (joint layout), in [0, 10].
     **base_options
         For SURF: ``upright``, ``extended``, ``n_octaves``.
 
@@ -170,22 +255,40 @@ def colour_features(
     if base not in _BASES:
         raise ValueError(f"base must be one of {', '.join(_BASES)}, got {base!r}")
     rgb = np.asarray(rgb)
-    if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f"rgb must be a uint8 (H, W, 3) image, got {rgb.dtype} {rgb.shape}")
+    if rgb.dtype not in (np.uint8, np.uint16) or rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(
+            f"rgb must be a uint8 (H, W, 3) image (or uint16 linear values), got "
+            f"{rgb.dtype} {rgb.shape}"
+        )
+    _check_options(layout, transfer, noise_floor, saturation, colour_weight)
+    white_level = check_white_level(rgb, white_level)
     method = f"color-{base}"
+    kind = method if layout == "joint" else f"{method}-chapter"
     if reduce and basis is None:
-        basis = default_basis(method)
-    grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+        basis = default_basis(kind)
+    grey = detection_grey(rgb, white_level=white_level)
     detect = {"max_features": max_features, "threshold": threshold, "mask": mask}
-    if base == "sift":
-        if base_options:
-            raise ValueError(f"unknown options for color-sift: {', '.join(base_options)}")
+    if base == "sift" and base_options:
+        raise ValueError(f"unknown options for color-sift: {', '.join(base_options)}")
+    if layout == "joint":
+        colour = {
+            "transfer": transfer,
+            "white_level": white_level,
+            "noise_floor": float(noise_floor),
+            "saturation": float(saturation),
+            "colour_weight": float(colour_weight),
+        }
+        kp, raw = joint_raw(rgb, grey, base, detect, base_options, colour)
+        raw_version = _VERSION_JOINT_RAW.format(base=base)
+    elif base == "sift":
         kp, raw = colour_raw_sift(rgb, grey, **detect)
+        raw_version = _VERSION_RAW.format(base=base)
     else:
         detect = {k: v for k, v in detect.items() if v is not None}
         kp, raw = colour_raw_surf(rgb, grey, **detect, **base_options)
+        raw_version = _VERSION_RAW.format(base=base)
     if not reduce:
-        return Features(kp, raw, method, _VERSION_RAW.format(base=base), False, grey.shape)
+        return Features(kp, raw, method, raw_version, False, grey.shape)
     if basis.dim_in != raw.shape[1]:
         raise ValueError(
             f"basis {basis.kind!r} reduces {basis.dim_in}-dim vectors, {method} gives "

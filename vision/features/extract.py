@@ -10,7 +10,7 @@ import numpy as np
 
 from vision.features.types import Features
 
-__all__ = ["COLOUR_METHODS", "METHODS", "extract", "grey_from_image"]
+__all__ = ["COLOUR_METHODS", "METHODS", "RGB_METHODS", "extract", "grey_from_image"]
 
 # method id -> "module:function". Each function takes the image (grey uint8 (H, W), or RGB
 # uint8 (H, W, 3) for the colour methods) and keyword options, and returns Features.
@@ -23,10 +23,13 @@ _REGISTRY: dict[str, str] = {
     "gloh": "vision.features.gloh:gloh_features",
     "color-sift": "vision.features.colour:colour_features",
     "color-surf": "vision.features.colour:colour_features",
+    "opponent-sift": "vision.features.opponent:opponent_sift_features",
 }
 
 #: Methods that need the RGB image (the chapter's colour-invariant descriptor, eqs. 15-19).
 COLOUR_METHODS = frozenset({"color-sift", "color-surf"})
+#: Methods that need the RGB image but are not the chapter's descriptor (baselines).
+RGB_METHODS = frozenset({"opponent-sift"})
 #: Every method id ``extract`` accepts.
 METHODS = tuple(_REGISTRY)
 _OPENCV = frozenset({"sift", "orb", "akaze"})
@@ -42,13 +45,16 @@ def grey_from_image(image: np.ndarray) -> np.ndarray:
 def _check_image(image: np.ndarray, method: str) -> np.ndarray:
     if not isinstance(image, np.ndarray):
         raise ValueError(f"image must be a numpy array, got {type(image).__name__}")
-    if image.dtype != np.uint8:
-        raise ValueError(f"image must be uint8, got dtype {image.dtype}")
+    if image.dtype != np.uint8 and not (image.dtype == np.uint16 and method in COLOUR_METHODS):
+        raise ValueError(
+            f"image must be uint8 (uint16 linear RGB only for the colour methods), got dtype "
+            f"{image.dtype} for {method!r}"
+        )
     if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3):
         raise ValueError(f"image must have shape (H, W) or (H, W, 3), got {image.shape}")
     if min(image.shape[:2]) < 16:
         raise ValueError(f"image of shape {image.shape} is too small for features (min 16 px)")
-    if method in COLOUR_METHODS and image.ndim != 3:
+    if method in COLOUR_METHODS | RGB_METHODS and image.ndim != 3:
         raise ValueError(f"method {method!r} needs an RGB image (H, W, 3), got {image.shape}")
     return np.ascontiguousarray(image)
 
@@ -65,12 +71,16 @@ def extract(image: np.ndarray, method: str = "sift", **options) -> Features:
     ----------
     image : ndarray of shape (H, W) or (H, W, 3), uint8
         Grey or RGB image (RGB order, as everywhere in VisionCell). Grey methods convert RGB
-        input to grey; the colour methods need RGB.
+        input to grey; the colour methods need RGB and also take uint16 linear sensor values
+        (options ``transfer``, ``white_level``, ``noise_floor``, ``saturation``, ``layout``:
+        see :func:`vision.features.colour.colour_features`; ``transfer="srgb"`` linearises a
+        gamma-encoded 8-bit image before the colour ratios).
     method : str
         One of :data:`METHODS`: ``"sift"`` (Lowe 2004), ``"orb"``, ``"akaze"`` (OpenCV),
         ``"surf"`` (Bay et al. 2008, written here), ``"pca-sift"`` (Ke and Sukthankar 2004),
         ``"gloh"`` (Mikolajczyk and Schmid 2005), ``"color-sift"`` / ``"color-surf"`` (the
-        chapter's colour-invariant descriptor, equations 15-19).
+        chapter's colour-invariant descriptor, equations 15-19), ``"opponent-sift"`` (van de
+        Sande, Gevers and Snoek, TPAMI 2010; a colour baseline, RGB uint8).
     **options
         Method-specific keyword options (``max_features``, ``threshold``, ``mask``,
         ``upright``, ``basis`` ...), documented on each method's function.
@@ -93,4 +103,6 @@ def extract(image: np.ndarray, method: str = "sift", **options) -> Features:
         return func(grey_from_image(image), method, **options)
     if method in COLOUR_METHODS:
         return func(image, base=method.removeprefix("color-"), **options)
+    if method in RGB_METHODS:
+        return func(image, **options)
     return func(grey_from_image(image), **options)

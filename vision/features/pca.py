@@ -37,6 +37,8 @@ BASIS_KINDS: dict[str, tuple[int, int]] = {
     "gloh": (272, 128),
     "color-sift": (384, 128),
     "color-surf": (192, 64),
+    "color-sift-chapter": (384, 128),
+    "color-surf-chapter": (192, 64),
 }
 _FORMAT = 1
 

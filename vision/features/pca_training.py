@@ -42,7 +42,8 @@ def raw_descriptors(kind: str, rgb: np.ndarray, *, max_features: int = 3000) -> 
     ----------
     kind : str
         ``"pca-sift"`` (3042-dim gradient patches), ``"gloh"`` (272), ``"color-sift"`` (384)
-        or ``"color-surf"`` (192).
+        or ``"color-surf"`` (192) in their default (joint) layout, ``"color-sift-chapter"``
+        (384) or ``"color-surf-chapter"`` (192) in the chapter's layout.
     rgb : ndarray of shape (H, W, 3), uint8
     max_features : int
         Strongest keypoints kept per image.
@@ -57,7 +58,10 @@ def raw_descriptors(kind: str, rgb: np.ndarray, *, max_features: int = 3000) -> 
     rgb = np.asarray(rgb)
     if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
         raise ValueError(f"rgb must be a uint8 (H, W, 3) image, got {rgb.dtype} {rgb.shape}")
-    return extract(rgb, kind, max_features=max_features, reduce=False).descriptors
+    method, opts = kind, {}
+    if kind.endswith("-chapter"):  # the chapter's layout of the colour descriptor
+        method, opts = kind.removesuffix("-chapter"), {"layout": "chapter"}
+    return extract(rgb, method, max_features=max_features, reduce=False, **opts).descriptors
 
 
 def sample_training_set(

@@ -1,0 +1,139 @@
+"""Camera values for the colour-ratio descriptor: linearisation, noise floor, clipping.
+
+The invariance of the m1 m2 m3 ratios (chapter equations 15-17) to the illuminant holds for
+*linear* sensor values: a diagonal change of the light multiplies R, G, B by constants, which
+the log ratios subtract away. Real cameras add what that model leaves out (issue 17):
+
+* a transfer function: 8-bit sRGB output is ``V = f(L)`` with the sRGB curve (IEC 61966-2-1),
+  so a gain on ``L`` is no gain on ``V``. ``transfer="srgb"`` inverts the curve first;
+* noise: shot and read noise of a dark pixel make ``log(R/G)`` swing widely. We add a floor
+  ``f`` before the logarithm, ``log(C + f)``, set from the noise measured in the image itself
+  (:func:`noise_sigma`, Donoho's median absolute deviation of the finest diagonal detail,
+  Biometrika 81(3), 1994), so that ratios of pixels within a few noise levels of black shrink
+  towards 1 (log 0) instead of swinging;
+* clipping: where a channel saturates the ratio is wrong; such pixels (and a 1-pixel border
+  around them) get weight 0 and their log ratios are set to the neutral 0.
+
+Everything here works on relative values ``L / white_level`` in [0, 1], so 8-bit and 16-bit
+inputs are treated alike.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+__all__ = [
+    "TRANSFERS",
+    "check_white_level",
+    "clipped_weight",
+    "linear_from_image",
+    "noise_floor",
+    "noise_sigma",
+    "srgb8_from_linear",
+    "srgb_decode",
+    "srgb_encode",
+]
+
+#: Transfer functions ``extract(..., transfer=...)`` knows: the values are linear already, or
+#: sRGB-encoded (IEC 61966-2-1) and linearised before the ratios.
+TRANSFERS = ("linear", "srgb")
+_MAX_WHITE = 65535.0
+
+
+def srgb_decode(v: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values in [0, 1] to linear light in [0, 1] (IEC 61966-2-1)."""
+    v = np.asarray(v, dtype=np.float32)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def srgb_encode(x: np.ndarray) -> np.ndarray:
+    """Linear light in [0, 1] (clipped) to sRGB-encoded values in [0, 1]."""
+    x = np.clip(np.asarray(x, dtype=np.float32), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055).astype(np.float32)
+
+
+def check_white_level(image: np.ndarray, white_level: float | None) -> float:
+    """The white level of ``image`` (its dtype's maximum unless given), validated."""
+    if white_level is None:
+        return 255.0 if image.dtype == np.uint8 else _MAX_WHITE
+    if isinstance(white_level, bool) or not isinstance(white_level, int | float | np.number):
+        raise ValueError(f"white_level must be a number, got {white_level!r}")
+    top = 255.0 if image.dtype == np.uint8 else _MAX_WHITE
+    if not (np.isfinite(white_level) and 1.0 <= white_level <= top):
+        raise ValueError(
+            f"white_level must be in [1, {top:g}] for {image.dtype}, got {white_level!r}"
+        )
+    return float(white_level)
+
+
+def srgb8_from_linear(rgb: np.ndarray, *, white_level: float | None = None) -> np.ndarray:
+    """8-bit sRGB encoding of linear camera values (what a camera's 8-bit output shows).
+
+    Parameters
+    ----------
+    rgb : ndarray of shape (H, W, 3) or (H, W), uint8 or uint16
+        Linear values; ``white_level`` (default the dtype's maximum) maps to 255.
+
+    Returns
+    -------
+    ndarray of the same shape, uint8
+    """
+    rgb = np.asarray(rgb)
+    if rgb.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"rgb must be uint8 or uint16, got {rgb.dtype}")
+    w = check_white_level(rgb, white_level)
+    return np.rint(255.0 * srgb_encode(rgb.astype(np.float32) / np.float32(w))).astype(np.uint8)
+
+
+def linear_from_image(
+    rgb: np.ndarray, *, transfer: str = "linear", white_level: float | None = None
+) -> np.ndarray:
+    """Relative linear light ``L / white`` in [0, 1] of an RGB image, float32 (H, W, 3).
+
+    ``transfer="srgb"`` inverts the sRGB curve (for cameras that apply it); ``"linear"``
+    only divides by the white level.
+    """
+    if transfer not in TRANSFERS:
+        raise ValueError(f"transfer must be one of {', '.join(TRANSFERS)}, got {transfer!r}")
+    w = check_white_level(rgb, white_level)
+    x = np.minimum(rgb.astype(np.float32) / np.float32(w), 1.0)
+    return srgb_decode(x) if transfer == "srgb" else x
+
+
+def noise_sigma(x: np.ndarray) -> float:
+    """Robust estimate of the noise standard deviation of an image (any units).
+
+    Donoho and Johnstone's estimator: ``median(|HH|) / 0.6745`` of the finest diagonal Haar
+    detail ``HH = (a - b - c + d) / 2`` of 2x2 blocks, which texture barely reaches, averaged
+    over the channels. Quantisation counts as noise (``x`` of 8-bit data never gives less than
+    the step / sqrt(12) floor that :func:`noise_floor` adds).
+    """
+    x = np.asarray(x, dtype=np.float32)
+    if x.ndim == 2:
+        x = x[..., None]
+    h, w = (x.shape[0] // 2) * 2, (x.shape[1] // 2) * 2
+    a, b = x[0:h:2, 0:w:2], x[0:h:2, 1:w:2]
+    c, d = x[1:h:2, 0:w:2], x[1:h:2, 1:w:2]
+    hh = 0.5 * (a - b - c + d)
+    return float(np.median(np.abs(hh[::2, ::2])) / 0.6745)  # a 1-in-4 subsample suffices
+
+
+def noise_floor(lin: np.ndarray, step: float, k: float) -> float:
+    """The floor ``f = k * sigma`` added before the logarithms (relative units).
+
+    ``sigma`` combines the measured noise (:func:`noise_sigma`) and the quantisation of the
+    input (``step / sqrt(12)``, ``step`` = one digital number relative to white) in quadrature.
+    """
+    s = noise_sigma(lin)
+    q = step / np.sqrt(12.0)
+    return float(k * np.hypot(s, q))
+
+
+def clipped_weight(lin: np.ndarray, saturation: float) -> np.ndarray:
+    """Weight (H, W) float32: 0 where any channel reaches ``saturation`` (relative) or
+    touches such a pixel (3x3 dilation), 1 elsewhere."""
+    sat = (lin >= np.float32(saturation)).any(axis=2).astype(np.uint8)
+    if sat.any():
+        sat = cv2.dilate(sat, np.ones((3, 3), np.uint8))
+    return (1.0 - sat).astype(np.float32)
