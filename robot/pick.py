@@ -214,6 +214,7 @@ def plan_pick_place(
     clearance_m: float = 0.05,
     drop_clearance_m: float = 0.03,
     q_return: ArrayLike | None = None,
+    transit_max_z_m: float = 0.9,
     speed: float = 0.5,
     max_tilt_deg: float = 2.0,
     model: ArmModel = ASEA,
@@ -246,6 +247,9 @@ def plan_pick_place(
         the part's clearance above every obstacle in transit, and above the rim at the drop.
     q_return : array_like of shape (5,), optional
         Where to go at the end (default ``q_start``).
+    transit_max_z_m : float
+        Obstacles up to this height are flown over in transit; taller ones (fences,
+        columns) are not, the collision check keeps the arm and the part clear of them.
     speed : float in (0, 1]
         Fraction of the joint and Cartesian speed limits.
     max_tilt_deg : float
@@ -288,6 +292,7 @@ def plan_pick_place(
         ("drop_clearance_m", drop_clearance_m, 0.0, 0.5),
         ("roll_rad", roll_rad, -math.pi, math.pi),
         ("max_tilt_deg", max_tilt_deg, 0.0, 10.0),
+        ("transit_max_z_m", transit_max_z_m, 0.0, 2.0),
     ):
         if isinstance(v, bool) or not (
             isinstance(v, int | float) and math.isfinite(v) and lo <= v <= hi
@@ -324,7 +329,10 @@ def plan_pick_place(
     grasp_z = float(g_obj[2]) - press_m  # lip height above the part's bottom when held
     off = T[:3, :3] @ np.array([g_obj[0], g_obj[1], 0.0])
     part = (Tt, _HeldPart(off[:2], grasp_z, r_obj, float(object_height_m)))
-    top_z = max([b.upper[2] for b in obstacles.boxes] + [obstacles.floor_z_m])
+    top_z = max(
+        [b.upper[2] for b in obstacles.boxes if b.upper[2] <= transit_max_z_m]
+        + [obstacles.floor_z_m]
+    )
     z_transit = max(top_z + clearance_m + grasp_z, grasp[2] + approach_m)
     z_transit = max(z_transit, float(p_obj[2]) + object_height_m + clearance_m)
 
@@ -375,12 +383,14 @@ def plan_pick_place(
     # The part turns with the flange about the vertical (by the change of q1): its
     # footprint centre's offset from the lip is turned with it, found by iteration.
     q_over = t_up.goal
-    for _ in range(4):
+    for _ in range(30):
         dq1 = float(q_over[0] - q_grasp[0])
         c, s_ = math.cos(dq1), math.sin(dq1)
         off_d = np.array([c * off[0] - s_ * off[1], s_ * off[0] + c * off[1]])
         p_over = np.array([drop[0] + off_d[0], drop[1] + off_d[1], max(z_drop, z_transit)])
-        q_over = solve(p_over, t_up.goal, "above the bin")
+        q_prev, q_over = q_over, solve(p_over, t_up.goal, "above the bin")
+        if abs(q_over[0] - q_prev[0]) < 1e-12:
+            break
     t_tr = plan_joint_move(t_up.goal, q_over, speed=speed, model=model)
     _check_path("transfer", t_tr, obstacles, part=part)
     steps.append(PickStep("transfer", t_tr))
