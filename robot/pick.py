@@ -174,8 +174,9 @@ def _check_path(
         if acc >= step_rad or i == len(q) - 1:
             keep.append(i)
             acc = 0.0
-    for i in keep:
-        contacts = world.contacts(q[i])
+    hits = world.collides_many(q[keep])
+    for k, i in enumerate(keep):
+        contacts = world.contacts(q[i]) if hits[k] else []
         if contacts:
             raise Unreachable(
                 f"{what}: collision at {100 * i / max(len(q) - 1, 1):.0f} % of the move: "
