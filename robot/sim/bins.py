@@ -121,7 +121,7 @@ def default_bins() -> tuple[BinSpec, ...]:
         ("wheel-7spoke-curved", (-0.11, 0.85)),
         ("wheel-10spoke-twin", (-0.53, 0.92)),
         ("wheel-steel", (-0.53, 0.50)),
-        ("wheel-6spoke-split", (-0.53, -0.51)),
+        ("wheel-6spoke-split", (-0.53, -0.92)),
     )
     parts = (
         ("gear-housing", (-0.90, 0.62)),
@@ -132,7 +132,7 @@ def default_bins() -> tuple[BinSpec, ...]:
     )
     out = [BinSpec(f"bin-{p}", (p,), xy, 0.40) for p, xy in wheels]
     out += [BinSpec(f"bin-{p}", (p,), xy, 0.30) for p, xy in parts]
-    out.append(BinSpec("reject", (), (-0.53, -0.92), 0.40, reject=True))
+    out.append(BinSpec("reject", (), (-0.53, -0.51), 0.40, reject=True))
     return tuple(out)
 
 
