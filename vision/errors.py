@@ -53,3 +53,29 @@ class RecognitionFailed(VisionCellError):
 
     code = "recognition_failed"
     http_status = 422
+
+
+class InvalidInput(VisionCellError, ValueError):
+    """A value given by a user (request, file, command line) is out of range or malformed.
+
+    Raised where user input is validated beyond what a schema can say (the contents of an
+    uploaded file, a combination of fields).  It is also a ``ValueError`` so that callers
+    catching bad values keep working; the API answers 422.
+    """
+
+    code = "validation_error"
+    http_status = 422
+
+
+class NotFound(VisionCellError):
+    """The thing named by an id or a name does not exist (a row, a job, a light, a plot)."""
+
+    code = "not_found"
+    http_status = 404
+
+
+class Conflict(VisionCellError):
+    """The request clashes with the current state (a name already taken, a locked resource)."""
+
+    code = "conflict"
+    http_status = 409
