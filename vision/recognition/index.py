@@ -1,0 +1,465 @@
+"""The index of trained views (chapter section 3.5): models, viewpoints, features, and a
+versioned byte form for the database.
+
+A trained view is one image of one model from one viewpoint (1 = top, 2 and 3 = the side
+positions of section 3.5.3), reduced to its local features. A physical part that can sit on
+several bases is trained as one model per base (section 3.5.3): ``part`` and ``base`` are kept
+beside the model name so that reports can group them. Retrieval over all descriptors is the
+job of :mod:`vision.recognition.search`; the index only owns the views and hands out cached
+searchers.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from vision.errors import VisionCellError
+from vision.features import METHODS, Features, Keypoints, extract
+from vision.recognition.search import Searcher
+
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "MAX_FEATURES_PER_VIEW",
+    "MAX_VIEWS",
+    "VIEWPOINTS",
+    "IndexFormatError",
+    "TrainedView",
+    "ViewIndex",
+    "check_image",
+    "check_viewpoint",
+]
+
+#: Magic name and version of :meth:`ViewIndex.to_bytes`; bump the version whenever the layout
+#: or the meaning of a stored field changes.
+FORMAT = "visioncell.view-index"
+FORMAT_VERSION = 1
+#: Viewpoints of the cell: 1 = top, 2 and 3 = the two side positions (section 3.5.3).
+VIEWPOINTS = (1, 2, 3)
+#: Caps that keep one index within memory and the ANN build within a second or two.
+MAX_VIEWS = 50_000
+MAX_FEATURES_PER_VIEW = 4_000
+MAX_NAME_CHARS = 200
+#: Strongest keypoints kept per image unless the caller says otherwise.
+DEFAULT_MAX_FEATURES = 1_000
+
+
+class IndexFormatError(VisionCellError, ValueError):
+    """A serialised index is not one, or was written by another (stale) format version."""
+
+    code = "bad_view_index"
+    http_status = 422
+
+
+@dataclass(frozen=True, eq=False)
+class TrainedView:
+    """One trained image of a model, kept as its features.
+
+    Attributes
+    ----------
+    view_id : int
+        Stable id (unique in the index, kept through serialisation).
+    model : str
+        Model name (one physical part on one sitting base).
+    viewpoint : int
+        1 (top), 2 or 3 (side positions).
+    part, base : str or None
+        Physical part and sitting base the model stands for (section 3.5.3), if given.
+    features : Features
+        Keypoints (pixels of the trained image) and descriptors, extracted inside the mask.
+    """
+
+    view_id: int
+    model: str
+    viewpoint: int
+    part: str | None
+    base: str | None
+    features: Features
+
+
+def _check_name(value: object, name: str, *, optional: bool = False) -> str | None:
+    if value is None and optional:
+        return None
+    if not isinstance(value, str) or not value.strip():
+        raise ValueError(f"{name} must be a non-empty string, got {value!r}")
+    if len(value) > MAX_NAME_CHARS:
+        raise ValueError(f"{name} must be at most {MAX_NAME_CHARS} characters, got {len(value)}")
+    return value
+
+
+def check_viewpoint(viewpoint: object, *, allow_none: bool = False) -> int | None:
+    """Validate a viewpoint number (1, 2 or 3; ``None`` = every viewpoint where allowed)."""
+    if viewpoint is None and allow_none:
+        return None
+    if isinstance(viewpoint, bool) or not isinstance(viewpoint, int | np.integer):
+        raise ValueError(f"viewpoint must be one of {VIEWPOINTS}, got {viewpoint!r}")
+    if int(viewpoint) not in VIEWPOINTS:
+        raise ValueError(f"viewpoint must be one of {VIEWPOINTS}, got {viewpoint!r}")
+    return int(viewpoint)
+
+
+def check_image(image: object, mask: object = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Validate an RGB (H, W, 3) or grey (H, W) uint8 image and an optional (H, W) mask.
+
+    The mask may be bool or uint8 (non-zero = object); it must cover at least one pixel.
+    """
+    if not isinstance(image, np.ndarray):
+        raise ValueError(f"image must be a numpy array or Features, got {type(image).__name__}")
+    if image.dtype != np.uint8:
+        raise ValueError(f"image must be uint8, got dtype {image.dtype}")
+    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3):
+        raise ValueError(f"image must have shape (H, W) or (H, W, 3), got {image.shape}")
+    if min(image.shape[:2]) < 16 or max(image.shape[:2]) > 8192:
+        raise ValueError(f"image sides must be within 16..8192 px, got {image.shape[:2]}")
+    if mask is None:
+        return image, None
+    if not isinstance(mask, np.ndarray) or mask.dtype not in (np.bool_, np.uint8):
+        raise ValueError(f"mask must be a bool or uint8 array, got {getattr(mask, 'dtype', mask)}")
+    if mask.shape != image.shape[:2]:
+        raise ValueError(f"mask shape {mask.shape} differs from the image's {image.shape[:2]}")
+    m = mask > 0
+    if not m.any():
+        raise ValueError("mask is empty: it selects no pixel of the image")
+    return image, m.astype(np.uint8)
+
+
+class ViewIndex:
+    """Trained views of every model, with cached approximate-nearest-neighbour searchers.
+
+    Parameters
+    ----------
+    method : str
+        Feature method of every view and query (see :func:`vision.features.extract`).
+    max_features : int
+        Strongest keypoints kept per image (1..:data:`MAX_FEATURES_PER_VIEW`).
+    geometry : {"affine", "homography"}
+        Model fitted by the verification (:func:`vision.registration.verify`). Affine is the
+        default: measured on COIL-20 (benchmarks/recognition.py) it verifies more views of
+        3D objects than the 8-dof homography from a few dozen features; both give a 3x3
+        matrix mapping trained-view pixels to query pixels.
+    feature_options : dict, optional
+        Further options for :func:`vision.features.extract` (``threshold``, ``upright``...).
+
+    Examples
+    --------
+    >>> index = ViewIndex(method="sift")  # doctest: +SKIP
+    >>> vid = index.add("wheel-a", top_image, viewpoint=1, mask=top_mask)  # doctest: +SKIP
+    """
+
+    def __init__(
+        self,
+        method: str = "sift",
+        *,
+        max_features: int = DEFAULT_MAX_FEATURES,
+        geometry: str = "affine",
+        feature_options: dict | None = None,
+    ) -> None:
+        if method not in METHODS:
+            raise ValueError(f"unknown feature method {method!r}; choose one of {METHODS}")
+        if (
+            isinstance(max_features, bool)
+            or not isinstance(max_features, int)
+            or not 1 <= max_features <= MAX_FEATURES_PER_VIEW
+        ):
+            raise ValueError(
+                f"max_features must be an int in 1..{MAX_FEATURES_PER_VIEW}, got {max_features!r}"
+            )
+        if geometry not in ("affine", "homography"):
+            raise ValueError(f"geometry must be 'affine' or 'homography', got {geometry!r}")
+        options = dict(feature_options or {})
+        for bad in ("mask", "max_features"):
+            if bad in options:
+                raise ValueError(f"feature_options must not set {bad!r}: pass it directly")
+        json.dumps(options)  # options must survive serialisation
+        self.method = method
+        self.max_features = max_features
+        self.geometry = geometry
+        self.feature_options = options
+        self._views: dict[int, TrainedView] = {}
+        self._next_id = 1
+        self._searchers: dict[tuple, Searcher] = {}
+
+    # ----------------------------------------------------------------- reading
+    def __len__(self) -> int:
+        return len(self._views)
+
+    def __repr__(self) -> str:
+        return (
+            f"ViewIndex(method={self.method!r}, views={len(self)}, models={len(self.models)}, "
+            f"geometry={self.geometry!r})"
+        )
+
+    @property
+    def models(self) -> tuple[str, ...]:
+        """Model names, sorted."""
+        return tuple(sorted({v.model for v in self._views.values()}))
+
+    @property
+    def views(self) -> tuple[TrainedView, ...]:
+        """Every trained view, in order of id."""
+        return tuple(self._views[k] for k in sorted(self._views))
+
+    def view(self, view_id: int) -> TrainedView:
+        """The trained view with this id (``KeyError`` if there is none)."""
+        try:
+            return self._views[view_id]
+        except KeyError:
+            raise KeyError(f"no trained view with id {view_id!r}") from None
+
+    def views_of(self, model: str, *, viewpoint: int | None = None) -> tuple[TrainedView, ...]:
+        """Views of one model, optionally from one viewpoint only."""
+        return tuple(
+            v
+            for v in self.views
+            if v.model == model and (viewpoint is None or v.viewpoint == viewpoint)
+        )
+
+    def viewpoints_of(self, model: str) -> tuple[int, ...]:
+        """Viewpoints that have at least one trained view of ``model``."""
+        return tuple(sorted({v.viewpoint for v in self._views.values() if v.model == model}))
+
+    # ----------------------------------------------------------------- features
+    def features(self, image: np.ndarray | Features, *, mask: np.ndarray | None = None) -> Features:
+        """Extract this index's features from an image (inside ``mask``), or check given ones.
+
+        Given :class:`Features` must come from this index's method (and ``mask`` must then be
+        ``None``: the caller already restricted them).
+        """
+        if isinstance(image, Features):
+            if mask is not None:
+                raise ValueError("mask must be None when Features are given (already extracted)")
+            if image.method != self.method:
+                raise ValueError(
+                    f"features of method {image.method!r} given to an index of {self.method!r}"
+                )
+            if len(image) > MAX_FEATURES_PER_VIEW:
+                raise ValueError(
+                    f"at most {MAX_FEATURES_PER_VIEW} features per image, got {len(image)}"
+                )
+            return image
+        image, m = check_image(image, mask)
+        kw = dict(self.feature_options)
+        if m is not None:
+            kw["mask"] = m
+        return extract(image, self.method, max_features=self.max_features, **kw)
+
+    # ----------------------------------------------------------------- editing
+    def add(
+        self,
+        model: str,
+        image: np.ndarray | Features,
+        *,
+        viewpoint: int = 1,
+        mask: np.ndarray | None = None,
+        part: str | None = None,
+        base: str | None = None,
+        view_id: int | None = None,
+    ) -> int:
+        """Train one view of ``model`` and return its view id.
+
+        Parameters
+        ----------
+        model : str
+            Model name (non-empty, at most 200 characters).
+        image : ndarray (H, W[, 3]) uint8 or Features
+            The trained image (RGB or grey), or features already extracted with this index's
+            method (what the database stores).
+        viewpoint : int
+            1 (top), 2 or 3 (side positions).
+        mask : ndarray (H, W) bool or uint8, optional
+            Object region: features are detected only inside it.
+        part, base : str, optional
+            Physical part and sitting base this model stands for.
+        view_id : int, optional
+            Id to give the view (a database key); by default the next free one.
+
+        Raises
+        ------
+        ValueError
+            Bad image, mask, names or viewpoint; features of another method or version than
+            the views already trained; an image without any feature; a taken view id.
+        """
+        model = _check_name(model, "model")
+        part = _check_name(part, "part", optional=True)
+        base = _check_name(base, "base", optional=True)
+        viewpoint = check_viewpoint(viewpoint)
+        if view_id is not None:
+            if isinstance(view_id, bool) or not isinstance(view_id, int) or view_id < 1:
+                raise ValueError(f"view_id must be a positive int, got {view_id!r}")
+            if view_id in self._views:
+                raise ValueError(f"view id {view_id} is already in the index")
+        if len(self._views) >= MAX_VIEWS:
+            raise ValueError(f"the index is full ({MAX_VIEWS} views)")
+        feats = self.features(image, mask=mask)
+        if len(feats) < 3:
+            raise ValueError(
+                f"only {len(feats)} {self.method} features in the view of {model!r}: "
+                "too few to verify a match (need 3); use a larger or more textured image"
+            )
+        for other in self._views.values():
+            f = other.features
+            if (f.version, f.binary, f.dim) != (feats.version, feats.binary, feats.dim):
+                raise ValueError(
+                    f"features of version {feats.version!r} (dim {feats.dim}) differ from the "
+                    f"index's {f.version!r} (dim {f.dim}): retrain every view"
+                )
+            break
+        vid = self._next_id if view_id is None else view_id
+        self._views[vid] = TrainedView(vid, model, viewpoint, part, base, feats)
+        self._next_id = max(self._next_id, vid + 1)
+        self._searchers.clear()
+        return vid
+
+    def remove_model(self, model: str) -> int:
+        """Remove every view of ``model``; return how many were removed (0 if unknown)."""
+        gone = [k for k, v in self._views.items() if v.model == model]
+        for k in gone:
+            del self._views[k]
+        if gone:
+            self._searchers.clear()
+        return len(gone)
+
+    def remove_view(self, view_id: int) -> None:
+        """Remove one view (``KeyError`` if there is none)."""
+        self.view(view_id)
+        del self._views[view_id]
+        self._searchers.clear()
+
+    # ----------------------------------------------------------------- search
+    def searcher(
+        self, *, viewpoint: int | None, exclude_models: Iterable[str] = ()
+    ) -> Searcher | None:
+        """The cached ANN searcher over the views of ``viewpoint`` (``None`` = all), leaving
+        out ``exclude_models``; ``None`` when no view is left."""
+        excl = frozenset(exclude_models)
+        key = (viewpoint, excl)
+        if key not in self._searchers:
+            views = [
+                v
+                for v in self.views
+                if (viewpoint is None or v.viewpoint == viewpoint) and v.model not in excl
+            ]
+            if not views:
+                return None
+            if len(self._searchers) > 64:  # leave-one-model-out sweeps: keep the cache bounded
+                self._searchers.clear()
+            self._searchers[key] = Searcher(views)
+        return self._searchers[key]
+
+    # ----------------------------------------------------------------- bytes
+    def to_bytes(self) -> bytes:
+        """Serialise the index (views and options, not the ANN structures) to bytes.
+
+        The blob is a compressed ``.npz`` with a JSON header naming :data:`FORMAT` and
+        :data:`FORMAT_VERSION`; :meth:`from_bytes` refuses any other.
+        """
+        views = self.views
+        header = {
+            "format": FORMAT,
+            "version": FORMAT_VERSION,
+            "method": self.method,
+            "max_features": self.max_features,
+            "geometry": self.geometry,
+            "feature_options": self.feature_options,
+            "next_id": self._next_id,
+            "views": [
+                {
+                    "id": v.view_id,
+                    "model": v.model,
+                    "viewpoint": v.viewpoint,
+                    "part": v.part,
+                    "base": v.base,
+                    "n": len(v.features),
+                    "feature_version": v.features.version,
+                    "binary": v.features.binary,
+                    "image_shape": list(v.features.image_shape),
+                }
+                for v in views
+            ],
+        }
+        fs = [v.features for v in views]
+        kps = [f.keypoints for f in fs]
+        dim = fs[0].dim if fs else 0
+        dtype = np.uint8 if fs and fs[0].binary else np.float32
+        arrays = {
+            "header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8),
+            "xy": np.concatenate([k.xy for k in kps]) if fs else np.zeros((0, 2)),
+            "size_px": np.concatenate([k.size_px for k in kps]) if fs else np.zeros(0),
+            "angle_rad": np.concatenate([k.angle_rad for k in kps]) if fs else np.zeros(0),
+            "response": np.concatenate([k.response for k in kps]) if fs else np.zeros(0),
+            "octave": np.concatenate([k.octave for k in kps]) if fs else np.zeros(0, np.int32),
+            "descriptors": (
+                np.concatenate([f.descriptors for f in fs]) if fs else np.zeros((0, dim), dtype)
+            ),
+        }
+        buf = io.BytesIO()
+        np.savez_compressed(buf, **arrays)
+        return buf.getvalue()
+
+    @classmethod
+    def from_bytes(cls, blob: bytes) -> ViewIndex:
+        """Rebuild an index from :meth:`to_bytes`.
+
+        Raises
+        ------
+        IndexFormatError
+            Not a serialised view index, or one of another format version (stale: retrain or
+            migrate it).
+        """
+        if not isinstance(blob, bytes | bytearray | memoryview):
+            raise IndexFormatError(f"a view index blob must be bytes, got {type(blob).__name__}")
+        try:
+            with np.load(io.BytesIO(bytes(blob)), allow_pickle=False) as z:
+                header = json.loads(bytes(z["header"]).decode())
+                data = {k: z[k] for k in z.files if k != "header"}
+        except Exception as exc:
+            raise IndexFormatError(f"not a serialised view index: {exc}") from exc
+        if not isinstance(header, dict) or header.get("format") != FORMAT:
+            got = header.get("format") if isinstance(header, dict) else header
+            raise IndexFormatError(f"not a serialised view index (format {got!r})")
+        if header.get("version") != FORMAT_VERSION:
+            raise IndexFormatError(
+                f"view index format version {header.get('version')!r} is not the supported "
+                f"version {FORMAT_VERSION}: retrain the views (or migrate the stored index)"
+            )
+        try:
+            index = cls(
+                header["method"],
+                max_features=header["max_features"],
+                geometry=header["geometry"],
+                feature_options=header["feature_options"],
+            )
+            start = 0
+            for v in header["views"]:
+                sl = slice(start, start + int(v["n"]))
+                start = sl.stop
+                kp = Keypoints(
+                    data["xy"][sl],
+                    data["size_px"][sl],
+                    data["angle_rad"][sl],
+                    data["response"][sl],
+                    data["octave"][sl],
+                )
+                f = Features(
+                    kp,
+                    data["descriptors"][sl],
+                    header["method"],
+                    v["feature_version"],
+                    bool(v["binary"]),
+                    tuple(v["image_shape"]),
+                )
+                vid = int(v["id"])
+                index._views[vid] = TrainedView(
+                    vid, v["model"], check_viewpoint(v["viewpoint"]), v["part"], v["base"], f
+                )
+            if start != len(data["descriptors"]):
+                raise ValueError("descriptor count does not match the views")
+            index._next_id = max([int(header["next_id"]), *[k + 1 for k in index._views]])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise IndexFormatError(f"corrupt view index: {exc}") from exc
+        return index

@@ -1,0 +1,304 @@
+"""Automatic threshold selection (the chapter's section 6: "An automatic threshold selection
+process can also be implemented. This will eliminate the need to manually select a
+threshold").
+
+Score distributions, from the trained views alone
+    *Genuine*: every trained view is held out in turn and recognised against the others of
+    its viewpoint (leave-one-view-out); its own model's score is a genuine score.
+    *Impostor*: every model is held out in turn and each of its views is recognised against
+    the remaining models (leave-one-model-out): the best score any other model gets is what
+    an untrained object would score. Negative images (nothing trained in them), when given,
+    add impostor scores against every model.
+
+Rules
+    ``"conformal-far"`` (default): the global threshold ``t`` is the ``k``-th smallest of the
+    ``n`` impostor scores with ``k = ceil((n + 1) * (1 - target_far))``. If a new impostor
+    score is exchangeable with those ``n``, ``P(score > t) <= 1 - k / (n + 1) <=
+    target_far`` (the finite-sample split-conformal bound: Vovk, Gammerman and Shafer,
+    "Algorithmic Learning in a Random World", 2005; Angelopoulos and Bates, "A gentle
+    introduction to conformal prediction", 2021, section 1). Views of one object are not
+    independent draws, so the bound is a design figure, checked on unknown objects by
+    ``benchmarks/recognition.py``. With fewer than ``1 / target_far - 1`` impostor scores
+    the bound cannot be reached; the largest impostor score is taken and the choice says so.
+    ``"youden"``: the threshold maximising Youden's J = TPR - FPR (Youden, "Index for rating
+    diagnostic tests", Cancer 3(1), 1950) over the observed scores.
+
+Per-model thresholds
+    ``per_model[m] = max(global, the same rule on the scores model m gave to other models'
+    views)``: a model that attracts impostors gets a higher bar; no model gets a lower one,
+    so the false-accept rate of the whole decision stays that of the global rule.
+
+Confusability
+    ``confusion[viewpoint][a][b]``: share of model ``a``'s held-out views of that viewpoint on
+    which model ``b`` passes its threshold. Models alike from the top (viewpoint 1) need a
+    side view; ``best-next`` picks the side viewpoint where the remaining candidates are least
+    alike.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from vision.features import Features
+from vision.recognition.index import ViewIndex
+from vision.recognition.recognise import evaluate
+
+__all__ = [
+    "RULES",
+    "ThresholdChoice",
+    "choose_threshold",
+    "conformal_threshold",
+    "youden_threshold",
+]
+
+RULES = ("conformal-far", "youden")
+MAX_NEGATIVES = 10_000
+
+
+@dataclass(frozen=True, eq=False)
+class ThresholdChoice:
+    """Thresholds chosen from the score distributions, with the figures used.
+
+    Attributes
+    ----------
+    threshold : float
+        Global threshold in [0, 1]; a model passes when its score is strictly above.
+    per_model : mapping of str to float
+        Threshold per model (each >= ``threshold``).
+    rule : str
+        Rule and figures in words (what was bounded, with how many scores).
+    rule_id : str
+        ``"conformal-far"`` or ``"youden"``.
+    target_far : float or None
+        Target false-accept rate (conformal rule).
+    far_bound : float or None
+        Finite-sample bound ``1 - k / (n + 1)`` achieved (conformal rule; ``None`` when too
+        few impostor scores to bound it).
+    far, frr : float
+        Empirical false-accept rate on the impostor scores and false-reject rate on the
+        genuine (leave-one-view-out) scores at ``threshold``.
+    genuine, impostor : ndarray
+        The score distributions (genuine per held-out view; impostor per held-out-model view
+        and per negative image).
+    genuine_models : tuple of str
+        Model of each genuine score.
+    confusion : mapping
+        ``confusion[viewpoint][a][b]``: share of ``a``'s held-out views on which ``b`` passes.
+    """
+
+    threshold: float
+    per_model: Mapping[str, float]
+    rule: str
+    rule_id: str
+    target_far: float | None
+    far_bound: float | None
+    far: float
+    frr: float
+    genuine: np.ndarray
+    impostor: np.ndarray
+    genuine_models: tuple[str, ...]
+    confusion: Mapping[int, Mapping[str, Mapping[str, float]]]
+
+    def roc(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(thresholds, far, tpr)`` over every observed score (accept when score > t)."""
+        return roc_curve(self.genuine, self.impostor)
+
+
+def roc_curve(
+    genuine: np.ndarray, impostor: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """False-accept and true-accept rates at every distinct score (accept when score > t)."""
+    g = np.sort(np.asarray(genuine, dtype=np.float64))
+    i = np.sort(np.asarray(impostor, dtype=np.float64))
+    t = np.unique(np.concatenate([[0.0], g, i, [1.0]]))
+    far = 1.0 - np.searchsorted(i, t, side="right") / max(len(i), 1)
+    tpr = 1.0 - np.searchsorted(g, t, side="right") / max(len(g), 1)
+    return t, far, tpr
+
+
+def _check_scores(x: object, name: str, *, allow_empty: bool = False) -> np.ndarray:
+    a = np.asarray(x, dtype=np.float64).reshape(-1)
+    if not allow_empty and a.size == 0:
+        raise ValueError(f"{name} scores are empty")
+    if not np.all(np.isfinite(a)) or (a.size and (a.min() < 0.0 or a.max() > 1.0)):
+        raise ValueError(f"{name} scores must be finite and in [0, 1]")
+    return a
+
+
+def conformal_threshold(impostor: Sequence[float], target_far: float) -> tuple[float, float | None]:
+    """Smallest order statistic of ``impostor`` whose finite-sample FAR bound is met.
+
+    Returns ``(threshold, bound)`` with ``bound = 1 - k / (n + 1) <= target_far``; when
+    ``n < 1 / target_far - 1`` no order statistic reaches it: ``(max, None)``.
+    """
+    i = np.sort(_check_scores(impostor, "impostor"))
+    if not (0.0 < target_far < 1.0):
+        raise ValueError(f"target_far must be in (0, 1), got {target_far!r}")
+    n = len(i)
+    k = math.ceil((n + 1) * (1.0 - target_far) - 1e-9)
+    if k > n:
+        return float(i[-1]), None
+    return float(i[k - 1]), 1.0 - k / (n + 1)
+
+
+def youden_threshold(genuine: Sequence[float], impostor: Sequence[float]) -> float:
+    """Threshold maximising Youden's J = TPR - FAR (ties: the highest such threshold)."""
+    g = _check_scores(genuine, "genuine")
+    i = _check_scores(impostor, "impostor")
+    t, far, tpr = roc_curve(g, i)
+    j = tpr - far
+    best = np.flatnonzero(j >= j.max() - 1e-12)
+    return float(t[best[-1]])
+
+
+def _check_far(value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"target_far must be a number in (0, 0.5], got {value!r}")
+    v = float(value)
+    if not (math.isfinite(v) and 0.0 < v <= 0.5):
+        raise ValueError(f"target_far must be a finite number in (0, 0.5], got {value!r}")
+    return v
+
+
+def choose_threshold(
+    index: ViewIndex,
+    *,
+    negatives: Sequence[np.ndarray | Features] | None = None,
+    target_far: float = 0.01,
+    rule: str = "conformal-far",
+    progress: Callable[[int, int], None] | None = None,
+) -> ThresholdChoice:
+    """Choose global and per-model thresholds from the trained views (module docstring).
+
+    Parameters
+    ----------
+    index : ViewIndex
+        At least two models, and at least two views of one model in some viewpoint.
+    negatives : sequence of images or Features, optional
+        Images of things that are none of the models (empty belt, other parts); each gives
+        one impostor score per viewpoint (its best model) and per-model scores.
+    target_far : float
+        Target false-accept rate in (0, 0.5] for ``rule="conformal-far"``.
+    rule : {"conformal-far", "youden"}
+    progress : callable(done, total), optional
+        Called after each held-out query.
+
+    Returns
+    -------
+    ThresholdChoice
+
+    Raises
+    ------
+    ValueError
+        Fewer than two models, no model with two views of a viewpoint, a bad rule, target or
+        negative image.
+    """
+    if not isinstance(index, ViewIndex):
+        raise ValueError(f"index must be a ViewIndex, got {type(index).__name__}")
+    if rule not in RULES:
+        raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
+    target_far = _check_far(target_far)
+    models = index.models
+    if len(models) < 2:
+        raise ValueError(f"threshold selection needs at least two models, the index has {models}")
+    negs = list(negatives or [])
+    if len(negs) > MAX_NEGATIVES:
+        raise ValueError(f"at most {MAX_NEGATIVES} negative images, got {len(negs)}")
+    neg_feats = [index.features(x) for x in negs]
+    views = index.views
+    viewpoints = sorted({v.viewpoint for v in views})
+    total = 2 * len(views) + len(neg_feats) * len(viewpoints)
+    done = 0
+
+    def tick() -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total)
+
+    # Genuine: leave one view out.
+    genuine: list[float] = []
+    genuine_models: list[str] = []
+    lovo: list[tuple[int, str, dict[str, float]]] = []
+    for v in views:
+        others = [w for w in index.views_of(v.model, viewpoint=v.viewpoint) if w is not v]
+        if others:
+            scores, *_ = evaluate(index, v.features, viewpoint=v.viewpoint, exclude_view=v.view_id)
+            genuine.append(scores.get(v.model, 0.0))
+            genuine_models.append(v.model)
+            lovo.append((v.viewpoint, v.model, scores))
+        tick()
+    if not genuine:
+        raise ValueError("no model has two trained views of one viewpoint: nothing to hold out")
+    # Impostor: leave one model out (and negatives).
+    impostor: list[float] = []
+    per_model_imp: dict[str, list[float]] = {m: [] for m in models}
+    for v in views:
+        scores, *_ = evaluate(index, v.features, viewpoint=v.viewpoint, exclude_models=[v.model])
+        impostor.append(max(scores.values(), default=0.0))
+        for m, s in scores.items():
+            per_model_imp[m].append(s)
+        tick()
+    for f in neg_feats:
+        for vp in viewpoints:
+            scores, *_ = evaluate(index, f, viewpoint=vp)
+            impostor.append(max(scores.values(), default=0.0))
+            for m, s in scores.items():
+                per_model_imp[m].append(s)
+            tick()
+    g = np.asarray(genuine)
+    i = np.asarray(impostor)
+    n = len(i)
+    if rule == "conformal-far":
+        t, bound = conformal_threshold(i, target_far)
+        if bound is None:
+            text = (
+                f"conformal FAR <= {target_far:g} not reachable with {n} impostor scores "
+                f"(need {math.ceil(1 / target_far - 1)}): threshold = largest impostor score"
+            )
+        else:
+            text = (
+                f"conformal FAR <= {target_far:g}: {math.ceil((n + 1) * (1 - target_far) - 1e-9)}"
+                f"-th of {n} impostor scores, bound {bound:.4f}"
+            )
+    else:
+        t, bound = youden_threshold(g, i), None
+        text = f"Youden's J over {len(g)} genuine and {n} impostor scores"
+    per_model: dict[str, float] = {}
+    for m in models:
+        imp = per_model_imp[m]
+        if not imp:
+            per_model[m] = t
+            continue
+        tm = conformal_threshold(imp, target_far)[0] if rule == "conformal-far" else t
+        per_model[m] = max(t, tm)
+    confusion: dict[int, dict[str, dict[str, float]]] = {}
+    counts: dict[tuple[int, str], int] = {}
+    for vp, a, scores in lovo:
+        counts[(vp, a)] = counts.get((vp, a), 0) + 1
+        row = confusion.setdefault(vp, {}).setdefault(a, {})
+        for b, s in scores.items():
+            if b != a:
+                row[b] = row.get(b, 0.0) + float(s > per_model.get(b, t))
+    for (vp, a), c in counts.items():
+        row = confusion[vp][a]
+        for b in row:
+            row[b] /= c
+    return ThresholdChoice(
+        threshold=float(t),
+        per_model=per_model,
+        rule=text,
+        rule_id=rule,
+        target_far=target_far if rule == "conformal-far" else None,
+        far_bound=bound,
+        far=float(np.mean(i > t)),
+        frr=float(np.mean(g <= t)),
+        genuine=g,
+        impostor=i,
+        genuine_models=tuple(genuine_models),
+        confusion=confusion,
+    )
