@@ -21,6 +21,7 @@ from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Cell as CellRow
 from backend.db.session import Database
 from backend.hardware import make_hardware
+from backend.recognition.index import LiveIndex
 from backend.settings import Settings
 
 __all__ = ["WEB_DIR", "StartupError", "create_app"]
@@ -54,6 +55,24 @@ async def _ensure_cell_row(db: Database) -> None:
             session.add(CellRow(name=DEFAULT_CELL, description="The demo cell"))
 
 
+async def _load_index(db: Database, settings: Settings) -> LiveIndex:
+    """Build the live index of trained views from the database (once, at start-up)."""
+    live = await asyncio.to_thread(
+        LiveIndex,
+        method=settings.recognition_method,
+        max_features=settings.recognition_max_features,
+    )
+    report = await live.load(db)
+    log.info(
+        "recognition index: %d views of %d models in %.2f s (%d stale)",
+        report.views,
+        report.models,
+        report.seconds,
+        len(report.stale),
+    )
+    return live
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the FastAPI app for ``settings`` (default: from the environment).
 
@@ -71,6 +90,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         try:
             await _check_database(db)
             await _ensure_cell_row(db)
+            app.state.live_index = await _load_index(db, settings)
             hardware = await asyncio.to_thread(make_hardware, settings)
             app.state.sim = hardware.sim
             cell = Cell(settings, hardware.driver, hardware.camera)
@@ -87,6 +107,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             yield
         finally:
             app.state.cell = None
+            app.state.live_index = None
             if view is not None:
                 await view.stop()
             if cell is not None:
@@ -108,6 +129,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.cell = None
     app.state.view3d = None
     app.state.sim = None
+    app.state.live_index = None
     install_error_handlers(app)
     app.include_router(api_router)
 

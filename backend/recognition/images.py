@@ -24,6 +24,8 @@ __all__ = [
     "MIN_IMAGE_SIDE",
     "THUMBNAIL_PX",
     "ImageHeader",
+    "ImageTooLarge",
+    "UnsupportedImage",
     "check_header",
     "decode_image",
     "decode_mask",
@@ -47,6 +49,21 @@ MAX_IMAGE_SIDE = 8192
 MIN_IMAGE_SIDE = 32
 #: Longest side of a thumbnail, pixels.
 THUMBNAIL_PX = 160
+
+
+class ImageTooLarge(InvalidInput):
+    """An uploaded image has more bytes or pixels than allowed."""
+
+    code = "too_large"
+    http_status = 413
+
+
+class UnsupportedImage(InvalidInput):
+    """An uploaded file is not an image of a supported type, or does not decode."""
+
+    code = "unsupported_media_type"
+    http_status = 415
+
 
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 # JPEG start-of-frame markers that carry the image size (not DHT C4, JPG C8, DAC CC).
@@ -102,15 +119,15 @@ def read_header(data: bytes, *, name: str = "image") -> ImageHeader:
     """
     if data.startswith(_PNG_MAGIC):
         if len(data) < 24 or data[12:16] != b"IHDR":
-            raise InvalidInput(f"{name!r}: the PNG header is cut short")
+            raise UnsupportedImage(f"{name!r}: the PNG header is cut short")
         width, height = struct.unpack(">II", data[16:24])
         return ImageHeader("png", int(width), int(height))
     if data.startswith(b"\xff\xd8"):
         size = _jpeg_size(data)
         if size is None:
-            raise InvalidInput(f"{name!r}: the JPEG header has no frame size")
+            raise UnsupportedImage(f"{name!r}: the JPEG header has no frame size")
         return ImageHeader("jpeg", size[0], size[1])
-    raise InvalidInput(f"{name!r} is not a PNG or JPEG image (first bytes {data[:8]!r})")
+    raise UnsupportedImage(f"{name!r} is not a PNG or JPEG image (first bytes {data[:8]!r})")
 
 
 def check_header(
@@ -122,20 +139,24 @@ def check_header(
 ) -> ImageHeader:
     """Refuse a file that is too large in bytes or in pixels, before decoding it."""
     if len(data) > max_bytes:
-        raise InvalidInput(
+        raise ImageTooLarge(
             f"{name!r} has {len(data)} bytes; the limit is {max_bytes} bytes per image"
         )
     if not data:
         raise InvalidInput(f"{name!r} is empty")
     head = read_header(data, name=name)
     w, h = head.width, head.height
-    if min(w, h) < MIN_IMAGE_SIDE or max(w, h) > MAX_IMAGE_SIDE:
+    if max(w, h) > MAX_IMAGE_SIDE:
+        raise ImageTooLarge(
+            f"{name!r} is {w} x {h} px; each side must be at most {MAX_IMAGE_SIDE} px"
+        )
+    if min(w, h) < MIN_IMAGE_SIDE:
         raise InvalidInput(
             f"{name!r} is {w} x {h} px; each side must be within "
             f"[{MIN_IMAGE_SIDE}, {MAX_IMAGE_SIDE}] px"
         )
     if w * h > max_pixels:
-        raise InvalidInput(
+        raise ImageTooLarge(
             f"{name!r} is {w} x {h} = {w * h} px; the limit is {max_pixels} px per image"
         )
     return head
@@ -155,7 +176,7 @@ def decode_image(
     head = check_header(data, name=name, max_bytes=max_bytes, max_pixels=max_pixels)
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:
-        raise InvalidInput(f"{name!r} does not decode as a {head.format.upper()} image")
+        raise UnsupportedImage(f"{name!r} does not decode as a {head.format.upper()} image")
     if img.dtype != np.uint8:
         raise InvalidInput(f"{name!r} must have 8 bits per channel, got {img.dtype}")
     if img.shape[:2] != (head.height, head.width):

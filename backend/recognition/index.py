@@ -22,12 +22,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from sqlalchemy import select
-from vision.recognition import ViewIndex
 
 from backend.db.models import ObjectModel, TrainedView
 from backend.db.session import Database
 from vision.errors import InvalidInput, VisionCellError
 from vision.features import Features
+from vision.recognition import ViewIndex
 
 __all__ = ["IndexedModel", "LiveIndex", "LoadReport", "StaleFeatures", "StaleView"]
 

@@ -289,7 +289,7 @@ def _number_list(text: str | None, n: int, what: str, *, lo: float, hi: float) -
 async def _read_capped(f: UploadFile, limit: int) -> bytes:
     data = await f.read(limit + 1)
     if len(data) > limit:
-        raise InvalidInput(
+        raise im.ImageTooLarge(
             f"{f.filename!r} has more than {limit} bytes; the limit is {limit} bytes per image"
         )
     return data
