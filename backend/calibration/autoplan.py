@@ -6,7 +6,9 @@ own terms, then judged with the camera model:
 
 1. pick an aim point on or near the board (offsets move the board about the image), an
    approach angle ``phi = q2 + q3 + q4`` around the one that faces the board, a distance
-   along the approach axis and a roll ``q5``; ``q1`` follows from the aim point's azimuth;
+   along the approach axis and a roll ``q5``; ``q1`` follows from the aim point's azimuth
+   (:func:`robot.aiming.aimed_flange_pose`, the geometry the inspection's viewpoint
+   planner shares);
 2. solve the flange pose with the analytic IK (:func:`robot.kinematics.ik`, joint ranges
    checked), refuse it if an arm link or the camera comes near the table, the conveyor, the
    floor or the board (:class:`robot.collision.CollisionWorld`);
@@ -27,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from robot.aiming import aimed_flange_pose
 from robot.collision import Box, CollisionWorld
 from robot.errors import Unreachable
 from robot.kinematics import T_base_ee, ik
@@ -233,13 +236,9 @@ def plan_calibration_poses(
         phi = min(max(phi, -math.pi + 1e-3), math.pi - 1e-3)
         d = rng.uniform(lo, hi)
         roll = math.radians(rng.uniform(-max_roll_deg, max_roll_deg))
-        az = math.atan2(aim[1], aim[0])
-        approach = np.array(
-            [math.cos(az) * math.cos(phi), math.sin(az) * math.cos(phi), math.sin(phi)]
-        )
-        p = aim - d * approach
+        pose = aimed_flange_pose(aim, phi_rad=phi, distance_m=d)
         try:
-            q = ik((*p, math.cos(phi), math.sin(phi)), roll=roll, seed=q0, model=model)
+            q = ik(pose, roll=roll, seed=q0, model=model)
         except Unreachable:
             refused["unreachable"] += 1
             continue
@@ -308,18 +307,13 @@ def survey_views(
     centre = B[:3, :3] @ obj.mean(axis=0) + B[:3, 3]
     phi0 = math.asin(float(np.clip(B[2, 2], -1.0, 1.0)))  # facing the printed side
     Tec = np.asarray(T_ee_cam, dtype=np.float64)
-    az = math.atan2(centre[1], centre[0])
     out: list[PlannedView] = []
     for d in np.arange(0.65, 0.299, -0.05):
         for dphi, roll in ((0, 0), (10, 0), (-10, 0), (0, 30), (0, -30), (20, 0), (-20, 0)):
             phi = phi0 + math.radians(dphi)
-            a = np.array(
-                [math.cos(az) * math.cos(phi), math.sin(az) * math.cos(phi), math.sin(phi)]
-            )
-            p = centre - d * a
             try:
                 q = ik(
-                    (*p, math.cos(phi), math.sin(phi)),
+                    aimed_flange_pose(centre, phi_rad=phi, distance_m=float(d)),
                     roll=math.radians(roll),
                     seed=q0,
                     model=model,

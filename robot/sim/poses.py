@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
+from robot.aiming import aimed_flange_pose
 from robot.errors import Unreachable
 from robot.kinematics import fk
 from robot.model import ASEA, ArmModel, check_joints
@@ -85,9 +86,8 @@ def viewpoint(
         raise ValueError(f"view must be one of {tuple(VIEWS)}, got {view!r}")
     t = np.asarray(target, dtype=np.float64)
     phi = math.radians(VIEWS[view])
-    az = math.atan2(t[1], t[0])
-    approach = np.array([math.cos(az) * math.cos(phi), math.sin(az) * math.cos(phi), math.sin(phi)])
-    return flange_config(t - distance_m * approach, phi, q5=q5, model=model)
+    pose = aimed_flange_pose(t, phi_rad=phi, distance_m=distance_m)
+    return flange_config(np.array(pose[:3]), phi, q5=q5, model=model)
 
 
 def standard_configurations(

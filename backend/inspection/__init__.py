@@ -1,0 +1,1 @@
+"""Inspection runs: viewpoint planning, the loop, pose, pick and sort, results."""
