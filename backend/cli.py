@@ -13,6 +13,10 @@ from pydantic import ValidationError
 from rich.console import Console
 
 from backend import __version__
+
+# Until this module becomes the ``backend/cli/`` package, let its submodules import.
+__path__ = [str(__import__("pathlib").Path(__file__).with_suffix(""))]
+from backend.cli.models import register as models_register
 from backend.cli_calibrate import calibrate_app
 from backend.cli_features import train_pca
 from backend.settings import Settings
@@ -32,6 +36,7 @@ app.add_typer(db_app, name="db")
 app.add_typer(user_app, name="user")
 app.add_typer(calibrate_app, name="calibrate")
 app.command("train-pca")(train_pca)
+models_register(app)
 
 out = Console()
 err = Console(stderr=True)

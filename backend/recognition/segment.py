@@ -52,6 +52,11 @@ class ObjectRegion:
         Snake iterations.
     converged : bool
         Whether the snake met its movement test.
+    method : str
+        ``"active contour"``, or ``"background difference"`` when the snake left the
+        object (its region disagreed with the blob) and the blob was kept instead.
+    note : str
+        Why the fallback was taken (empty otherwise).
     """
 
     mask: NDArray[np.bool_]
@@ -60,6 +65,8 @@ class ObjectRegion:
     init: NDArray[np.float64]
     iterations: int
     converged: bool
+    method: str = "active contour"
+    note: str = ""
 
 
 def _check_pair(image: NDArray[np.uint8], background: NDArray[np.uint8]) -> None:
@@ -122,9 +129,7 @@ def foreground_mask(
 def _initial_contour(
     blob: NDArray[np.bool_], margin_px: float, n_points: int
 ) -> NDArray[np.float64]:
-    contours, _ = cv2.findContours(
-        blob.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE
-    )
+    contours, _ = cv2.findContours(blob.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     hull = cv2.convexHull(max(contours, key=cv2.contourArea)).reshape(-1, 2).astype(np.float64)
     pts = resample_closed(hull, n_points)
     # Outward normals of a counter-clockwise (on screen: y down) polygon, by central differences.
@@ -165,12 +170,14 @@ def segment_object(
         Snake size and iteration cap.
     min_agreement : float
         Smallest IoU between the snake's region and the foreground blob; below it the
-        snake is taken to have left the object and the blob is refused too.
+        snake is taken to have left the object (it may have collapsed through a weak edge,
+        or the object touches the image border) and the blob is the region instead, with
+        ``method="background difference"`` and the reason in ``note``.
 
     Raises
     ------
     SegmentationFailed
-        No foreground, or a contour that does not agree with it.
+        Nothing differs enough from the background.
     """
     if not 0.0 <= margin_px <= 100.0:
         raise ValueError(f"margin_px must be in [0, 100], got {margin_px!r}")
@@ -180,8 +187,19 @@ def segment_object(
     mask = mask_from_contour(snake.contour, blob.shape)
     agreement = iou(mask, blob)
     if agreement < min_agreement:
-        raise SegmentationFailed(
-            f"the active contour and the background difference disagree (IoU "
-            f"{agreement:.2f} < {min_agreement}): check the lighting and the background"
+        contours, _ = cv2.findContours(
+            blob.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE
+        )
+        outline = max(contours, key=cv2.contourArea).reshape(-1, 2).astype(np.float64)
+        return ObjectRegion(
+            blob,
+            outline,
+            blob,
+            init,
+            snake.iterations,
+            snake.converged,
+            method="background difference",
+            note=f"the active contour left the object (IoU {agreement:.2f} with the "
+            f"background difference, under {min_agreement})",
         )
     return ObjectRegion(mask, snake.contour, blob, init, snake.iterations, snake.converged)

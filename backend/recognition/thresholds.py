@@ -149,11 +149,13 @@ async def current_choice(session: AsyncSession) -> ThresholdChoice:
     else:
         choice = choice_from_detail(row.global_threshold, {"rule": row.chosen_by})
     overrides = dict(
-        (await session.execute(
-            select(ObjectModel.name, ObjectModel.threshold).where(
-                ObjectModel.threshold.is_not(None)
+        (
+            await session.execute(
+                select(ObjectModel.name, ObjectModel.threshold).where(
+                    ObjectModel.threshold.is_not(None)
+                )
             )
-        )).all()
+        ).all()
     )
     if not overrides:
         return choice
@@ -199,6 +201,4 @@ async def recompute(
                 detail=_detail(choice, n_views),
             )
         )
-    return ThresholdOutcome(
-        True, choice.threshold, choice.threshold, choice.rule, confusable
-    )
+    return ThresholdOutcome(True, choice.threshold, choice.threshold, choice.rule, confusable)

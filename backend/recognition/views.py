@@ -14,7 +14,7 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from sqlalchemy import func, select
+from sqlalchemy import delete, func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import defer
 
@@ -216,16 +216,22 @@ def _prepare(
 
 
 async def add_views(
-    db: Database, live: LiveIndex, model_id: int, views: Sequence[ViewInput]
+    db: Database,
+    live: LiveIndex,
+    model_id: int,
+    views: Sequence[ViewInput],
+    *,
+    replace: bool = False,
 ) -> list[TrainedView]:
-    """Store ``views`` of a model (all or none) and add them to the live index."""
+    """Store ``views`` of a model (all or none) and add them to the live index; with
+    ``replace``, the model's earlier views are deleted in the same transaction."""
     if not views:
         raise InvalidInput("no views given")
     if len(views) > MAX_VIEWS_PER_REQUEST:
         raise InvalidInput(f"at most {MAX_VIEWS_PER_REQUEST} views at once, got {len(views)}")
     async with db.session() as session:
         model = IndexedModel.of(await get_model(session, model_id))
-        have = await _view_total(session, model_id)
+        have = 0 if replace else await _view_total(session, model_id)
     if have + len(views) > MAX_VIEWS_PER_MODEL:
         raise Conflict(
             f"model {model.name!r} has {have} views; {len(views)} more would pass the limit "
@@ -236,6 +242,14 @@ async def add_views(
     try:
         async with db.session() as session:
             row_model = await get_model(session, model_id)  # still there, and locked in
+            old: list[int] = []
+            if replace:
+                old = list(
+                    await session.scalars(
+                        select(TrainedView.id).where(TrainedView.model_id == model_id)
+                    )
+                )
+                await session.execute(delete(TrainedView).where(TrainedView.model_id == model_id))
             rows = []
             for v, (feats, png, mask_png, thumb) in zip(views, prepared, strict=True):
                 row = TrainedView(
@@ -266,6 +280,8 @@ async def add_views(
         for vid in added:
             live.remove_view(vid)
         raise
+    for vid in old:
+        live.remove_view(vid)
     return rows
 
 

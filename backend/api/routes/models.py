@@ -12,14 +12,16 @@ import math
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
+import numpy as np
 from fastapi import APIRouter, Depends, File, Form, Path, Query, Request, UploadFile, status
 from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import DatabaseDep, EngineerUser, SessionDep, ViewerUser
+from backend.api.deps import CellDep, DatabaseDep, EngineerUser, SessionDep, ViewerUser
 from backend.api.errors import ApiError
 from backend.recognition import images as im
 from backend.recognition import models as svc
+from backend.recognition import teach as teach_svc
 from backend.recognition import views as views_svc
 from backend.recognition.index import IndexedModel, LiveIndex
 from vision.errors import InvalidInput
@@ -209,6 +211,86 @@ async def delete_model(
     await svc.delete_model(db, model_id)
     live.drop_model(model_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+# -- teaching -------------------------------------------------------------------------------
+
+
+class TeachIn(BaseModel):
+    """Options of a teach (see ``backend.recognition.teach.TeachOptions``)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    viewpoints: list[int] | None = Field(
+        None, min_length=1, max_length=3, description="Default: [1] for 2d, [1, 2, 3] for 3d"
+    )
+    top_rolls_rad: list[float] | None = Field(
+        None, min_length=1, max_length=12, description="Camera rolls of the top view, rad"
+    )
+    background: Literal["grab", "stored"] = Field(
+        "grab",
+        description="grab: the station must be empty; the job grabs the background, then "
+        "waits for the object. stored: the backgrounds of an earlier teach",
+    )
+    object_height_m: float = Field(0.1, gt=0.0, le=0.5, allow_inf_nan=False)
+    yaw_rad: float = Field(0.0, ge=-math.pi, le=math.pi, allow_inf_nan=False)
+    speed: float | None = Field(None, gt=0.0, le=1.0, allow_inf_nan=False)
+    wait_s: float = Field(120.0, ge=0.0, le=teach_svc.MAX_WAIT_S, allow_inf_nan=False)
+    replace: bool = Field(False, description="Replace the model's earlier views")
+    point: list[float] | None = Field(
+        None, min_length=3, max_length=3, description="Station point x, y, z in metres"
+    )
+
+
+class JobAccepted(BaseModel):
+    job: dict[str, Any]
+
+
+def get_backgrounds(request: Request) -> teach_svc.BackgroundStore:
+    """The backgrounds grabbed by earlier teaches of this cell."""
+    store = getattr(request.app.state, "teach_backgrounds", None)
+    if store is None:
+        store = request.app.state.teach_backgrounds = teach_svc.BackgroundStore()
+    return store
+
+
+@router.post(
+    "/{model_id}/teach",
+    response_model=JobAccepted,
+    status_code=status.HTTP_202_ACCEPTED,
+    summary="Teach the model with the arm: a job (engineer)",
+)
+async def teach_model(
+    _: EngineerUser,
+    db: DatabaseDep,
+    live: LiveIndexDep,
+    cell: CellDep,
+    model_id: ModelId,
+    body: TeachIn,
+    store: Annotated[teach_svc.BackgroundStore, Depends(get_backgrounds)],
+) -> dict[str, Any]:
+    options = teach_svc.TeachOptions(
+        viewpoints=None if body.viewpoints is None else tuple(body.viewpoints),
+        top_rolls_rad=teach_svc.TOP_ROLLS_RAD
+        if body.top_rolls_rad is None
+        else tuple(body.top_rolls_rad),
+        background=body.background,
+        object_height_m=body.object_height_m,
+        yaw_rad=body.yaw_rad,
+        speed=body.speed,
+        wait_s=body.wait_s,
+        replace=body.replace,
+    )
+    job = await teach_svc.start_teach(
+        cell=cell,
+        db=db,
+        live=live,
+        model_id=model_id,
+        options=options,
+        store=store,
+        point=None if body.point is None else np.asarray(body.point, dtype=np.float64),
+    )
+    return {"job": job.public()}
 
 
 # -- views ----------------------------------------------------------------------------------
