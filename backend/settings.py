@@ -8,6 +8,7 @@ the setting and the value.
 from __future__ import annotations
 
 import ipaddress
+import re
 from pathlib import Path
 from typing import Literal
 
@@ -19,6 +20,9 @@ __all__ = ["DEV_SECRET", "Settings"]
 #: The secret used when none is configured.  Accepted only in the development
 #: environment and only while every listener is bound to the loopback interface.
 DEV_SECRET = "visioncell-development-secret-change-me"
+
+#: A cell name: a short slug (lower-case letters and digits, inner '-' or '_', <= 40 chars).
+CELL_NAME_PATTERN = re.compile(r"^[a-z0-9](?:[a-z0-9_-]{0,38}[a-z0-9])?$")
 
 
 def _is_loopback(host: str) -> bool:
@@ -42,6 +46,11 @@ class Settings(BaseSettings):
 
     environment: Literal["development", "production"] = Field(
         "development", description="'production' forbids the development secret and disabling auth."
+    )
+    cell_name: str = Field(
+        "cell-1",
+        description="Name of this cell's row in the database; several cells (processes) may "
+        "share one PostgreSQL database, each with its own calibrations and inspections.",
     )
     database_url: str = Field(
         "sqlite+aiosqlite:///var/visioncell.db",
@@ -123,6 +132,16 @@ class Settings(BaseSettings):
                 ipaddress.ip_address(v)
             except ValueError as exc:
                 raise ValueError(f"host must be an IP address or 'localhost', got {v!r}") from exc
+        return v
+
+    @field_validator("cell_name")
+    @classmethod
+    def _valid_cell_name(cls, v: str) -> str:
+        if not CELL_NAME_PATTERN.match(v):
+            raise ValueError(
+                "cell_name must be a short slug: 1-40 lower-case letters, digits, '-' or '_', "
+                f"starting and ending with a letter or digit, got {v!r}"
+            )
         return v
 
     @field_validator("database_url")

@@ -1,11 +1,18 @@
-"""Shared dependencies: database session, current user with a minimum role, the cell."""
+"""Shared dependencies: the runtime, database session, current user with a minimum role,
+the cell, the simulator.
+
+This module is the one place that knows where the app keeps its
+:class:`~backend.runtime.CellRuntime` (:func:`install_runtime`, :func:`runtime_of`);
+handlers, the WebSocket and services get what they need from these dependencies.
+"""
 
 from __future__ import annotations
 
 from collections.abc import AsyncIterator, Callable, Coroutine
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
-from fastapi import Depends, Request
+from fastapi import Depends, FastAPI
+from fastapi.requests import HTTPConnection
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.ext.asyncio import AsyncSession
 
@@ -16,15 +23,29 @@ from backend.db.models import Role, User
 from backend.db.session import Database
 from backend.settings import Settings
 
+if TYPE_CHECKING:
+    from backend.runtime import CellRuntime
+    from backend.view3d import View3D
+    from robot.sim import SimEngine
+
 __all__ = [
     "CellDep",
     "DatabaseDep",
     "EngineerUser",
     "OperatorUser",
+    "RuntimeDep",
     "SessionDep",
     "SettingsDep",
+    "SimDep",
+    "View3DDep",
     "ViewerUser",
+    "get_cell",
+    "get_database",
+    "get_runtime",
+    "get_settings",
+    "install_runtime",
     "require_role",
+    "runtime_of",
 ]
 
 _bearer = HTTPBearer(
@@ -32,19 +53,51 @@ _bearer = HTTPBearer(
 )
 
 
-def get_settings(request: Request) -> Settings:
-    return request.app.state.settings
+def install_runtime(
+    app: FastAPI, runtime: CellRuntime | None, *, settings: Settings | None = None
+) -> None:
+    """Make ``runtime`` the one the app's dependencies serve (None: not running)."""
+    app.state.runtime = runtime
+    if settings is not None:
+        app.state.settings = settings
+    elif runtime is not None:
+        app.state.settings = runtime.settings
 
 
-def get_database(request: Request) -> Database:
-    return request.app.state.db
+def runtime_of(app: FastAPI) -> CellRuntime | None:
+    """The runtime an app serves (None before start-up and after shutdown)."""
+    return getattr(app.state, "runtime", None)
 
 
-def get_cell(request: Request) -> Cell:
-    cell = getattr(request.app.state, "cell", None)
-    if cell is None:
+def get_runtime(conn: HTTPConnection) -> CellRuntime:
+    """The running :class:`CellRuntime`, or 503 when the cell is not running."""
+    rt = runtime_of(conn.app)
+    if rt is None or not rt.running:
         raise ApiError(503, "unavailable", "the cell is not running")
-    return cell
+    return rt
+
+
+def get_settings(conn: HTTPConnection) -> Settings:
+    return conn.app.state.settings  # type: ignore[no-any-return]
+
+
+def get_database(conn: HTTPConnection) -> Database:
+    return get_runtime(conn).database
+
+
+def get_cell(conn: HTTPConnection) -> Cell:
+    return get_runtime(conn).cell
+
+
+def get_sim_or_none(conn: HTTPConnection) -> SimEngine | None:
+    """The simulation engine, or None when the cell drives real (or ideal) hardware."""
+    return get_runtime(conn).sim
+
+
+def get_view3d(conn: HTTPConnection) -> View3D | None:
+    """The 3D view, or None when it is off (or the cell is not running)."""
+    rt = runtime_of(conn.app)
+    return rt.view3d if rt is not None and rt.running else None
 
 
 async def get_session(
@@ -54,8 +107,13 @@ async def get_session(
         yield session
 
 
+# Types the runtime's module would import at start-up are written as Any here (FastAPI only
+# needs the dependency); the functions above carry the precise types.
+RuntimeDep = Annotated[Any, Depends(get_runtime)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 DatabaseDep = Annotated[Database, Depends(get_database)]
+SimDep = Annotated[Any, Depends(get_sim_or_none)]
+View3DDep = Annotated[Any, Depends(get_view3d)]
 SessionDep = Annotated[AsyncSession, Depends(get_session)]
 CellDep = Annotated[Cell, Depends(get_cell)]
 

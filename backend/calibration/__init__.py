@@ -10,7 +10,6 @@ from backend.calibration.auto import (
     nominal_camera,
     prepare_auto_calibration,
     run_auto_calibration,
-    view_log,
 )
 from backend.calibration.autoplan import (
     NOMINAL_T_EE_CAM,
@@ -80,5 +79,4 @@ __all__ = [
     "run_auto_calibration",
     "session_summary",
     "solve_session",
-    "view_log",
 ]

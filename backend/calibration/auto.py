@@ -6,9 +6,10 @@ One run is one motion job (it holds the arm until it ends):
 2. the arm goes to the plan's first view (the board centred, seen nearly straight on); the
    board's pose is measured there with the planning camera model (PnP), and the views are
    planned again around that measurement, so that a rough board placement is enough;
-3. for each view: joint move (collision-checked along the path), wait for a frame exposed
-   after the arm has stopped, store it with the joints and ``T_base_ee`` from the encoders
-   (the board is detected when the sample is stored);
+3. for each view: ``cell.look`` (a joint move collision-checked along the path with the
+   board as an extra obstacle, settle, a frame exposed after the arm stopped), store the
+   frame with the joints and ``T_base_ee`` from the encoders at exposure (the board is
+   detected when the sample is stored);
 4. collection stops when the planned views are done and the criteria hold (stated in
    :data:`AUTO_CRITERIA`); reserves are visited while they do not; with none left the run
    fails, the samples stay in the session;
@@ -25,8 +26,6 @@ import asyncio
 import dataclasses
 import functools
 import time
-import weakref
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -50,12 +49,11 @@ from backend.calibration.sessions import (
     get_session,
 )
 from backend.calibration.solving import SolveOptions, solve_session
+from backend.cell.errors import PathBlocked
+from backend.cell.viewlog import CalibrationViewLog
 from backend.db.models import CalibrationKind
 from robot.collision import CollisionWorld
-from robot.errors import DriverError
 from robot.kinematics import T_base_ee
-from robot.model import check_joints
-from robot.trajectory import plan_joint_move
 from vision.calibration import (
     Board,
     CharucoBoard,
@@ -87,7 +85,6 @@ __all__ = [
     "nominal_camera",
     "prepare_auto_calibration",
     "run_auto_calibration",
-    "view_log",
 ]
 
 #: When collection may stop: >= 12 views with the board found, corners in >= 70 % of an
@@ -132,12 +129,12 @@ class AutoOptions:
     seed : int
         Seed of the planner.
     speed : float
-        Fraction of the arm's speed limits, (0, 1].
+        Fraction of the arm's speed limits, [0.01, 1].
     criteria : ViewSetCriteria
         When collection may stop (``min_views`` is capped at ``n_poses``).
     settle_s : float
         Wall-clock wait after a move, after which the run also waits for the arm to be
-        still (:data:`STILL_RAD_S`) before the frame is taken.
+        still (``backend.cell.STILL_RAD_S``) before the frame is taken.
     """
 
     n_poses: int = 25
@@ -153,68 +150,8 @@ class AutoOptions:
             raise ValueError(f"n_poses must be in [3, 60], got {self.n_poses!r}")
         if not 0 <= int(self.n_reserve) <= 60:
             raise ValueError(f"n_reserve must be in [0, 60], got {self.n_reserve!r}")
-        if not 0.0 < float(self.speed) <= 1.0:
-            raise ValueError(f"speed must be in (0, 1], got {self.speed!r}")
-
-
-class CalibrationViewLog:
-    """The camera poses sampled by the current (or last) run of a cell, for the 3D view.
-
-    Listeners get ``("clear", None)`` when a run starts and ``("view", (T_base_cam, ok))``
-    for each stored sample (``ok``: the board was found).
-    """
-
-    def __init__(self) -> None:
-        self.poses: list[tuple[NDArray[np.float64], bool]] = []
-        self._listeners: list[Callable[[str, Any], None]] = []
-
-    def add_listener(self, fn: Callable[[str, Any], None]) -> None:
-        """Call ``fn(event, data)`` on every change."""
-        self._listeners.append(fn)
-
-    def remove_listener(self, fn: Callable[[str, Any], None]) -> None:
-        """Stop calling ``fn``."""
-        if fn in self._listeners:
-            self._listeners.remove(fn)
-
-    def _emit(self, event: str, data: Any) -> None:
-        for fn in list(self._listeners):
-            fn(event, data)
-
-    def clear(self) -> None:
-        """A new run starts."""
-        self.poses = []
-        self._emit("clear", None)
-
-    def add(self, T_base_cam: NDArray[np.float64], ok: bool) -> None:
-        """A sample was stored."""
-        self.poses.append((T_base_cam, ok))
-        self._emit("view", (T_base_cam, ok))
-
-
-_LOGS: weakref.WeakKeyDictionary[Any, CalibrationViewLog] = weakref.WeakKeyDictionary()
-
-
-def view_log(cell: Cell) -> CalibrationViewLog:
-    """The :class:`CalibrationViewLog` of ``cell`` (made on first use)."""
-    log = _LOGS.get(cell)
-    if log is None:
-        log = _LOGS[cell] = CalibrationViewLog()
-    return log
-
-
-async def _fresh_frame(cell: Cell, after_s: float, timeout_s: float = 10.0) -> Any:
-    """The first frame of the cell's camera exposed after ``after_s`` (``time.monotonic``)."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        frame = cell.latest_frame
-        if frame is not None and frame.stamp_s > after_s:
-            return frame
-        if time.monotonic() > deadline:
-            raise CalibrationError(
-                f"the camera gave no frame within {timeout_s:g} s: {cell.camera_status().error or 'no error reported'}"
-            )
-        await asyncio.sleep(0.02)
+        if not 0.01 <= float(self.speed) <= 1.0:
+            raise ValueError(f"speed must be in [0.01, 1], got {self.speed!r}")
 
 
 #: Survey views tried before the run gives up on finding the board.
@@ -252,39 +189,6 @@ def _quick_model(
 
 def _diversity(poses: list[NDArray[np.float64]]) -> RotationDiversity:
     return rotation_diversity(np.array(poses, dtype=np.float64).reshape(-1, 4, 4))
-
-
-async def _move(
-    cell: Cell, q: NDArray[np.float64], world: CollisionWorld, speed: float
-) -> str | None:
-    """Move to ``q``; the reason instead if the straight joint path would collide."""
-    q_now = np.asarray(cell.driver.state.q, dtype=np.float64)
-    goal = check_joints(q, cell.model)
-    hits = world.path_contacts(q_now, goal)
-    if hits:
-        return f"the move would bring the {hits[0]}"
-    traj = plan_joint_move(q_now, goal, speed=speed, model=cell.model)
-    report = await cell.driver.move(traj)
-    if not report.completed:
-        raise DriverError(f"the calibration run stopped: the move ended with {report.reason!r}")
-    return None
-
-
-#: The arm counts as still when no joint turns faster than this, rad/s (0.06 deg/s).
-STILL_RAD_S = 1e-3
-
-
-async def _settle(cell: Cell, wait_s: float, *, timeout_s: float = 3.0) -> None:
-    """Wait ``wait_s``, then until the arm's joint speeds are below :data:`STILL_RAD_S`
-    (the controller may still be damping the end of the move: a moving camera blurs the
-    corners and its encoders disagree with the exposure)."""
-    await asyncio.sleep(wait_s)
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        qd = np.asarray(cell.driver.state.qd, dtype=np.float64)
-        if float(np.abs(qd).max()) < STILL_RAD_S:
-            return
-        await asyncio.sleep(0.01)
 
 
 def _measure_board(
@@ -374,7 +278,7 @@ async def prepare_auto_calibration(
     :data:`NOMINAL_T_EE_CAM`."""
     B = np.asarray(T_base_board, dtype=np.float64)
     if camera is None:
-        frame = await _fresh_frame(cell, 0.0)
+        frame = await cell.next_frame(after=0.0)
         h, w = frame.rgb.shape[:2]
         camera = nominal_camera(w, h)
     Tec = np.asarray(NOMINAL_T_EE_CAM if T_ee_cam is None else T_ee_cam, dtype=np.float64)
@@ -388,7 +292,7 @@ async def prepare_auto_calibration(
 async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun) -> dict[str, Any]:
     """The body of an ``auto_calibrate`` motion job (see the module docstring)."""
     t0 = time.monotonic()
-    log = view_log(cell)
+    log = cell.calibration_views
     log.clear()
     board, options, world, cam, Tec = run.board, run.options, run.world, run.camera, run.T_ee_cam
     w, h = cam.width, cam.height
@@ -412,7 +316,7 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
 
     first = run.plan
     async with db.session() as s:
-        cell_id = await cell_id_of(s)
+        cell_id = await cell_id_of(s, cell.name)
         row = await create_session(
             s,
             kind=CalibrationKind.hand_eye,
@@ -446,11 +350,13 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
     guarded = world.with_boxes(board_box(board, run.T_base_board))
     for n_try, survey in enumerate(surveys, start=1):
         job.report(0.01, f"survey view {n_try}: locating the board")
-        if await _move(cell, survey.q, guarded, options.speed) is not None:
+        try:
+            frame = await cell.look(
+                survey.q, speed=options.speed, world=guarded, settle_s=options.settle_s
+            )
+        except PathBlocked:
             continue
-        await _settle(cell, options.settle_s)
-        frame = await _fresh_frame(cell, time.monotonic())
-        q_seen = np.asarray(getattr(frame.robot_state, "q", cell.driver.state.q), dtype=np.float64)
+        q_seen = np.asarray(frame.robot_state.q, dtype=np.float64)
         B = await asyncio.to_thread(
             _measure_board, frame.rgb, board, cam, T_base_ee(q_seen, cell.model) @ Tec
         )
@@ -500,13 +406,14 @@ async def run_auto_calibration(job: Job, cell: Cell, db: Database, run: AutoRun)
             f"view {visited} of {n_primary}{' (reserve)' if k > n_primary else ''}: "
             f"{len(poses)} with the board",
         )
-        blocked = await _move(cell, v.q, guarded, options.speed)
-        if blocked is not None:
-            skipped.append(blocked)
+        try:
+            frame = await cell.look(
+                v.q, speed=options.speed, world=guarded, settle_s=options.settle_s
+            )
+        except PathBlocked as exc:
+            skipped.append(exc.detail)
             continue
-        await _settle(cell, options.settle_s)
-        frame = await _fresh_frame(cell, time.monotonic())
-        q_seen = np.asarray(getattr(frame.robot_state, "q", cell.driver.state.q), dtype=np.float64)
+        q_seen = np.asarray(frame.robot_state.q, dtype=np.float64)
         await store(f"auto-{visited:02d}.png", frame.rgb, q_seen)
         if not updated and len(poses) >= UPDATE_AFTER_VIEWS:
             # Plan the rest with the camera model measured so far (the nominal one

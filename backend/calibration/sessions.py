@@ -118,12 +118,8 @@ def load_detections(cal_session: CalibrationSession) -> tuple[list[Detection], l
 # -- sessions and samples -----------------------------------------------------------------
 
 
-async def cell_id_of(session: AsyncSession, name: str | None = None) -> int:
-    """Id of the cell called ``name`` (default: this process's cell)."""
-    if name is None:
-        from backend.app import DEFAULT_CELL  # imported here: backend.app imports the API
-
-        name = DEFAULT_CELL
+async def cell_id_of(session: AsyncSession, name: str) -> int:
+    """Id of the cell called ``name`` (``Settings.cell_name`` of the process that runs it)."""
     cell_id = await session.scalar(select(CellRow.id).where(CellRow.name == name))
     if cell_id is None:
         raise NotFound(f"no cell named {name!r}")

@@ -1,7 +1,8 @@
 """An automatic calibration run in a simulated cell, in this process (CLI and benchmark).
 
-The app is built as ``visioncell serve`` builds it (simulated driver and camera, a fresh
-SQLite database in a temporary folder, no 3D view), a board is placed on the table preset,
+The cell is assembled by :class:`~backend.runtime.CellRuntime`, as ``visioncell serve``
+assembles it (simulated driver and camera, a fresh SQLite database in a temporary folder,
+no 3D view), a board is placed on the table preset,
 and the same planner and job as ``POST /api/calibration/auto`` run.  Only after the run is
 the result compared with the simulator's ground truth, for the report.
 """
@@ -102,11 +103,10 @@ async def _run(
     activate: bool,
     progress: Callable[[float, str], None] | None,
 ) -> SimAutoReport:
-    from backend.app import create_app
     from backend.calibration import auto
     from backend.db.migrate import upgrade
+    from backend.runtime import CellRuntime
     from backend.settings import Settings
-    from robot.sim.obstacles import collision_world
 
     url = f"sqlite+aiosqlite:///{folder / 'calibration.db'}"
     settings = Settings(
@@ -121,10 +121,9 @@ async def _run(
         sim_demo=False,
     )
     await asyncio.to_thread(upgrade, url)
-    app = create_app(settings)
-    async with app.router.lifespan_context(app):
-        cell, db, sim = app.state.cell, app.state.db, app.state.sim
-        if cell is None or sim is None:
+    async with CellRuntime(settings) as rt:
+        cell, db, sim = rt.cell, rt.database, rt.sim
+        if sim is None or cell.world is None:
             raise RuntimeError("the simulated cell did not start")
         spec = next(s for s in sim.config.boards if s.kind == board)
         layout = sim.config.layout
@@ -145,7 +144,7 @@ async def _run(
             board=pattern,
             T_base_board=T,
             options=auto.AutoOptions(n_poses=n_poses, seed=seed, activate=activate, speed=1.0),
-            world=collision_world(layout),
+            world=cell.world,
         )
 
         async def body(job: Any) -> dict[str, Any]:

@@ -53,7 +53,7 @@ def _fail(message: str) -> typer.Exit:
 
 
 def _settings() -> Any:
-    from backend.cli import load_settings
+    from backend.cli.common import load_settings
 
     return load_settings()
 

@@ -18,6 +18,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,7 +30,14 @@ from vision.errors import InvalidInput, VisionCellError
 from vision.features import Features
 from vision.recognition import ViewIndex
 
-__all__ = ["IndexedModel", "LiveIndex", "LoadReport", "StaleFeatures", "StaleView"]
+__all__ = [
+    "IndexedModel",
+    "LiveIndex",
+    "LoadReport",
+    "StaleFeatures",
+    "StaleView",
+    "load_live_index",
+]
 
 log = logging.getLogger(__name__)
 
@@ -292,3 +300,23 @@ class LiveIndex:
             self._index.remove_view(view_id)
             del self._view_model[view_id]
             return True
+
+
+async def load_live_index(db: Database, settings: Any) -> LiveIndex:
+    """Build the live index of ``settings``' feature method from the database (at start-up)."""
+    import asyncio
+
+    live = await asyncio.to_thread(
+        LiveIndex,
+        method=settings.recognition_method,
+        max_features=settings.recognition_max_features,
+    )
+    report = await live.load(db)
+    log.info(
+        "recognition index: %d views of %d models in %.2f s (%d stale)",
+        report.views,
+        report.models,
+        report.seconds,
+        len(report.stale),
+    )
+    return live

@@ -356,16 +356,15 @@ async def start_teach(
     ``point`` defaults to the station point of the cell's conveyor; the camera mounting is
     the active hand-eye calibration of the cell, else the nominal one.
     """
-    from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration, cell_id_of
+    from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
     from robot.sim.world import ConveyorSpec
 
     async with db.session() as session:
         await get_model(session, model_id)
-        try:
-            calib = await active_camera_calibration(session, await cell_id_of(session))
-            T_ee_cam = calib.T_ee_cam
-        except VisionCellError:
-            T_ee_cam = None
+        cell_id = getattr(cell, "db_id", None)
+        T_ee_cam = None
+        if cell_id is not None:
+            T_ee_cam = (await active_camera_calibration(session, cell_id)).T_ee_cam
     T = np.asarray(NOMINAL_T_EE_CAM if T_ee_cam is None else T_ee_cam, dtype=np.float64)
     p = np.asarray(ConveyorSpec().station_point if point is None else point, dtype=np.float64)
     if p.shape != (3,) or not np.all(np.isfinite(p)) or np.linalg.norm(p[:2]) > 1.6:

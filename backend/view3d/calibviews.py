@@ -1,6 +1,6 @@
 """Camera poses sampled by an automatic calibration run, drawn as frusta in the 3D view.
 
-Subscribes to the cell's :func:`backend.calibration.auto.view_log`: a run's start clears
+Follows the cell's :class:`~backend.cell.viewlog.CalibrationViewLog` (``cell.calibration_views``): a run's start clears
 the previous run's frusta, each stored sample adds one (green: board found, red: not).
 """
 
@@ -13,7 +13,7 @@ import numpy as np
 import viser
 import viser.transforms as vtf
 
-from backend.calibration.auto import CalibrationViewLog
+from backend.cell.viewlog import CalibrationViewLog
 
 __all__ = ["CalibrationFrusta"]
 

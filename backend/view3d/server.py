@@ -22,7 +22,6 @@ import numpy as np
 import viser
 import viser.transforms as vtf
 
-from backend.calibration.auto import view_log
 from backend.calibration.autoplan import NOMINAL_T_EE_CAM
 from backend.cell import Cell
 from backend.view3d.arm import arm_shapes, link_poses
@@ -217,7 +216,7 @@ class View3D:
             self._sim_scene = SimScene(server, self.sim)
         # Camera poses of automatic calibration runs (backend.calibration.auto).
         self._calib_frusta = CalibrationFrusta(
-            server, view_log(self.cell), fov_rad=self._fov_rad, aspect=self._aspect
+            server, self.cell.calibration_views, fov_rad=self._fov_rad, aspect=self._aspect
         )
 
     def _build_panel(self, server: viser.ViserServer) -> None:

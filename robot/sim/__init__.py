@@ -11,6 +11,7 @@ from robot.sim.camera import DEFAULT_DIST, DEFAULT_T_EE_CAM, CameraSpec, Lens
 from robot.sim.catalogue import CATALOGUE, CatalogueEntry, catalogue_names
 from robot.sim.config import SimConfig
 from robot.sim.controller import ControllerGains, JointController
+from robot.sim.conveyor import SimConveyor
 from robot.sim.demo import DEMO_OBJECTS, populate_demo
 from robot.sim.driver import SimCamera, SimDriver
 from robot.sim.engine import ArmSample, SimEngine, Snapshot
@@ -40,6 +41,7 @@ __all__ = [
     "ObjectTruth",
     "SimCamera",
     "SimConfig",
+    "SimConveyor",
     "SimDriver",
     "SimEngine",
     "SimTruth",

@@ -486,6 +486,16 @@ class SimEngine:
                 running=running, speed_m_s=speed_m_s, mode=mode, dwell_s=dwell_s
             )
 
+    def halt_conveyor(self) -> None:
+        """Emergency stop of the belt (latched until :meth:`resume_conveyor`)."""
+        with self._lock:
+            self.conveyor.halt()
+
+    def resume_conveyor(self) -> None:
+        """Release the emergency stop of the belt (it runs again if it was running)."""
+        with self._lock:
+            self.conveyor.resume()
+
     def release_conveyor(self) -> None:
         """Index mode: let the item at the station go on."""
         with self._lock:

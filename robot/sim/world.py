@@ -153,6 +153,8 @@ class ConveyorState:
     dwell_s: float | None
     at_station: bool
     travel_m: float
+    halted: bool = False
+    """True while the cell's emergency stop holds the belt (it resumes on reset)."""
 
     def as_dict(self) -> dict[str, object]:
         """JSON-friendly form."""
@@ -163,6 +165,7 @@ class ConveyorState:
             "dwell_s": self.dwell_s,
             "at_station": self.at_station,
             "travel_m": self.travel_m,
+            "halted": self.halted,
         }
 
 
@@ -205,6 +208,7 @@ class Conveyor:
         self.speed_m_s = 0.0
         self.mode = "continuous"
         self.dwell_s: float | None = None
+        self.halted = False
         self.configure(running=running, speed_m_s=speed_m_s, mode=mode, dwell_s=dwell_s)
 
     def configure(
@@ -215,7 +219,14 @@ class Conveyor:
         mode: str | None = None,
         dwell_s: float | str | None = "keep",
     ) -> ConveyorState:
-        """Change any of running, speed, mode and dwell (``"keep"`` leaves dwell unchanged)."""
+        """Change any of running, speed, mode and dwell (``"keep"`` leaves dwell unchanged).
+
+        Starting the belt while it is halted (:meth:`halt`) raises :class:`~robot.errors.SimError`.
+        """
+        if running and self.halted:
+            from robot.errors import SimError
+
+            raise SimError("the conveyor is halted by the emergency stop: reset the cell first")
         if speed_m_s is not None and (not math.isfinite(speed_m_s) or not 0.0 <= speed_m_s <= 2.0):
             raise ValueError(f"speed_m_s must be in [0, 2] m/s, got {speed_m_s!r}")
         if mode is not None and mode not in CONVEYOR_MODES:
@@ -242,8 +253,23 @@ class Conveyor:
     def state(self) -> ConveyorState:
         """The belt's current settings and whether it holds an item at the station."""
         return ConveyorState(
-            self.running, self.speed_m_s, self.mode, self.dwell_s, self._holding, self.travel_m
+            self.running and not self.halted,
+            self.speed_m_s,
+            self.mode,
+            self.dwell_s,
+            self._holding,
+            self.travel_m,
+            self.halted,
         )
+
+    def halt(self) -> None:
+        """Emergency stop: the belt stands still at once and until :meth:`resume`; whether it
+        was running is kept."""
+        self.halted = True
+
+    def resume(self) -> None:
+        """After an emergency stop is reset: the belt runs again if it was running."""
+        self.halted = False
 
     def release(self) -> None:
         """Index mode: let the item waiting at the station go on now."""
@@ -263,7 +289,7 @@ class Conveyor:
     def advance(self, dt_s: float) -> list[int]:
         """Run the belt for ``dt_s`` seconds; returns the ids of items removed at the end."""
         remaining = float(dt_s)
-        while self.running and remaining > 1e-12 and self.speed_m_s > 0.0:
+        while self.running and not self.halted and remaining > 1e-12 and self.speed_m_s > 0.0:
             if self.mode == "index" and self._holding:
                 if self.dwell_s is None:
                     break

@@ -49,7 +49,7 @@ def _count_rows(settings, table) -> int:
 
 
 def _live(client):
-    return client.app.state.live_index
+    return client.app.state.runtime.live_index
 
 
 # -- CRUD -----------------------------------------------------------------------------------
@@ -284,7 +284,7 @@ def test_stale_descriptor_version_is_refused_then_reextracted(settings, tokens, 
         assert "opencv-3.4.0" in view["stale"] and "visioncell models reextract" in view["stale"]
         from backend.recognition.views import reextract_views
 
-        n = c.portal.call(lambda: reextract_views(c.app.state.db, live))
+        n = c.portal.call(lambda: reextract_views(c.app.state.runtime.database, live))
         assert n == 1 and live.has_view(vid) and not live.stale
 
 

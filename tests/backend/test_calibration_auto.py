@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from backend.api.deps import runtime_of
 from backend.app import create_app
 from tests.utils.factories import make_settings, make_tokens, migrate
 
@@ -78,7 +79,7 @@ def test_auto_calibration_end_to_end(sim_client):
     active = c.get("/api/calibration/active", headers=hdr["viewer"]).json()
     assert active["hand_eye"]["id"] == res["calibration_id"], active
     # Judged against the simulator's truth (never given to the run).
-    truth = app.state.sim.truth.camera
+    truth = runtime_of(app).sim.truth.camera
     K = np.asarray(res["K"])
     assert abs(K[0, 0] / truth.K[0, 0] - 1) <= 0.002 and abs(K[1, 1] / truth.K[1, 1] - 1) <= 0.002
     T = np.asarray(res["T_ee_cam"])

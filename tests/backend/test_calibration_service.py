@@ -43,7 +43,7 @@ def _samples(folder, *, with_poses=True, names=None):
 
 async def _session(db, kind, folder, **kw):
     async with db.session() as s:
-        cell_id = await svc.cell_id_of(s)
+        cell_id = await svc.cell_id_of(s, "cell-1")
         row = await svc.create_session(s, kind=kind, board=folder.data.board, cell_id=cell_id)
         await svc.add_samples(s, row, _samples(folder, **kw))
         return row.id
@@ -81,7 +81,7 @@ async def test_hand_eye_session_needs_a_pose_per_image_and_keeps_nothing_otherwi
             s,
             kind=CalibrationKind.hand_eye,
             board=synthetic_folder.data.board,
-            cell_id=await svc.cell_id_of(s),
+            cell_id=await svc.cell_id_of(s, "cell-1"),
         )
     with pytest.raises(ValueError, match=r"sample 'view_00\.png' has no robot pose"):
         async with db.session() as s:
@@ -128,9 +128,9 @@ async def test_one_active_calibration_per_kind(db, synthetic_folder):
     async with db.session() as s:
         await svc.activate(s, b.id)
     async with db.session() as s:
-        act = await svc.active_calibrations(s, await svc.cell_id_of(s))
+        act = await svc.active_calibrations(s, await svc.cell_id_of(s, "cell-1"))
         assert act[CalibrationKind.intrinsic].id == b.id and act[CalibrationKind.hand_eye] is None
-        cam = await svc.active_camera_calibration(s, await svc.cell_id_of(s))
+        cam = await svc.active_camera_calibration(s, await svc.cell_id_of(s, "cell-1"))
         assert cam.intrinsic_id == b.id and cam.T_ee_cam is None and cam.hand_eye_id is None
         assert not (await svc.get_calibration(s, a.id)).active
         row = await svc.get_session(s, sid)
@@ -151,7 +151,7 @@ async def test_hand_eye_solve_stores_both_and_activation_brings_its_intrinsics(
         translation_error_mm(X, TRUE_T_EE_CAM) < 1.0 and rotation_error_deg(X, TRUE_T_EE_CAM) < 0.2
     )
     async with db.session() as s:
-        act = await svc.active_calibrations(s, await svc.cell_id_of(s))
+        act = await svc.active_calibrations(s, await svc.cell_id_of(s, "cell-1"))
         assert (
             act[CalibrationKind.hand_eye].id == he.id
             and act[CalibrationKind.intrinsic].id == intr.id

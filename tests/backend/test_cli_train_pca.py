@@ -8,7 +8,7 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from backend.cli_features import train_pca
+from backend.cli.features import train_pca
 from vision.features.pca import load_npz
 
 pytest.importorskip("skimage")
@@ -94,7 +94,7 @@ def test_errors_and_skipped_kinds(tmp_path, monkeypatch):
 @pytest.mark.slow
 def test_sim_frames_render_the_cell(monkeypatch):
     monkeypatch.setenv("MUJOCO_GL", "egl")
-    from backend.cli_features import sim_frames
+    from backend.cli.features import sim_frames
 
     frames = sim_frames(2)
     assert [n for n, _ in frames] == ["sim:top-0", "sim:inner-0"]

@@ -1,7 +1,7 @@
 """Training of the shipped PCA bases (chapter section 3.4.2: about 20,000 patches, the
 covariance of equation 19, the projection of equation 18).
 
-Pure vision code: the caller (``visioncell train-pca`` in :mod:`backend.cli_features`)
+Pure vision code: the caller (``visioncell train-pca`` in :mod:`backend.cli.features`)
 gathers the RGB training images and their names; this module computes the unreduced
 descriptors at the keypoints of each image, samples the training set reproducibly and fits
 the basis with its provenance.

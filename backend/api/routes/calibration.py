@@ -12,12 +12,12 @@ from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
-from fastapi import APIRouter, File, Form, Query, Request, UploadFile, status
+from fastapi import APIRouter, File, Form, Query, UploadFile, status
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, Field, model_validator
 
 from backend import calibration as svc
-from backend.api.deps import CellDep, DatabaseDep, EngineerUser, SessionDep, ViewerUser
+from backend.api.deps import CellDep, DatabaseDep, EngineerUser, SessionDep, SimDep, ViewerUser
 from backend.api.errors import ApiError, error_body
 from backend.db.models import CalibrationKind
 from backend.jobs import Job, JobState
@@ -169,10 +169,10 @@ def _joints(text: str | None, n: int) -> list[list[float] | None]:
     "/sessions", status_code=status.HTTP_201_CREATED, summary="Start a calibration session"
 )
 async def create_calibration_session(
-    _: EngineerUser, session: SessionDep, body: SessionIn
+    _: EngineerUser, session: SessionDep, cell: CellDep, body: SessionIn
 ) -> dict[str, Any]:
     board = body.board.to_board()
-    cell_id = await svc.cell_id_of(session)
+    cell_id = await svc.cell_id_of(session, cell.name)
     row = await svc.create_session(
         session, kind=body.kind, board=board, cell_id=cell_id, note=body.note
     )
@@ -180,14 +180,16 @@ async def create_calibration_session(
     return {"session": svc.session_summary(row)}
 
 
-@router.get("/sessions", summary="Calibration sessions, newest first")
+@router.get("/sessions", summary="This cell's calibration sessions, newest first")
 async def read_calibration_sessions(
     _: ViewerUser,
     session: SessionDep,
+    cell: CellDep,
     limit: Annotated[int, Query(ge=1, le=500)] = 100,
     offset: Annotated[int, Query(ge=0)] = 0,
 ) -> dict[str, Any]:
-    rows = await svc.list_sessions(session, limit=limit, offset=offset)
+    cell_id = await svc.cell_id_of(session, cell.name)
+    rows = await svc.list_sessions(session, cell_id=cell_id, limit=limit, offset=offset)
     data = [svc.session_summary(r) for r in rows]
     return {"data": data, "count": len(data)}
 
@@ -348,22 +350,28 @@ async def create_calibration_solve(
 # -- calibrations -------------------------------------------------------------------------
 
 
-@router.get("/calibrations", summary="Calibration history, newest first")
+@router.get("/calibrations", summary="This cell's calibration history, newest first")
 async def read_calibrations(
     _: ViewerUser,
     session: SessionDep,
+    cell: CellDep,
     kind: CalibrationKind | None = None,
     session_id: int | None = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 100,
 ) -> dict[str, Any]:
-    rows = await svc.history(session, kind=kind, session_id=session_id, limit=limit)
+    cell_id = await svc.cell_id_of(session, cell.name)
+    rows = await svc.history(
+        session, cell_id=cell_id, kind=kind, session_id=session_id, limit=limit
+    )
     data = [svc.calibration_public(r) for r in rows]
     return {"data": data, "count": len(data)}
 
 
 @router.get("/active", summary="The active calibration of each kind in this cell")
-async def read_active_calibrations(_: ViewerUser, session: SessionDep) -> dict[str, Any]:
-    cell_id = await svc.cell_id_of(session)
+async def read_active_calibrations(
+    _: ViewerUser, session: SessionDep, cell: CellDep
+) -> dict[str, Any]:
+    cell_id = await svc.cell_id_of(session, cell.name)
     act = await svc.active_calibrations(session, cell_id)
     return {k.value: (svc.calibration_public(v) if v else None) for k, v in act.items()}
 
@@ -446,18 +454,13 @@ class AutoIn(BaseModel):
     summary="Start an automatic calibration run (a motion job; 409 while the arm is busy)",
 )
 async def create_calibration_auto(
-    _: EngineerUser, request: Request, db: DatabaseDep, cell: CellDep, body: AutoIn
+    _: EngineerUser, db: DatabaseDep, cell: CellDep, sim: SimDep, body: AutoIn
 ) -> dict[str, Any]:
     from backend.calibration import auto
 
     cell.check_can_move()  # refuse before the planning work
-    sim = getattr(request.app.state, "sim", None)
     board, T = _auto_board(body, sim)
-    world = CollisionWorld()
-    if sim is not None:
-        from robot.sim.obstacles import collision_world
-
-        world = collision_world(sim.config.layout)
+    world = cell.world if cell.world is not None else CollisionWorld()
     options = auto.AutoOptions(
         n_poses=body.n_poses,
         n_reserve=body.n_reserve,

@@ -24,5 +24,4 @@ async def read_frame(_: ViewerUser, cell: CellDep) -> Response:
 
 @router.get("/status", summary="Camera health and rate")
 async def read_camera_status(_: ViewerUser, cell: CellDep) -> dict[str, Any]:
-    s = cell.camera_status()
-    return {"name": s.name, "ok": s.ok, "frames": s.frames, "fps": s.fps, "error": s.error}
+    return cell.camera_status().as_dict()

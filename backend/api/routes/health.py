@@ -5,18 +5,17 @@ from __future__ import annotations
 import platform
 from typing import Any
 
-from fastapi import APIRouter, Request
+from fastapi import APIRouter
 
 from backend import __version__
-from backend.api.deps import CellDep, DatabaseDep, SettingsDep, ViewerUser
+from backend.api.deps import CellDep, DatabaseDep, SettingsDep, View3DDep, ViewerUser
 from backend.db.migrate import current_revision, head_revision
 
 router = APIRouter(tags=["health"])
 
 
 @router.get("/health", summary="Liveness; needs no token")
-async def read_health(request: Request) -> dict[str, Any]:
-    view = getattr(request.app.state, "view3d", None)
+async def read_health(view: View3DDep) -> dict[str, Any]:
     return {
         "status": "ok",
         "version": __version__,
@@ -42,13 +41,12 @@ def _versions() -> dict[str, str]:
 
 @router.get("/status", summary="Driver, camera, database and versions")
 async def read_status(
-    _: ViewerUser, settings: SettingsDep, db: DatabaseDep, cell: CellDep, request: Request
+    _: ViewerUser, settings: SettingsDep, db: DatabaseDep, cell: CellDep, view: View3DDep
 ) -> dict[str, Any]:
     state = cell.driver.state
     cam = cell.camera_status()
     db_ok = await db.ping()
     revision = await current_revision(db.engine) if db_ok else None
-    view = getattr(request.app.state, "view3d", None)
     return {
         "driver": {
             "name": cell.driver.name,
@@ -57,13 +55,8 @@ async def read_status(
             "estopped": state.estopped,
             "fault": state.fault,
         },
-        "camera": {
-            "name": cam.name,
-            "ok": cam.ok,
-            "frames": cam.frames,
-            "fps": cam.fps,
-            "error": cam.error,
-        },
+        "camera": cam.as_dict(),
+        "cell": {"name": cell.name, "id": cell.db_id, "estopped": cell.estopped},
         "database": {
             "url": settings.redacted_database_url(),
             "ok": db_ok,

@@ -1,9 +1,23 @@
-"""Live updates for the console over a WebSocket.
+"""Live updates for the console over a WebSocket (``/api/ws``), fed by the cell's event bus.
 
 The client sends ``{"token": "..."}`` as its first message (browsers cannot set headers on
-WebSockets, and tokens in URLs end up in logs).  The server then sends
-``{"type": "state", ...}`` at up to ``rate`` Hz and ``{"type": "job", ...}`` when a job
-starts or ends.  Close codes: 4401 bad or missing token, 4408 no token within 5 s.
+WebSockets, and tokens in URLs end up in logs).  Close codes: 4401 bad or missing token,
+4408 no token within 5 s, 1013 the cell is not running.
+
+Messages from the server (JSON objects, ``type`` first):
+
+- ``{"type": "hello", "user", "role", "driver"}`` once, after the token is accepted;
+  then at once one ``state`` and one ``camera`` message with the current values.
+- ``{"type": "state", "state": RobotState.as_dict(), "speed": float}``: the arm, at up to
+  20 Hz, and at once when ``connected``, ``estopped`` or ``fault`` change.
+- ``{"type": "job", "job": Job.public()}``: a job started, reported progress or ended.  Start
+  and end are always sent; progress reports are throttled to at most
+  :data:`JOB_PROGRESS_HZ` per job, the latest one being sent when the interval is over (a
+  console can follow jobs from these messages alone, without polling ``/api/jobs``).
+- ``{"type": "camera", "camera": {"name", "ok", "frames", "fps", "error", "retries"}}``: the
+  camera's health changed.
+- ``{"type": "estop", "active": bool, "conveyors": [names]}``: the cell-wide emergency stop
+  was pressed or reset.
 """
 
 from __future__ import annotations
@@ -12,22 +26,43 @@ import asyncio
 import contextlib
 import json
 import time
+from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
+from backend.api.deps import get_runtime, get_settings
+from backend.api.errors import ApiError
 from backend.auth import authenticate
+from backend.cell.events import ArmState, CameraStatus, CellStopped, JobProgress, JobState
 from backend.db.models import Role
 
 router = APIRouter(tags=["live"])
 
-_MAX_RATE_HZ = 20.0
+#: Largest rate of ``job`` messages from progress reports, per job, Hz.
+JOB_PROGRESS_HZ = 4.0
+
+
+def _message(event: Any) -> dict[str, Any] | None:
+    if isinstance(event, ArmState):
+        return {"type": "state", "state": event.state.as_dict(), "speed": event.speed}
+    if isinstance(event, JobState | JobProgress):
+        return {"type": "job", "job": event.job}
+    if isinstance(event, CameraStatus):
+        return {"type": "camera", "camera": event.as_dict()}
+    if isinstance(event, CellStopped):
+        return {"type": "estop", "active": event.active, "conveyors": list(event.conveyors)}
+    return None
 
 
 @router.websocket("/ws")
 async def live(ws: WebSocket) -> None:
     await ws.accept()
-    app = ws.app
-    settings, db, cell = app.state.settings, app.state.db, app.state.cell
+    try:
+        rt = get_runtime(ws)
+    except ApiError:
+        await ws.close(code=1013, reason="the cell is not running")
+        return
+    settings, cell = get_settings(ws), rt.cell
     try:
         async with asyncio.timeout(5.0):
             first = await ws.receive_text()
@@ -42,49 +77,62 @@ async def live(ws: WebSocket) -> None:
             token = str(json.loads(first).get("token", ""))
         except (ValueError, AttributeError):
             token = ""
-        async with db.session() as session:
+        async with rt.database.session() as session:
             user = await authenticate(session, token, settings.secret_key.get_secret_value())
         if user is None:
             await ws.close(code=4401, reason="invalid or revoked token")
             return
         user_name, role = user.name, user.role
-    await ws.send_json(
-        {"type": "hello", "user": user_name, "role": role, "driver": cell.driver.name}
-    )
 
-    jobs: asyncio.Queue[dict] = asyncio.Queue(maxsize=100)
-
-    def on_job(job) -> None:  # type: ignore[no-untyped-def]
-        with contextlib.suppress(asyncio.QueueFull):
-            jobs.put_nowait(job.public())
-
-    cell.jobs.add_listener(on_job)
-
-    async def send_jobs() -> None:
-        while True:
-            await ws.send_json({"type": "job", "job": await jobs.get()})
+    sub = cell.bus.subscribe(ArmState, JobState, JobProgress, CameraStatus, CellStopped)
 
     async def drain_incoming() -> None:
         while True:
             await ws.receive_text()  # the client has nothing else to say; detect closing
 
-    job_task = asyncio.create_task(send_jobs())
     rx_task = asyncio.create_task(drain_incoming())
     try:
-        last = 0.0
-        async for state in cell.driver.states():
-            if rx_task.done() or job_task.done():
-                break
+        await ws.send_json(
+            {
+                "type": "hello",
+                "user": user_name,
+                "role": role,
+                "driver": cell.driver.name,
+            }
+        )
+        await ws.send_json(_message(ArmState(state=cell.driver.state, speed=cell.speed)))
+        await ws.send_json(_message(cell.camera_status()))
+        period = 1.0 / JOB_PROGRESS_HZ
+        last_sent: dict[str, float] = {}  # job id -> time of its last progress message
+        pending: dict[str, JobProgress] = {}  # job id -> newest progress not sent yet
+        while not rx_task.done():
             now = time.monotonic()
-            if now - last < 1.0 / _MAX_RATE_HZ:
+            due = [jid for jid, ev in pending.items() if now - last_sent.get(jid, 0.0) >= period]
+            for jid in due:
+                last_sent[jid] = now
+                await ws.send_json(_message(pending.pop(jid)))
+            wait = 1.0
+            if pending:
+                wait = min(period - (now - last_sent.get(j, 0.0)) for j in pending)
+            event = await sub.get(timeout_s=max(0.0, min(wait, 1.0)))
+            if event is None:
                 continue
-            last = now
-            await ws.send_json({"type": "state", "state": state.as_dict(), "speed": cell.speed})
+            if isinstance(event, JobProgress):
+                if time.monotonic() - last_sent.get(event.job_id, 0.0) < period:
+                    pending[event.job_id] = event
+                    continue
+                last_sent[event.job_id] = time.monotonic()
+            elif isinstance(event, JobState):
+                pending.pop(event.job_id, None)  # the state message carries the newest progress
+                if event.state != "running":
+                    last_sent.pop(event.job_id, None)
+            msg = _message(event)
+            if msg is not None:
+                await ws.send_json(msg)
     except (WebSocketDisconnect, RuntimeError):
         pass
     finally:
-        cell.jobs.remove_listener(on_job)
-        for t in (job_task, rx_task):
-            t.cancel()
-            with contextlib.suppress(BaseException):
-                await t
+        sub.close()
+        rx_task.cancel()
+        with contextlib.suppress(BaseException):
+            await rx_task

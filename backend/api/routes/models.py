@@ -13,12 +13,11 @@ from datetime import datetime
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from fastapi import APIRouter, Depends, File, Form, Path, Query, Request, UploadFile, status
+from fastapi import APIRouter, Depends, File, Form, Path, Query, UploadFile, status
 from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import CellDep, DatabaseDep, EngineerUser, SessionDep, ViewerUser
-from backend.api.errors import ApiError
+from backend.api.deps import CellDep, DatabaseDep, EngineerUser, RuntimeDep, SessionDep, ViewerUser
 from backend.recognition import images as im
 from backend.recognition import models as svc
 from backend.recognition import teach as teach_svc
@@ -37,12 +36,9 @@ ViewId = Annotated[int, Path(ge=1, le=DB_ID_MAX, description="Trained view id")]
 Name = Annotated[str, Field(min_length=1, max_length=64, pattern=svc.NAME_PATTERN.pattern)]
 
 
-def get_live_index(request: Request) -> LiveIndex:
-    """The live index of the running app (built at start-up)."""
-    live = getattr(request.app.state, "live_index", None)
-    if live is None:
-        raise ApiError(503, "unavailable", "the recognition index is not loaded")
-    return live
+def get_live_index(runtime: RuntimeDep) -> LiveIndex:
+    """The live index of the running cell (built from the database at start-up)."""
+    return runtime.live_index
 
 
 LiveIndexDep = Annotated[LiveIndex, Depends(get_live_index)]
@@ -246,12 +242,9 @@ class JobAccepted(BaseModel):
     job: dict[str, Any]
 
 
-def get_backgrounds(request: Request) -> teach_svc.BackgroundStore:
+def get_backgrounds(runtime: RuntimeDep) -> teach_svc.BackgroundStore:
     """The backgrounds grabbed by earlier teaches of this cell."""
-    store = getattr(request.app.state, "teach_backgrounds", None)
-    if store is None:
-        store = request.app.state.teach_backgrounds = teach_svc.BackgroundStore()
-    return store
+    return runtime.teach_backgrounds
 
 
 @router.post(

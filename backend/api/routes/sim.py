@@ -10,10 +10,10 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-from fastapi import APIRouter, Depends, Request, Response, status
+from fastapi import APIRouter, Depends, Response, status
 from pydantic import BaseModel, Field, field_validator
 
-from backend.api.deps import CellDep, EngineerUser
+from backend.api.deps import CellDep, EngineerUser, SettingsDep, get_sim_or_none
 from backend.api.errors import ApiError
 
 if TYPE_CHECKING:
@@ -30,11 +30,9 @@ def _catalogue() -> dict[str, Any]:
     return CATALOGUE
 
 
-def get_sim(request: Request) -> SimEngine:
+def get_sim(sim: Annotated[Any, Depends(get_sim_or_none)], settings: SettingsDep) -> SimEngine:
     """The simulation engine, or 409 when this cell drives real (or ideal) hardware."""
-    sim = getattr(request.app.state, "sim", None)
     if sim is None:
-        settings = request.app.state.settings
         raise ApiError(
             409,
             "not_simulated",

@@ -1,0 +1,5 @@
+"""``python -m backend.cli``: the same as the ``visioncell`` console script."""
+
+from backend.cli import main
+
+main()

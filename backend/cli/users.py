@@ -1,0 +1,74 @@
+"""``visioncell user add``: users and their API tokens."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Annotated
+
+import typer
+
+from backend.cli.common import err, load_settings, out
+from backend.settings import Settings
+
+__all__ = ["bootstrap_operator", "user_app"]
+
+user_app = typer.Typer(help="Users and API tokens.", no_args_is_help=True)
+
+
+async def _add_user(settings: Settings, name: str, role: str) -> str:
+    from backend.auth import create_user, parse_role
+    from backend.db.session import Database
+
+    db = Database(settings.database_url)
+    try:
+        async with db.session() as session:
+            _, token = await create_user(
+                session, name, parse_role(role), settings.secret_key.get_secret_value()
+            )
+        return token
+    finally:
+        await db.dispose()
+
+
+@user_app.command("add")
+def user_add(
+    name: Annotated[str, typer.Argument(help="User name (letters, digits, _ . @ -)")],
+    role: Annotated[str, typer.Option(help="viewer, operator or engineer")] = "operator",
+) -> None:
+    """Create a user and print its API token (shown once, alone on the last line)."""
+    from backend.db.migrate import upgrade
+
+    settings = load_settings()
+    upgrade(settings.database_url)
+    try:
+        token = asyncio.run(_add_user(settings, name, role))
+    except ValueError as exc:
+        err.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(2) from None
+    out.print(f"created user {name!r} with role {role}; its token (shown once):")
+    print(token)
+
+
+async def bootstrap_operator(settings: Settings) -> str:
+    """A fresh start-up token for the built-in 'operator' user (the previous one is revoked)."""
+    from sqlalchemy import select
+
+    from backend.auth import create_user, issue_token, revoke_tokens
+    from backend.db.models import Role, User
+    from backend.db.session import Database
+
+    secret = settings.secret_key.get_secret_value()
+    db = Database(settings.database_url)
+    try:
+        async with db.session() as session:
+            user = await session.scalar(select(User).where(User.name == "operator"))
+            if user is None:
+                _, token = await create_user(
+                    session, "operator", Role.operator, secret, label="startup"
+                )
+            else:
+                await revoke_tokens(session, user, label="startup")
+                token = await issue_token(session, user, secret, label="startup")
+        return token
+    finally:
+        await db.dispose()

@@ -1,0 +1,234 @@
+"""The one assembly of a running cell: settings -> database, cell row, hardware, cell, view.
+
+:class:`CellRuntime` is an async context manager used by the FastAPI lifespan
+(:func:`backend.app.create_app`), ``visioncell serve`` and the CLI's in-process runs, and by
+the benchmarks; nothing else wires these parts together::
+
+    async with CellRuntime(settings) as rt:
+        job = rt.cell.home()
+        await rt.jobs.wait(job)
+
+Entering builds, in this order, and exiting undoes in the reverse order:
+
+1. the database engine, checked to be at the newest Alembic revision
+   (:class:`StartupError` says to run ``visioncell db upgrade`` otherwise);
+2. the cell's row, named by ``Settings.cell_name`` (created on first start), whose id
+   every per-cell service (calibration sessions, active calibrations, inspections) is given;
+3. the hardware the settings name: robot driver, camera and, when either is simulated, the
+   MuJoCo engine behind both (with its belt as a conveyor under the E-STOP and its table
+   and belt as the collision model);
+4. the :class:`~backend.cell.Cell` (driver connected, camera feed, jobs, event bus);
+5. the viser 3D view, when ``view3d_enabled`` (or ``view3d=True``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from typing import TYPE_CHECKING, Any
+
+from sqlalchemy import select
+from sqlalchemy.exc import IntegrityError
+
+from backend.cell import Cell, EventBus
+from backend.db.migrate import current_revision, head_revision
+from backend.db.models import Cell as CellRow
+from backend.db.session import Database
+from backend.hardware import make_hardware
+from backend.jobs import JobManager
+from backend.recognition.index import LiveIndex, load_live_index
+from backend.recognition.teach import BackgroundStore
+from backend.settings import Settings
+
+if TYPE_CHECKING:
+    from backend.view3d import View3D
+    from robot.sim import SimEngine
+
+__all__ = ["CellRuntime", "StartupError", "check_database", "ensure_cell_row"]
+
+log = logging.getLogger(__name__)
+
+
+class StartupError(RuntimeError):
+    """The cell cannot start; the message says what to do."""
+
+
+async def check_database(db: Database) -> None:
+    """Raise :class:`StartupError` unless ``db`` answers and is at the head revision."""
+    try:
+        rev = await current_revision(db.engine)
+    except Exception as exc:
+        raise StartupError(f"cannot open the database {db.url!r}: {exc}") from exc
+    head = head_revision()
+    if rev != head:
+        raise StartupError(
+            f"the database is at revision {rev!r} but this VisionCell needs {head!r}: "
+            "run `visioncell db upgrade`"
+        )
+
+
+async def ensure_cell_row(db: Database, name: str, *, description: str = "") -> int:
+    """Id of the cell row called ``name``, created if it does not exist yet (two processes
+    starting together on one PostgreSQL database both get the one row)."""
+    for _ in range(2):
+        async with db.session() as session:
+            cell_id = await session.scalar(select(CellRow.id).where(CellRow.name == name))
+            if cell_id is not None:
+                return int(cell_id)
+        try:
+            async with db.session() as session:
+                row = CellRow(name=name, description=description or f"Cell {name}")
+                session.add(row)
+                await session.flush()
+                return int(row.id)
+        except IntegrityError:  # another process created it meanwhile: read it again
+            continue
+    raise StartupError(f"cannot create or read the cell row {name!r}")
+
+
+class CellRuntime:
+    """The running system of one cell (see the module docstring).
+
+    Parameters
+    ----------
+    settings : Settings
+        The process's configuration.
+    view3d : bool, optional
+        Start the 3D view (default: ``settings.view3d_enabled``).
+
+    Attributes (after entering)
+    ---------------------------
+    settings : Settings
+    database : Database
+    cell_id : int
+        Id of the cell's row (``settings.cell_name``).
+    cell : Cell
+    bus : EventBus
+    sim : SimEngine or None
+        The simulated cell, when the driver or the camera is simulated.
+    view3d : View3D or None
+    """
+
+    def __init__(self, settings: Settings, *, view3d: bool | None = None) -> None:
+        self.settings = settings
+        self._want_view = settings.view3d_enabled if view3d is None else bool(view3d)
+        self.bus = EventBus()
+        self._database: Database | None = None
+        self._cell: Cell | None = None
+        self.cell_id: int | None = None
+        self.sim: SimEngine | None = None
+        self.view3d: View3D | None = None
+        self._live_index: LiveIndex | None = None
+        #: Empty-belt backgrounds grabbed by teaches, for later teaches of this cell.
+        self.teach_backgrounds = BackgroundStore()
+        self._stack: contextlib.AsyncExitStack | None = None
+
+    # -- accessors (raise a clear error before start) -----------------------------------------
+    @property
+    def database(self) -> Database:
+        """The database (after entering)."""
+        if self._database is None:
+            raise RuntimeError("the cell runtime is not running")
+        return self._database
+
+    @property
+    def cell(self) -> Cell:
+        """The cell (after entering)."""
+        if self._cell is None:
+            raise RuntimeError("the cell runtime is not running")
+        return self._cell
+
+    @property
+    def live_index(self) -> LiveIndex:
+        """The index of every trained view, built from the database at start (after entering)."""
+        if self._live_index is None:
+            raise RuntimeError("the cell runtime is not running")
+        return self._live_index
+
+    @property
+    def jobs(self) -> JobManager:
+        """The cell's jobs."""
+        return self.cell.jobs
+
+    @property
+    def running(self) -> bool:
+        """Whether the runtime has been entered and not exited."""
+        return self._cell is not None
+
+    @property
+    def cell_name(self) -> str:
+        """``settings.cell_name``."""
+        return self.settings.cell_name
+
+    # -- life cycle ----------------------------------------------------------------------
+    async def __aenter__(self) -> CellRuntime:
+        if self._stack is not None:
+            raise RuntimeError("a CellRuntime can be entered once at a time")
+        stack = contextlib.AsyncExitStack()
+        await stack.__aenter__()
+        self._stack = stack
+        try:
+            await self._build(stack)
+        except BaseException:
+            self._stack = None
+            await stack.aclose()
+            self._clear()
+            raise
+        return self
+
+    async def __aexit__(self, *exc: Any) -> None:
+        stack, self._stack = self._stack, None
+        try:
+            if stack is not None:
+                await stack.aclose()
+        finally:
+            self._clear()
+
+    def _clear(self) -> None:
+        self._cell = None
+        self._database = None
+        self._live_index = None
+        self.view3d = None
+        self.sim = None
+
+    async def _build(self, stack: contextlib.AsyncExitStack) -> None:
+        s = self.settings
+        db = Database(s.database_url)
+        stack.push_async_callback(db.dispose)
+        await check_database(db)
+        self._database = db
+        self.cell_id = await ensure_cell_row(db, s.cell_name)
+        self._live_index = await load_live_index(db, s)
+
+        hardware = await asyncio.to_thread(make_hardware, s)
+        if hardware.sim is not None:
+            engine = hardware.sim
+            stack.push_async_callback(asyncio.to_thread, engine.stop)
+        world, conveyors = None, []
+        if hardware.sim is not None:
+            from robot.sim import SimConveyor
+            from robot.sim.obstacles import collision_world
+
+            world = collision_world(hardware.sim.config.layout, model=hardware.sim.arm_model)
+            conveyors.append(SimConveyor(hardware.sim))
+        cell = Cell(
+            s, hardware.driver, hardware.camera, world=world, conveyors=conveyors, bus=self.bus
+        )
+        cell.db_id = self.cell_id
+        await cell.start()
+        stack.push_async_callback(cell.stop)
+        self.sim = hardware.sim
+        self._cell = cell
+
+        if self._want_view:
+            from backend.view3d import View3D
+
+            view = View3D(cell, host=s.viser_host, port=s.viser_port, sim=hardware.sim)
+            await view.start()
+            stack.push_async_callback(view.stop)
+            self.view3d = view
+        log.info(
+            "cell %r (id %d) running: driver=%s camera=%s", s.cell_name, self.cell_id,
+            s.driver, s.camera,
+        )  # fmt: skip
