@@ -8,7 +8,8 @@ entry, the object lies at the station at yaw 0 and is taught from the top view p
 empty-belt background, features inside the mask) with each roll set below; then the same
 object is put back at ``--queries`` random yaws (seeded) and a few mm of jitter, seen from
 the top at roll 0, segmented the same way and recognised (:func:`vision.recognition.
-recognise`, top view, default threshold) against the index of that roll set.  A query
+recognise`, top view, default threshold) against the index of that roll set (SIFT with the
+live index's options, ``backend.recognition.index.FEATURE_OPTIONS``).  A query
 counts correct when the best-scoring model is the object's own, or its top-view twin
 (``wheel-5spoke`` and ``wheel-5spoke-redband`` are identical from the top).  The baseline is
 the single view at roll 0 (the chapter's one trained image per viewpoint).
@@ -38,6 +39,7 @@ def run(*, queries: int = 4, objects: int = 12, seed: int = 0) -> dict[str, Any]
 
     headless_mujoco()
     from backend.calibration.autoplan import NOMINAL_T_EE_CAM
+    from backend.recognition.index import FEATURE_OPTIONS
     from backend.recognition.segment import segment_object
     from backend.recognition.teach import plan_shots
     from robot.sim import CATALOGUE, SimEngine
@@ -61,7 +63,8 @@ def run(*, queries: int = 4, objects: int = 12, seed: int = 0) -> dict[str, Any]
         for ss in shots.values():
             for s in ss:
                 backgrounds[s.key] = capture(engine, s.q).rgb
-        indexes = {label: ViewIndex("sift") for label in ROLL_SETS}
+        options = FEATURE_OPTIONS["sift"]
+        indexes = {label: ViewIndex("sift", feature_options=options) for label in ROLL_SETS}
         snake_used: dict[str, int] = {}
         t0 = time.perf_counter()
         for k, name in enumerate(names):

@@ -262,7 +262,7 @@ async def add_views(
                     height=int(v.image.shape[0]),
                     features=feats.to_bytes(),
                     descriptor_kind=feats.method,
-                    descriptor_version=feats.version,
+                    descriptor_version=live.version,
                     keypoint_count=len(feats),
                     yaw_rad=float(v.yaw_rad),
                     roll_rad=float(v.roll_rad),
@@ -320,7 +320,7 @@ async def reextract_views(
                 raise InvalidInput(f"view {vid}: only {len(feats)} features on re-extraction")
             row.features = feats.to_bytes()
             row.descriptor_kind = feats.method
-            row.descriptor_version = feats.version
+            row.descriptor_version = live.version
             row.keypoint_count = len(feats)
             await session.flush()
             live.remove_view(vid)
