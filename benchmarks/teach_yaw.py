@@ -80,6 +80,7 @@ def run(*, queries: int = 4, objects: int = 12, seed: int = 0) -> dict[str, Any]
                     indexes[label].add(name, rgb, viewpoint=1, mask=mask.astype(np.uint8))
         q_top = shots["1 roll (baseline)"][0]
         hits = {label: 0 for label in ROLL_SETS}
+        misses: dict[str, dict[str, int]] = {label: {} for label in ROLL_SETS}
         own_scores: dict[str, list[float]] = {label: [] for label in ROLL_SETS}
         total = 0
         for k, name in enumerate(names):
@@ -98,6 +99,8 @@ def run(*, queries: int = 4, objects: int = 12, seed: int = 0) -> dict[str, Any]
                     r = recognise(index, rgb, viewpoint=1, mask=mask.astype(np.uint8))
                     if r.best_model in (name, TWINS.get(name)):
                         hits[label] += 1
+                    else:
+                        misses[label][name] = misses[label].get(name, 0) + 1
                     own_scores[label].append(float(r.scores.get(name, 0.0)))
         rows = [
             {
@@ -106,6 +109,7 @@ def run(*, queries: int = 4, objects: int = 12, seed: int = 0) -> dict[str, Any]
                 "correct_pct": round(100.0 * hits[label] / max(total, 1), 1),
                 "own_score_median": round(float(np.median(own_scores[label])), 3),
                 "own_score_p10": round(float(np.percentile(own_scores[label], 10)), 3),
+                "misses": misses[label],
             }
             for label in ROLL_SETS
         ]
@@ -142,6 +146,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             f"{r['rolls']:26s} {r['views']:6d} {r['correct_pct']:10.1f} "
             f"{r['own_score_median']:14.3f} {r['own_score_p10']:6.3f}"
         )
+    for r in out["rows"]:
+        print(f"  misses with {r['rolls']}: {r['misses'] or 'none'}")
     print(f"segmentation of the {sum(out['segmentation'].values())} images: {out['segmentation']}")
     if args.json:
         print(json.dumps(out))
