@@ -11,6 +11,7 @@ from vision.recognition.index import (
     TrainedView,
     ViewIndex,
 )
+from vision.recognition.plots import plot_threshold
 from vision.recognition.recognise import (
     DECISIONS,
     DEFAULT_MARGIN,
@@ -27,12 +28,14 @@ from vision.recognition.threshold import (
     conformal_threshold,
     youden_threshold,
 )
+from vision.recognition.views import POLICIES, ViewsRecognition, recognise_views
 
 __all__ = [
     "DECISIONS",
     "DEFAULT_MARGIN",
     "DEFAULT_THRESHOLD",
     "FORMAT_VERSION",
+    "POLICIES",
     "RULES",
     "VIEWPOINTS",
     "Candidate",
@@ -41,9 +44,12 @@ __all__ = [
     "ThresholdChoice",
     "TrainedView",
     "ViewIndex",
+    "ViewsRecognition",
     "choose_threshold",
     "conformal_threshold",
     "decide",
+    "plot_threshold",
     "recognise",
+    "recognise_views",
     "youden_threshold",
 ]

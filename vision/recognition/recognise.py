@@ -60,6 +60,7 @@ __all__ = [
     "Candidate",
     "Recognition",
     "decide",
+    "decide_with",
     "recognise",
     "resolve_threshold",
 ]
@@ -73,7 +74,10 @@ DEFAULT_MARGIN = 0.2
 #: Inlier threshold of the verification, pixels (MAGSAC++ marginalises the noise scale below
 #: it, so the value is not critical; Barath et al. 2020).
 REPROJ_PX = 3.0
-MAX_VERIFIED = 64
+#: Views reach verification only with at least this many votes, and at least this share of
+#: the best view's votes (fewer than 2 agreeing descriptors cannot fix an affine map).
+MIN_VOTES = 2.0
+REL_VOTES = 0.2
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,8 +99,8 @@ class Candidate:
         Share of query keypoints inside the mapped model outline that are not inliers, [0, 1].
     n_inliers, n_matches : int
         Inliers of the verified model and tentative matches.
-    votes : int
-        ANN votes the view received.
+    votes : float
+        ANN votes the view received (:class:`vision.recognition.search.Searcher`).
     H : ndarray of shape (3, 3) or None
         Map from pixels of the trained view to pixels of the query (``x_q ~ H @ x_view``);
         ``None`` when verification found no model.
@@ -112,7 +116,7 @@ class Candidate:
     clutter: float
     n_inliers: int
     n_matches: int
-    votes: int
+    votes: float
     H: np.ndarray | None
 
 
@@ -227,6 +231,18 @@ def decide(
         Passing models within the margin of the best, best first.
     """
     glob, per_model = resolve_threshold(threshold)
+    return decide_with(scores, glob, per_model, margin=margin)
+
+
+def decide_with(
+    scores: Mapping[str, float],
+    threshold: float,
+    per_model: Mapping[str, float],
+    *,
+    margin: float = DEFAULT_MARGIN,
+) -> tuple[str, str | None, tuple[str, ...]]:
+    """:func:`decide` with the thresholds given as a global value and a per-model mapping."""
+    glob = threshold
     margin = _check_unit(margin, "margin")
     if margin >= 1.0:
         raise ValueError(f"margin must be below 1, got {margin!r}")
@@ -256,7 +272,7 @@ def _clutter(H: np.ndarray, view: Features, query: Features, n_inliers: int) -> 
     return float(min(1.0, max(0.0, 1.0 - n_inliers / inside)))
 
 
-def verify_view(index: ViewIndex, view_id: int, query: Features, votes: int = 0) -> Candidate:
+def verify_view(index: ViewIndex, view_id: int, query: Features, votes: float = 0.0) -> Candidate:
     """Register one trained view onto the query features and score it (module docstring)."""
     view = index.view(view_id)
     a = view.features
@@ -318,9 +334,10 @@ def evaluate(
     )
     # Best views per model, models ranked by their best view's votes.
     order = np.argsort(-votes, kind="stable")
+    floor = max(MIN_VOTES, REL_VOTES * float(votes[order[0]]))
     chosen: dict[str, list[int]] = {}
     for pos in order:
-        if votes[pos] <= 0:
+        if votes[pos] < floor:
             break
         v = searcher.views[pos]
         if v.view_id == exclude_view or v.model not in scores:
@@ -338,7 +355,7 @@ def evaluate(
     best: dict[str, Candidate] = {}
     for _model, picks in chosen.items():
         for pos in picks:
-            c = verify_view(index, searcher.views[pos].view_id, query, int(votes[pos]))
+            c = verify_view(index, searcher.views[pos].view_id, query, float(votes[pos]))
             if c.model not in best or c.score > best[c.model].score:
                 best[c.model] = c
     for m, c in best.items():
@@ -402,6 +419,10 @@ def recognise(
     ):
         if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= hi:
             raise ValueError(f"{name} must be an int in 1..{hi}, got {value!r}")
+    from vision.recognition.threshold import ThresholdChoice
+
+    if isinstance(threshold, ThresholdChoice) and viewpoint is not None:
+        threshold = threshold.at(viewpoint)
     glob, per_model = resolve_threshold(threshold)
     _check_unit(margin, "margin")
     if models is not None and (

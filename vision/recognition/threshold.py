@@ -28,9 +28,22 @@ Per-model thresholds
     views)``: a model that attracts impostors gets a higher bar; no model gets a lower one,
     so the false-accept rate of the whole decision stays that of the global rule.
 
+Per viewpoint
+    The same rule on the scores of each viewpoint alone gives ``per_viewpoint[vp]`` and
+    ``per_model_viewpoint[vp][m]``; :meth:`ThresholdChoice.at` returns the choice for one
+    viewpoint, which :func:`recognise` applies when it searches one viewpoint. Models alike
+    from the top (a part on two bases, two parts with the same top face) push the top
+    viewpoint's threshold up, as they should: the top view cannot tell them apart, a side
+    view must. ``candidate`` is the lower bar for *considering* a model worth a side view:
+    the same rule on the impostor scores without *twins*, the other models that explained a
+    held-out view about as well as its own model did (within the ambiguity margin
+    :data:`DEFAULT_MARGIN`, or better) in the leave-one-view-out run (they
+    are indistinguishable from it at that viewpoint, so their scores say nothing about an
+    untrained object); at most ``threshold``.
+
 Confusability
     ``confusion[viewpoint][a][b]``: share of model ``a``'s held-out views of that viewpoint on
-    which model ``b`` passes its threshold. Models alike from the top (viewpoint 1) need a
+    which model ``b`` scores above the viewpoint's ``candidate`` bar (would be considered). Models alike from the top (viewpoint 1) need a
     side view; ``best-next`` picks the side viewpoint where the remaining candidates are least
     alike.
 """
@@ -39,13 +52,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from vision.features import Features
 from vision.recognition.index import ViewIndex
-from vision.recognition.recognise import evaluate
+from vision.recognition.recognise import DEFAULT_MARGIN, evaluate
 
 __all__ = [
     "RULES",
@@ -87,7 +100,17 @@ class ThresholdChoice:
     genuine_models : tuple of str
         Model of each genuine score.
     confusion : mapping
-        ``confusion[viewpoint][a][b]``: share of ``a``'s held-out views on which ``b`` passes.
+        ``confusion[viewpoint][a][b]``: share of ``a``'s held-out views on which ``b`` scores
+        above the viewpoint's candidate bar.
+    candidate : float
+        The rule on the impostor scores without twins (module docstring), at most
+        ``threshold``: the bar for considering a model worth verifying with another view.
+    per_viewpoint : mapping of int to float
+        Global threshold of the rule on each viewpoint's scores alone.
+    per_model_viewpoint : mapping of int to mapping of str to float
+        Per-model thresholds of each viewpoint.
+    candidate_viewpoint : mapping of int to float
+        ``candidate`` of each viewpoint.
     """
 
     threshold: float
@@ -102,6 +125,24 @@ class ThresholdChoice:
     impostor: np.ndarray
     genuine_models: tuple[str, ...]
     confusion: Mapping[int, Mapping[str, Mapping[str, float]]]
+    candidate: float = 0.0
+    per_viewpoint: Mapping[int, float] = field(default_factory=dict)
+    per_model_viewpoint: Mapping[int, Mapping[str, float]] = field(default_factory=dict)
+    candidate_viewpoint: Mapping[int, float] = field(default_factory=dict)
+
+    def at(self, viewpoint: int) -> ThresholdChoice:
+        """The choice for one viewpoint (itself when that viewpoint has no thresholds)."""
+        if viewpoint not in self.per_viewpoint:
+            return self
+        return replace(
+            self,
+            threshold=self.per_viewpoint[viewpoint],
+            per_model=self.per_model_viewpoint.get(viewpoint, {}),
+            candidate=self.candidate_viewpoint.get(viewpoint, self.candidate),
+            per_viewpoint={},
+            per_model_viewpoint={},
+            candidate_viewpoint={},
+        )
 
     def roc(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(thresholds, far, tpr)`` over every observed score (accept when score > t)."""
@@ -164,6 +205,53 @@ def _check_far(value: object) -> float:
     return v
 
 
+def _rule(
+    genuine: Sequence[float],
+    impostor: Sequence[float],
+    per_model_imp: Mapping[str, Sequence[float]],
+    models: Sequence[str],
+    *,
+    rule: str,
+    target_far: float,
+) -> tuple[float, float | None, str, dict[str, float]]:
+    """``(threshold, bound, text, per_model)`` of one rule on one set of scores."""
+    g = np.asarray(genuine, dtype=np.float64)
+    i = np.asarray(impostor, dtype=np.float64)
+    n = len(i)
+    if rule == "conformal-far":
+        t, bound = conformal_threshold(i, target_far)
+        if bound is None:
+            text = (
+                f"conformal FAR <= {target_far:g} not reachable with {n} impostor scores "
+                f"(need {math.ceil(1 / target_far - 1)}): threshold = largest impostor score"
+            )
+        else:
+            k = math.ceil((n + 1) * (1 - target_far) - 1e-9)
+            text = (
+                f"conformal FAR <= {target_far:g}: {k}-th of {n} impostor scores, bound {bound:.4f}"
+            )
+    else:
+        t, bound = youden_threshold(g, i), None
+        text = f"Youden's J over {len(g)} genuine and {n} impostor scores"
+    per_model: dict[str, float] = {}
+    for m in models:
+        imp = per_model_imp.get(m, [])
+        tm = conformal_threshold(imp, target_far)[0] if imp and rule == "conformal-far" else t
+        per_model[m] = max(t, tm)
+    return float(t), bound, text, per_model
+
+
+def _candidate(
+    genuine: Sequence[float], distinct: Sequence[float], *, rule: str, target_far: float, cap: float
+) -> float:
+    """The rule on the impostor scores without twins, at most ``cap``."""
+    if rule == "conformal-far":
+        c = conformal_threshold(distinct, target_far)[0]
+    else:
+        c = youden_threshold(genuine, distinct)
+    return float(min(c, cap))
+
+
 def choose_threshold(
     index: ViewIndex,
     *,
@@ -223,6 +311,8 @@ def choose_threshold(
     # Genuine: leave one view out.
     genuine: list[float] = []
     genuine_models: list[str] = []
+    genuine_vps: list[int] = []
+    twins: dict[int, set[str]] = {}
     lovo: list[tuple[int, str, dict[str, float]]] = []
     for v in views:
         others = [w for w in index.views_of(v.model, viewpoint=v.viewpoint) if w is not v]
@@ -230,52 +320,64 @@ def choose_threshold(
             scores, *_ = evaluate(index, v.features, viewpoint=v.viewpoint, exclude_view=v.view_id)
             genuine.append(scores.get(v.model, 0.0))
             genuine_models.append(v.model)
+            genuine_vps.append(v.viewpoint)
             lovo.append((v.viewpoint, v.model, scores))
+            g_v = scores.get(v.model, 0.0)
+            # Models explaining the held-out view about as well as its own model does (within
+            # the decision's ambiguity margin, or better) are indistinguishable from it at this
+            # viewpoint ("twins").
+            twins[v.view_id] = {
+                b
+                for b, s in scores.items()
+                if b != v.model and s > 0 and s >= (1.0 - DEFAULT_MARGIN) * g_v
+            }
         tick()
     if not genuine:
         raise ValueError("no model has two trained views of one viewpoint: nothing to hold out")
     # Impostor: leave one model out (and negatives).
     impostor: list[float] = []
+    impostor_vps: list[int] = []
     per_model_imp: dict[str, list[float]] = {m: [] for m in models}
-    for v in views:
-        scores, *_ = evaluate(index, v.features, viewpoint=v.viewpoint, exclude_models=[v.model])
+    per_model_imp_vp: dict[str, list[tuple[float, int]]] = {m: [] for m in models}
+
+    distinct: list[float] = []
+
+    def add_impostor(scores: dict[str, float], vp: int, twin: set[str] = frozenset()) -> None:
         impostor.append(max(scores.values(), default=0.0))
+        distinct.append(max((s for m, s in scores.items() if m not in twin), default=0.0))
+        impostor_vps.append(vp)
         for m, s in scores.items():
             per_model_imp[m].append(s)
+            per_model_imp_vp[m].append((s, vp))
+
+    for v in views:
+        scores, *_ = evaluate(index, v.features, viewpoint=v.viewpoint, exclude_models=[v.model])
+        add_impostor(scores, v.viewpoint, twins.get(v.view_id, set()))
         tick()
     for f in neg_feats:
         for vp in viewpoints:
             scores, *_ = evaluate(index, f, viewpoint=vp)
-            impostor.append(max(scores.values(), default=0.0))
-            for m, s in scores.items():
-                per_model_imp[m].append(s)
+            add_impostor(scores, vp)
             tick()
+    t, bound, text, per_model = _rule(
+        genuine, impostor, per_model_imp, models, rule=rule, target_far=target_far
+    )
+    cand = _candidate(genuine, distinct, rule=rule, target_far=target_far, cap=t)
+    per_vp: dict[int, float] = {}
+    per_model_vp: dict[int, dict[str, float]] = {}
+    cand_vp: dict[int, float] = {}
+    for vp in viewpoints:
+        g_vp = [s for s, v in zip(genuine, genuine_vps, strict=True) if v == vp]
+        i_vp = [s for s, v in zip(impostor, impostor_vps, strict=True) if v == vp]
+        if not g_vp or not i_vp:
+            continue
+        d_vp = [s for s, v in zip(distinct, impostor_vps, strict=True) if v == vp]
+        imp_vp = {m: [s for s, v in per_model_imp_vp[m] if v == vp] for m in models}
+        tv, _, _, pm = _rule(g_vp, i_vp, imp_vp, models, rule=rule, target_far=target_far)
+        per_vp[vp], per_model_vp[vp] = tv, pm
+        cand_vp[vp] = _candidate(g_vp, d_vp, rule=rule, target_far=target_far, cap=tv)
     g = np.asarray(genuine)
     i = np.asarray(impostor)
-    n = len(i)
-    if rule == "conformal-far":
-        t, bound = conformal_threshold(i, target_far)
-        if bound is None:
-            text = (
-                f"conformal FAR <= {target_far:g} not reachable with {n} impostor scores "
-                f"(need {math.ceil(1 / target_far - 1)}): threshold = largest impostor score"
-            )
-        else:
-            text = (
-                f"conformal FAR <= {target_far:g}: {math.ceil((n + 1) * (1 - target_far) - 1e-9)}"
-                f"-th of {n} impostor scores, bound {bound:.4f}"
-            )
-    else:
-        t, bound = youden_threshold(g, i), None
-        text = f"Youden's J over {len(g)} genuine and {n} impostor scores"
-    per_model: dict[str, float] = {}
-    for m in models:
-        imp = per_model_imp[m]
-        if not imp:
-            per_model[m] = t
-            continue
-        tm = conformal_threshold(imp, target_far)[0] if rule == "conformal-far" else t
-        per_model[m] = max(t, tm)
     confusion: dict[int, dict[str, dict[str, float]]] = {}
     counts: dict[tuple[int, str], int] = {}
     for vp, a, scores in lovo:
@@ -283,7 +385,7 @@ def choose_threshold(
         row = confusion.setdefault(vp, {}).setdefault(a, {})
         for b, s in scores.items():
             if b != a:
-                row[b] = row.get(b, 0.0) + float(s > per_model.get(b, t))
+                row[b] = row.get(b, 0.0) + float(s > cand_vp.get(vp, cand))
     for (vp, a), c in counts.items():
         row = confusion[vp][a]
         for b in row:
@@ -301,4 +403,8 @@ def choose_threshold(
         impostor=i,
         genuine_models=tuple(genuine_models),
         confusion=confusion,
+        candidate=cand,
+        per_viewpoint=per_vp,
+        per_model_viewpoint=per_model_vp,
+        candidate_viewpoint=cand_vp,
     )

@@ -1,0 +1,299 @@
+"""3D recognition over viewpoints (chapter sections 3.5.2 and 3.5.3, Figures 6 and 7).
+
+``recognise_views(look, index, policy=...)`` asks the caller for images, ``look(viewpoint)``,
+and decides after one, two or three of them. ``look`` may be a plain function or a coroutine
+function (the cell's moves the arm); it returns an image, an ``(image, mask)`` pair, or
+:class:`vision.features.Features`. The recognition itself runs in a worker thread so that an
+event loop driving the robot stays responsive.
+
+Policies
+    ``naive`` (Figure 6): every view against every trained image of every viewpoint; stop at
+    the first view where exactly one model is recognised; otherwise look again. The chapter's
+    loop never ends on an untrained object; here it stops after ``max_views``.
+    ``top-only``: decide from viewpoint 1 alone (the 2D algorithm of section 3.5.1).
+    ``two-views`` (section 3.5.3, the chapter's choice): top view against the top views of
+    every model; nothing passing means unknown; otherwise the contenders are verified with
+    side view 2 against the side views of the contenders only, and with view 3 if still
+    uncertain (the fused decision is not a recognition, or the winner's own side score does
+    not pass); fail after three.
+    ``best-next`` (beyond the chapter): like ``two-views``, but a model recognised from the
+    top that no other model is confused with from the top (confusion table of
+    :func:`choose_threshold`, below ``confusion_limit``) is accepted at once, and the side
+    viewpoint visited next is the one where the remaining contenders are least confused.
+
+Fused score
+    After several views, a model's score is the mean of its scores over the visited views
+    (0 where it was not verified), and its threshold the mean of its thresholds there
+    (:meth:`ThresholdChoice.at` each viewpoint); the decision rule of section 3.5.1 is
+    applied to them. A top view that passes no threshold still sends the models above the
+    choice's ``candidate`` bar (the best :data:`MAX_CONTENDERS`) to a side view, and then only
+    the side views are fused: models alike
+    from the top raise the top threshold beyond reach, and only the side view can decide.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import inspect
+from collections.abc import Awaitable, Callable, Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+
+import numpy as np
+
+from vision.features import Features
+from vision.recognition.index import ViewIndex
+from vision.recognition.recognise import (
+    DEFAULT_MARGIN,
+    Recognition,
+    decide,
+    decide_with,
+    recognise,
+    resolve_threshold,
+)
+from vision.recognition.threshold import ThresholdChoice
+
+__all__ = ["DEFAULT_CONFUSION_LIMIT", "POLICIES", "ViewsRecognition", "recognise_views"]
+
+POLICIES = ("naive", "top-only", "two-views", "best-next")
+#: ``best-next`` accepts a top-view recognition when every other model passes on less than
+#: this share of the model's held-out top views.
+DEFAULT_CONFUSION_LIMIT = 0.05
+
+#: Side views are checked against at most this many contenders from an inconclusive top view.
+MAX_CONTENDERS = 8
+
+LookResult = np.ndarray | Features | tuple[np.ndarray, np.ndarray | None]
+Look = Callable[[int], LookResult | Awaitable[LookResult]]
+
+
+@dataclass(frozen=True, eq=False)
+class ViewsRecognition:
+    """Result of :func:`recognise_views`.
+
+    Attributes
+    ----------
+    decision : {"recognized", "ambiguous", "unknown"}
+    model : str or None
+        The recognised model (``None`` unless recognised).
+    score : float
+        Fused score of the best model, in [0, 1].
+    scores : mapping of str to float
+        Fused score of every model considered (mean over visited views).
+    contenders : tuple of str
+        Models still in contention at the end (several when ambiguous).
+    policy : str
+    viewpoints : tuple of int
+        Viewpoints visited, in order.
+    views : tuple of Recognition
+        The recognition of each visited view, aligned with ``viewpoints``.
+    """
+
+    decision: str
+    model: str | None
+    score: float
+    scores: Mapping[str, float]
+    contenders: tuple[str, ...]
+    policy: str
+    viewpoints: tuple[int, ...]
+    views: tuple[Recognition, ...]
+
+    @property
+    def n_views(self) -> int:
+        """Number of views taken."""
+        return len(self.viewpoints)
+
+
+async def _look(look: Look, viewpoint: int) -> tuple[np.ndarray | Features, np.ndarray | None]:
+    got = look(viewpoint)
+    if inspect.isawaitable(got):
+        got = await got
+    if isinstance(got, tuple):
+        if len(got) != 2:
+            raise ValueError(
+                f"look({viewpoint}) returned a tuple of {len(got)}, want (image, mask)"
+            )
+        return got[0], got[1]
+    if isinstance(got, np.ndarray | Features):
+        return got, None
+    raise ValueError(
+        f"look({viewpoint}) must return an image, (image, mask) or Features, "
+        f"got {type(got).__name__}"
+    )
+
+
+def _fuse(views: list[Recognition], models: list[str]) -> dict[str, float]:
+    return {m: float(np.mean([r.scores.get(m, 0.0) for r in views])) for m in models}
+
+
+def _side_order(
+    index: ViewIndex, contenders: tuple[str, ...], choice: ThresholdChoice | None, smart: bool
+) -> list[int]:
+    """Side viewpoints where some contender has trained views; ``smart`` sorts them by the
+    summed pairwise confusion of the contenders there (least first)."""
+    sides = [vp for vp in (2, 3) if any(vp in index.viewpoints_of(m) for m in contenders)]
+    if not smart or choice is None:
+        return sides
+
+    def cost(vp: int) -> float:
+        table = choice.confusion.get(vp, {})
+        return sum(table.get(a, {}).get(b, 0.0) for a in contenders for b in contenders if a != b)
+
+    return sorted(sides, key=lambda vp: (cost(vp), vp))
+
+
+def _top_confusers(choice: ThresholdChoice, model: str, limit: float) -> tuple[str, ...]:
+    row = choice.confusion.get(1, {}).get(model, {})
+    rows_in = {a: r.get(model, 0.0) for a, r in choice.confusion.get(1, {}).items() if a != model}
+    alike = {b for b, c in row.items() if c >= limit} | {
+        a for a, c in rows_in.items() if c >= limit
+    }
+    return tuple(sorted(alike))
+
+
+async def recognise_views(
+    look: Look,
+    index: ViewIndex,
+    *,
+    policy: str,
+    max_views: int = 3,
+    threshold: float | ThresholdChoice | None = None,
+    margin: float = DEFAULT_MARGIN,
+    confusion_limit: float = DEFAULT_CONFUSION_LIMIT,
+) -> ViewsRecognition:
+    """Recognise a 3D object from up to three viewpoints (module docstring).
+
+    Parameters
+    ----------
+    look : callable(viewpoint) -> image, (image, mask) or Features; sync or async
+        Moves to viewpoint 1, 2 or 3 and returns what the camera sees there.
+    index : ViewIndex
+        Trained views (top views at viewpoint 1, side views at 2 and 3).
+    policy : {"naive", "top-only", "two-views", "best-next"}
+    max_views : int
+        Views taken at most, 1..3.
+    threshold : float or ThresholdChoice, optional
+        As for :func:`recognise`; ``best-next`` needs a :class:`ThresholdChoice` (its
+        confusion table).
+    margin : float
+        Relative confusion margin (see :func:`vision.recognition.decide`).
+    confusion_limit : float
+        ``best-next`` only: top-view confusion share in [0, 1] under which one view suffices.
+
+    Raises
+    ------
+    ValueError
+        Unknown policy, ``max_views`` outside 1..3, ``best-next`` without a ThresholdChoice,
+        or ``look`` returning something that is not an image.
+    """
+    if policy not in POLICIES:
+        raise ValueError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+    if isinstance(max_views, bool) or not isinstance(max_views, int) or not 1 <= max_views <= 3:
+        raise ValueError(f"max_views must be an int in 1..3, got {max_views!r}")
+    if not isinstance(index, ViewIndex):
+        raise ValueError(f"index must be a ViewIndex, got {type(index).__name__}")
+    if not callable(look):
+        raise ValueError(f"look must be callable, got {type(look).__name__}")
+    if policy == "best-next" and not isinstance(threshold, ThresholdChoice):
+        raise ValueError("policy 'best-next' needs threshold=ThresholdChoice (its confusion table)")
+    if isinstance(confusion_limit, bool) or not 0.0 <= float(confusion_limit) <= 1.0:
+        raise ValueError(f"confusion_limit must be in [0, 1], got {confusion_limit!r}")
+    decide({}, threshold=threshold, margin=margin)  # validates threshold and margin before moving
+    choice = threshold if isinstance(threshold, ThresholdChoice) else None
+
+    def at(vp: int) -> float | ThresholdChoice | None:
+        return choice.at(vp) if choice is not None else threshold
+
+    def bar(model: str, vp: int) -> float:
+        glob, per_model = resolve_threshold(at(vp))
+        return per_model.get(model, glob)
+
+    skip_top = False  # set when the top view only shortlisted (it could not rank)
+
+    def fused_decision(models: list[str]) -> tuple[dict[str, float], tuple]:
+        first = 1 if skip_top and len(views) > 1 else 0
+        fused = _fuse(views[first:], models)
+        bars = {m: float(np.mean([bar(m, vp) for vp in visited[first:]])) for m in models}
+        return fused, decide_with(fused, 1.0, bars, margin=margin)
+
+    visited: list[int] = []
+    views: list[Recognition] = []
+
+    async def see(vp: int, viewpoint: int | None, models=None) -> Recognition:
+        image, mask = await _look(look, vp)
+        r = await asyncio.to_thread(
+            recognise,
+            index,
+            image,
+            viewpoint=viewpoint,
+            mask=mask,
+            threshold=at(vp),
+            margin=margin,
+            models=models,
+        )
+        visited.append(vp)
+        views.append(r)
+        return r
+
+    def result(
+        decision: str, model: str | None, scores: dict[str, float], cont
+    ) -> ViewsRecognition:
+        best = max(scores.values(), default=0.0)
+        return ViewsRecognition(
+            decision=decision,
+            model=model,
+            score=float(scores[model]) if model is not None else float(best),
+            scores=MappingProxyType(dict(scores)),
+            contenders=tuple(cont),
+            policy=policy,
+            viewpoints=tuple(visited),
+            views=tuple(views),
+        )
+
+    def single(r: Recognition) -> ViewsRecognition:
+        return result(r.decision, r.model, dict(r.scores), r.contenders)
+
+    if policy == "naive":
+        for vp in (1, 2, 3)[:max_views]:
+            r = await see(vp, None)
+            if r.decision == "recognized":
+                break
+        return single(r)
+
+    top = await see(1, 1)
+    if policy == "top-only" or max_views == 1:
+        return single(top)
+    contenders = top.contenders
+    if top.decision == "unknown":
+        # Nothing certain from the top; models above the candidate bar are worth a side view.
+        # The top view could not rank them, so the margin does not prune here.
+        cand = at(1).candidate if choice is not None else bar("", 1)
+        contenders = tuple(
+            m for m in sorted(top.scores, key=lambda m: (-top.scores[m], m)) if top.scores[m] > cand
+        )[:MAX_CONTENDERS]
+        if not contenders:
+            return single(top)
+        skip_top = True
+    if policy == "best-next" and top.decision == "recognized":
+        assert choice is not None
+        alike = _top_confusers(choice, top.model, float(confusion_limit))
+        if not alike:
+            return single(top)
+        contenders = (top.model, *alike)
+    models = list(contenders)
+    for vp in _side_order(index, contenders, choice, smart=policy == "best-next"):
+        if len(visited) >= max_views:
+            break
+        side = await see(vp, vp, models)
+        fused, (decision, model, cont) = fused_decision(models)
+        if decision == "recognized" and side.scores.get(model, 0.0) > bar(model, vp):
+            return result(decision, model, fused, cont)
+        if cont:
+            models = list(cont)
+    if len(visited) == 1:  # no contender has side views: the top view is all there is
+        return single(top)
+    fused, (decision, model, cont) = fused_decision(models)
+    if decision == "recognized":
+        # The side check did not confirm the winner on its own view: report the doubt.
+        decision, model, cont = "ambiguous", None, cont
+    return result(decision, model, fused, cont)
