@@ -83,6 +83,13 @@ def make_camera(
         engine = sim if sim is not None else make_sim_engine(settings)
         follow = None if driver is None or settings.driver == "sim" else (lambda: driver.state)
         return SimCamera(engine, arm_state=follow)
+    if settings.camera == "opencv":
+        from vision.opencv_camera import OpenCVCamera, classify_source
+
+        kind, _ = classify_source(settings.camera_device)
+        # A video file is replayed in a loop (a demo or a recorded run); devices and streams
+        # reconnect on their own, and the cell's camera supervisor re-opens them after that.
+        return OpenCVCamera(settings.camera_device, fps=settings.camera_fps, loop=kind == "file")
     raise ValueError(f"camera {settings.camera!r} is not available in this build")
 
 

@@ -144,6 +144,16 @@ class Settings(BaseSettings):
             )
         return v
 
+    @field_validator("camera_device")
+    @classmethod
+    def _valid_device(cls, v: str) -> str:
+        if not v.strip() or len(v) > 2048 or "\x00" in v:
+            raise ValueError(
+                "camera_device must be a V4L2 index ('0', '/dev/video0'), a video file or a "
+                f"stream URL of at most 2048 characters, got {v[:80]!r}"
+            )
+        return v
+
     @field_validator("database_url")
     @classmethod
     def _valid_db(cls, v: str) -> str:

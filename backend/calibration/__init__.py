@@ -20,9 +20,11 @@ from backend.calibration.autoplan import (
 from backend.calibration.reports import PLOTS, calibration_public, calibration_report, report_png
 from backend.calibration.sessions import (
     NotFound,
+    OtherCell,
     SampleIn,
     add_samples,
     cell_id_of,
+    check_own,
     create_session,
     get_session,
     list_sessions,
@@ -53,6 +55,7 @@ __all__ = [
     "CalibrationViewLog",
     "CameraCalibration",
     "NotFound",
+    "OtherCell",
     "PlannedView",
     "SampleIn",
     "SolveOptions",
@@ -64,6 +67,7 @@ __all__ = [
     "calibration_public",
     "calibration_report",
     "cell_id_of",
+    "check_own",
     "check_solvable",
     "create_session",
     "get_calibration",

@@ -27,10 +27,12 @@ from vision.errors import CalibrationError, VisionCellError
 
 __all__ = [
     "NotFound",
+    "OtherCell",
     "ProgressFn",
     "SampleIn",
     "add_samples",
     "cell_id_of",
+    "check_own",
     "create_session",
     "get_session",
     "list_sessions",
@@ -48,6 +50,22 @@ class NotFound(VisionCellError):
 
     code = "not_found"
     http_status = 404
+
+
+class OtherCell(VisionCellError):
+    """The row belongs to another cell: this cell may read it, not change it."""
+
+    code = "other_cell"
+    http_status = 409
+
+
+def check_own(kind: str, row_id: int, row_cell_id: int, cell_id: int) -> None:
+    """Raise :class:`OtherCell` unless the row ``kind row_id`` belongs to cell ``cell_id``."""
+    if row_cell_id != cell_id:
+        raise OtherCell(
+            f"{kind} {row_id} belongs to cell id {row_cell_id}, not to this cell "
+            f"(id {cell_id}): change it from its own cell"
+        )
 
 
 @dataclass(frozen=True)

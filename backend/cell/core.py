@@ -127,7 +127,7 @@ class Cell(CellMotion):
                 raise
             except Exception:  # a driver's stream failing must not end the events for good
                 log.exception("arm state stream of %s failed; restarting", self.driver.name)
-                await asyncio.sleep(0.5)
+            await asyncio.sleep(0.5)  # the stream ended or failed: follow it again shortly
 
     # -- motion jobs (the REST API's moves) ----------------------------------------------------
     def _start_motion(self, kind: str, traj: JointTrajectory, params: dict[str, Any]) -> Job:

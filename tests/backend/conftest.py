@@ -8,6 +8,7 @@ from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from tests.utils.factories import make_settings, make_tokens, migrate
+from tests.utils.postgres import postgres_url  # noqa: F401  (a fixture of this suite)
 
 
 @pytest.fixture

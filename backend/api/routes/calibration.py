@@ -228,6 +228,7 @@ async def read_calibration_session(
 async def create_calibration_samples(
     _: EngineerUser,
     session: SessionDep,
+    cell: CellDep,
     session_id: int,
     images: Annotated[list[UploadFile], File(description="PNG, JPEG, BMP or TIFF images")],
     poses: Annotated[
@@ -240,6 +241,7 @@ async def create_calibration_samples(
     ] = None,
 ) -> dict[str, Any]:
     cal = await svc.get_session(session, session_id)
+    svc.check_own("session", cal.id, cal.cell_id, await svc.cell_id_of(session, cell.name))
     if not images:
         raise ApiError(422, "validation_error", "images: upload at least one image")
     if len(images) > MAX_IMAGES_PER_UPLOAD:
@@ -314,6 +316,7 @@ async def create_calibration_solve(
     req = body or SolveIn()
     options = req.to_options()
     cal = await svc.get_session(session, session_id)
+    svc.check_own("session", cal.id, cal.cell_id, await svc.cell_id_of(session, cell.name))
     warnings = svc.check_solvable(cal, options)  # CalibrationError -> 422 at once
 
     async def solve(job: Job) -> dict[str, Any]:
@@ -409,8 +412,10 @@ async def read_calibration_plot(
 
 @router.post("/calibrations/{calibration_id}/activate", summary="Make this calibration active")
 async def update_calibration_activate(
-    _: EngineerUser, session: SessionDep, calibration_id: int
+    _: EngineerUser, session: SessionDep, cell: CellDep, calibration_id: int
 ) -> dict[str, Any]:
+    row = await svc.get_calibration(session, calibration_id)
+    svc.check_own("calibration", row.id, row.cell_id, await svc.cell_id_of(session, cell.name))
     cal = await svc.activate(session, calibration_id)
     return {"calibration": svc.calibration_public(cal)}
 

@@ -114,7 +114,12 @@ async def live(ws: WebSocket) -> None:
             wait = 1.0
             if pending:
                 wait = min(period - (now - last_sent.get(j, 0.0)) for j in pending)
-            event = await sub.get(timeout_s=max(0.0, min(wait, 1.0)))
+            get = asyncio.ensure_future(sub.get(timeout_s=max(0.0, min(wait, 1.0))))
+            await asyncio.wait({get, rx_task}, return_when=asyncio.FIRST_COMPLETED)
+            if not get.done():  # the client went away (or the server is closing it)
+                get.cancel()
+                break
+            event = get.result()
             if event is None:
                 continue
             if isinstance(event, JobProgress):
