@@ -183,6 +183,34 @@ class CollisionWorld:
         """Whether any arm shape comes nearer than ``clearance_m`` to an obstacle."""
         return bool(self.contacts(q))
 
+    def collides_many(self, qs: ArrayLike) -> NDArray[np.bool_]:
+        """:meth:`collides` for each row of ``qs`` (N, 5), vectorised over the rows, the
+        spheres and the boxes (the same spheres and test as :meth:`contacts`)."""
+        qa = np.asarray(qs, dtype=np.float64).reshape(-1, 5)
+        if not np.isfinite(qa).all():
+            raise ValueError("qs must be finite joint values")
+        out = np.zeros(len(qa), dtype=bool)
+        if not len(qa):
+            return out
+        first = self._spheres(qa[0])
+        counts = [len(c) for _, c, _ in first]
+        radii = np.concatenate([np.full(n, r) for n, (_, _, r) in zip(counts, first, strict=True)])
+        on_floor = np.concatenate(
+            [np.full(n, name != "column") for n, (name, _, _) in zip(counts, first, strict=True)]
+        )
+        lo = np.array([b.lower for b in self.boxes]).reshape(-1, 3)
+        hi = np.array([b.upper for b in self.boxes]).reshape(-1, 3)
+        for i, q in enumerate(qa):
+            c = np.concatenate([cs for _, cs, _ in (first if i == 0 else self._spheres(q))])
+            if np.any((c[on_floor, 2] - radii[on_floor] - self.floor_z_m) < self.clearance_m):
+                out[i] = True
+                continue
+            if len(lo):
+                d = np.maximum(np.maximum(lo[None] - c[:, None], c[:, None] - hi[None]), 0.0)
+                gap = np.sqrt((d * d).sum(axis=2)) - radii[:, None]
+                out[i] = bool((gap < self.clearance_m).any())
+        return out
+
     def path_contacts(
         self, q_from: ArrayLike, q_to: ArrayLike, *, step_rad: float = 0.05
     ) -> list[Contact]:

@@ -20,7 +20,14 @@ from numpy.typing import NDArray
 
 from robot.trajectory import JointTrajectory
 
-__all__ = ["MoveReport", "RobotDriver", "RobotState", "StateHub"]
+__all__ = [
+    "GripReport",
+    "MoveReport",
+    "RobotDriver",
+    "RobotState",
+    "StateHub",
+    "check_grip_flag",
+]
 
 
 @dataclass(frozen=True)
@@ -43,6 +50,10 @@ class RobotState:
         True after an emergency stop until :meth:`RobotDriver.reset`.
     fault : str
         Empty when healthy, else a short description shown to the operator.
+    gripper_on : bool
+        True while the suction gripper is commanded on.
+    holding : bool
+        True while the gripper reports a part held (vacuum established).
     """
 
     q: tuple[float, ...]
@@ -52,6 +63,8 @@ class RobotState:
     moving: bool = False
     estopped: bool = False
     fault: str = ""
+    gripper_on: bool = False
+    holding: bool = False
 
     @property
     def q_array(self) -> NDArray[np.float64]:
@@ -68,6 +81,8 @@ class RobotState:
             "moving": self.moving,
             "estopped": self.estopped,
             "fault": self.fault,
+            "gripper_on": self.gripper_on,
+            "holding": self.holding,
         }
 
 
@@ -100,6 +115,49 @@ class MoveReport:
     final_error_rad: float = 0.0
     rms_tracking_error_rad: float = 0.0
     max_tracking_error_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class GripReport:
+    """What a gripper command did.
+
+    Attributes
+    ----------
+    on : bool
+        The suction state now (True: on).
+    holding : bool
+        True if a part is held after the command (vacuum established; always False after
+        switching off).
+    part_id : int or None
+        Which part is held, where the driver can tell (the simulator's object id), else None.
+    released_id : int or None
+        Switching off: the part that was let go, where the driver can tell.
+    detail : str
+        Short human-readable outcome (``"no part under the cup"``, ``"released"``...).
+    """
+
+    on: bool
+    holding: bool
+    part_id: int | None = None
+    released_id: int | None = None
+    detail: str = ""
+
+    def as_dict(self) -> dict[str, object]:
+        """JSON-friendly form."""
+        return {
+            "on": self.on,
+            "holding": self.holding,
+            "part_id": self.part_id,
+            "released_id": self.released_id,
+            "detail": self.detail,
+        }
+
+
+def check_grip_flag(on: object) -> bool:
+    """The gripper command's argument: a real ``bool`` (numbers and strings are refused)."""
+    if not isinstance(on, bool):
+        raise ValueError(f"grip(on) takes True or False, got {on!r}")
+    return on
 
 
 @runtime_checkable
@@ -136,6 +194,9 @@ class RobotDriver(Protocol):
 
     async def reset(self) -> None:
         """Clear an emergency stop or a fault."""
+
+    async def grip(self, on: bool) -> GripReport:
+        """Switch the suction gripper on (pick what is under the cup) or off (release)."""
 
 
 class StateHub:

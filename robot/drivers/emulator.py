@@ -47,6 +47,7 @@ from robot.drivers.serial.frames import (
     FrameParser,
     GetLimits,
     GetState,
+    Grip,
     Hello,
     HelloInfo,
     LimitsInfo,
@@ -66,6 +67,7 @@ from robot.drivers.serial.frames import (
 )
 from robot.drivers.serial.movetable import ExecutionRecord, MoveTable
 from robot.drivers.serial.ptyport import PtyPort
+from robot.errors import RobotBusy
 from robot.model import ASEA, ArmModel
 
 __all__ = ["Emulator", "EmulatorStats", "ExecutionRecord", "FaultConfig", "run_emulator"]
@@ -444,7 +446,20 @@ class Emulator:
             return Ack(seq, "RESET")
         if isinstance(cmd, QueryMove | TrajBegin | TrajPoint | Run | MoveJoints):
             return self.moves.handle(cmd)
+        if isinstance(cmd, Grip):
+            return await self._grip(cmd)
         return Nak(seq, "SYNTAX", f"{cmd.VERB} not handled here")
+
+    async def _grip(self, cmd: Grip) -> Ack | Nak:
+        """Suction on/off, passed to the backing driver (its own book-keeping, or the
+        simulator's suction cup); refused during an emergency stop."""
+        if self._estopped:
+            return Nak(cmd.seq, "ESTOP", "emergency stop active: the gripper keeps its state")
+        try:
+            report = await self.driver.grip(cmd.on)
+        except RobotBusy as exc:
+            return Nak(cmd.seq, "ESTOP", str(exc))
+        return Ack(cmd.seq, "GRIP", ("1" if report.on else "0", "1" if report.holding else "0"))
 
     def _on_move_done(self, session: str, outcome: MoveOutcome) -> None:
         if session == self._session:
@@ -468,6 +483,8 @@ class Emulator:
             mid=mid,
             move_status=status,
             fault=st.fault,
+            gripper_on=st.gripper_on,
+            holding=st.holding,
         )
 
     def _host_alive(self) -> bool:

@@ -15,7 +15,7 @@ from collections.abc import AsyncIterator
 import numpy as np
 from numpy.typing import ArrayLike
 
-from robot.drivers.base import MoveReport, RobotState, StateHub
+from robot.drivers.base import GripReport, MoveReport, RobotState, StateHub, check_grip_flag
 from robot.errors import DriverError, RobotBusy
 from robot.model import ASEA, ArmModel, check_joints
 from robot.trajectory import JointTrajectory
@@ -38,6 +38,9 @@ class IdealDriver:
         State publishing rate, Hz.
     time_scale : float
         Trajectory seconds per wall-clock second (1 = real time, 10 = ten times faster).
+
+    The gripper is book-keeping only: switched on it reports a part held (there is no
+    world to say otherwise), switched off it reports the release.
     """
 
     name = "ideal"
@@ -67,6 +70,7 @@ class IdealDriver:
         self._halt_reason = ""
         self._publisher: asyncio.Task[None] | None = None
         self._lock = asyncio.Lock()
+        self._gripper_on = False
 
     # -- protocol ---------------------------------------------------------------------
     async def connect(self) -> None:
@@ -153,6 +157,19 @@ class IdealDriver:
         self._estopped = False
         self._publish()
 
+    async def grip(self, on: bool) -> GripReport:
+        on = check_grip_flag(on)
+        if self._publisher is None:
+            raise DriverError("ideal driver is not connected")
+        if self._estopped:
+            raise RobotBusy("emergency stop is active: reset before using the gripper")
+        was = self._gripper_on
+        self._gripper_on = on
+        self._publish()
+        if on:
+            return GripReport(True, True, detail="suction on")
+        return GripReport(False, False, detail="released" if was else "suction already off")
+
     # -- internals --------------------------------------------------------------------
     def _request_halt(self, reason: str) -> None:
         if self._moving:
@@ -167,6 +184,8 @@ class IdealDriver:
                 connected=self._publisher is not None,
                 moving=self._moving,
                 estopped=self._estopped,
+                gripper_on=self._gripper_on,
+                holding=self._gripper_on,
             )
         )
 

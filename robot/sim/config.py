@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from robot.sim.boards import BoardSpec, default_boards
 from robot.sim.camera import CameraSpec
 from robot.sim.controller import ControllerGains
+from robot.sim.gripper import SuctionCupSpec
 from robot.sim.mjcf import ArmDynamics
 from robot.sim.world import WorldLayout
 
@@ -29,6 +30,8 @@ class SimConfig:
         Masses, drive friction and torque limits of the arm.
     gains : ControllerGains
         Joint controller.
+    gripper : SuctionCupSpec
+        The suction cup on the flange.
     slots_per_object : int
         How many objects of each catalogue entry can be on the belt at once.
     boards : tuple of BoardSpec
@@ -50,6 +53,7 @@ class SimConfig:
     layout: WorldLayout = field(default_factory=WorldLayout)
     dynamics: ArmDynamics = field(default_factory=ArmDynamics)
     gains: ControllerGains = field(default_factory=ControllerGains)
+    gripper: SuctionCupSpec = field(default_factory=SuctionCupSpec)
     slots_per_object: int = 3
     boards: tuple[BoardSpec, ...] = field(default_factory=default_boards)
     shadow_size: int = 1024

@@ -17,7 +17,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from robot.drivers.base import MoveReport, RobotState, StateHub
+from robot.drivers.base import GripReport, MoveReport, RobotState, StateHub, check_grip_flag
 from robot.errors import DriverError, RobotBusy
 from robot.model import check_joints
 from robot.sim.camera import CameraSpec
@@ -40,6 +40,8 @@ def _state(sample: ArmSample | Snapshot, *, connected: bool = True) -> RobotStat
         connected=connected,
         moving=sample.moving,
         estopped=sample.estopped,
+        gripper_on=sample.gripper_on,
+        holding=sample.holding,
     )
 
 
@@ -147,6 +149,21 @@ class SimDriver:
     async def reset(self) -> None:
         self.engine.clear_estop()
         self._publish()
+
+    async def grip(self, on: bool) -> GripReport:
+        """Suction on (the cup seals on the part under it, or on the next one it touches)
+        or off (the part drops: into a bin, back onto the belt or onto the floor)."""
+        on = check_grip_flag(on)
+        if not self._connected:
+            raise DriverError("sim driver is not connected")
+        if self.engine.estopped:
+            raise RobotBusy("emergency stop is active: reset before using the gripper")
+        try:
+            report = self.engine.grip(on)
+        except DriverError as exc:
+            raise RobotBusy(str(exc)) from None
+        self._publish()
+        return report
 
     # -- internals ---------------------------------------------------------------------
     def _publish(self) -> None:

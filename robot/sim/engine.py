@@ -29,8 +29,9 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robot.drivers.base import MoveReport
+from robot.drivers.base import GripReport, MoveReport, check_grip_flag
 from robot.errors import DriverError, SimError
+from robot.kinematics import T_base_ee
 from robot.model import ASEA, ArmModel, check_joints
 from robot.sim.boards import BoardSpec
 from robot.sim.builder import quat_from_matrix
@@ -38,6 +39,7 @@ from robot.sim.camera import Lens
 from robot.sim.catalogue import CATALOGUE
 from robot.sim.config import SimConfig
 from robot.sim.controller import JointController
+from robot.sim.gripper import Landing, payload_inertia, payload_mass_kg, ray_to_object
 from robot.sim.mjcf import build_cell
 from robot.sim.render import RenderWorker
 from robot.sim.truth import BoardTruth, ObjectTruth, SimTruth
@@ -51,6 +53,7 @@ log = logging.getLogger(__name__)
 _CHUNK_STEPS = 20  # most steps per lock hold
 _TICK_S = 0.002  # wall-clock period of the physics loop when it keeps up
 _MAX_LAG_S = 0.1  # wall seconds of lag after which the loop stops trying to catch up
+_SEAL_CHECK_STEPS = 5  # physics steps between checks for a part under the switched-on cup
 
 
 @dataclass(frozen=True)
@@ -63,6 +66,17 @@ class ArmSample:
     qd: NDArray[np.float64]
     moving: bool
     estopped: bool
+    gripper_on: bool = False
+    holding: bool = False
+
+
+@dataclass(frozen=True)
+class _Held:
+    """The part on the suction cup: its id, catalogue name, slot and ``T_cup_obj``."""
+
+    id: int
+    name: str
+    T_cup_obj: NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -84,6 +98,8 @@ class Snapshot:
     light_diffuse: NDArray[np.float32]
     light_specular: NDArray[np.float32]
     ambient: float
+    gripper_on: bool = False
+    holding: bool = False
 
 
 def _quat_yaw(yaw: float) -> NDArray[np.float64]:
@@ -150,6 +166,7 @@ class SimEngine:
         self._renderer_lock = threading.Lock()
         self._next_id = 1
         self.steps = 0
+        self._init_gripper()
 
     # -- scene book-keeping --------------------------------------------------------------
     def _body_mocap(self, name: str) -> int:
@@ -275,6 +292,8 @@ class SimEngine:
     def _advance_locked(self, n: int) -> None:
         for _ in range(n):
             self._step()
+            if self._suction and self._held is None and self.steps % _SEAL_CHECK_STEPS == 0:
+                self._try_seal_locked()
         removed = self.conveyor.advance(n * self.config.timestep_s)
         for obj_id in removed:
             self._free_slot(obj_id)
@@ -340,6 +359,8 @@ class SimEngine:
             d.qvel.copy(),
             self.controller.moving,
             self._estopped,
+            self._suction,
+            self._held is not None,
         )
 
     def arm_state(self) -> ArmSample:
@@ -446,10 +467,14 @@ class SimEngine:
             self._free_slot(obj_id)
 
     def clear_objects(self) -> None:
-        """Remove every object."""
+        """Remove every object (a part on the cup too; the bins' records stay)."""
         with self._lock:
             for obj_id in list(self.conveyor.items):
                 self.remove(obj_id)
+            if self._held is not None:
+                held, self._held = self._held, None
+                self._set_payload_locked(None)
+                self._free_slot(held.id)
 
     def _truth_locked(self, obj_id: int) -> ObjectTruth:
         it = self.conveyor.items[obj_id]
@@ -577,6 +602,12 @@ class SimEngine:
                 T = spec.T_base_item(it.s_m, it.lateral_m, it.yaw_rad)
                 pos[mid] = T[:3, 3]
                 quat[mid] = _quat_yaw(it.yaw_rad)
+            if self._held is not None:
+                name, slot = self._item_slot[self._held.id]
+                mid = self._slots[name][slot][0]
+                T = self._T_base_cup_locked() @ self._held.T_cup_obj
+                pos[mid] = T[:3, 3]
+                quat[mid] = quat_from_matrix(T[:3, :3])
             for kind, T in self._board_pose.items():
                 mid = self._boards[kind][1]
                 pos[mid] = T[:3, 3]
@@ -600,6 +631,8 @@ class SimEngine:
                 diffuse,
                 specular,
                 ambient,
+                self._suction,
+                self._held is not None,
             )
 
     def renderer(self) -> RenderWorker:
@@ -625,3 +658,156 @@ class SimEngine:
         model.vis.headlight.ambient[:] = snap.ambient
         mujoco.mj_kinematics(model, data)
         mujoco.mj_camlight(model, data)
+
+    # -- suction gripper and bins --------------------------------------------------------
+    def _init_gripper(self) -> None:
+        self._cup = self.config.gripper
+        self._payload_body = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, "payload")
+        m = self.model
+        self._payload_empty = (
+            float(m.body_mass[self._payload_body]),
+            m.body_inertia[self._payload_body].copy(),
+        )
+        self._suction = False
+        self._held: _Held | None = None
+        self._landings: list[Landing] = []
+
+    def _T_base_cup_locked(self) -> NDArray[np.float64]:
+        return T_base_ee(self.data.qpos, self.arm_model) @ self._cup.T_ee_cup
+
+    def _set_payload_locked(self, held: _Held | None) -> None:
+        """Load the payload body with ``held``'s mass and inertia (None: empty again)."""
+        m, b = self.model, self._payload_body
+        if held is None:
+            m.body_mass[b], m.body_inertia[b] = self._payload_empty[0], self._payload_empty[1]
+            m.body_ipos[b] = 0.0
+            m.body_iquat[b] = (1.0, 0.0, 0.0, 0.0)
+        else:
+            com_obj, inertia = payload_inertia(held.name)
+            m.body_mass[b] = payload_mass_kg(held.name)
+            m.body_inertia[b] = inertia
+            m.body_ipos[b] = held.T_cup_obj[:3, :3] @ com_obj + held.T_cup_obj[:3, 3]
+            m.body_iquat[b] = quat_from_matrix(held.T_cup_obj[:3, :3])
+        # Subtree masses and the other constants derived from the masses.
+        mujoco.mj_setConst(m, mujoco.MjData(m))
+
+    def _try_seal_locked(self) -> bool:
+        """Seal on the belt object under the cup, if one is within reach of the lip."""
+        cup = self._cup
+        T_cup = self._T_base_cup_locked()
+        lip, axis = T_cup[:3, 3], T_cup[:3, 2]
+        spec = self.config.layout.conveyor
+        cos_tilt = math.cos(math.radians(cup.max_tilt_deg))
+        for obj_id in sorted(self.conveyor.items):
+            it = self.conveyor.items[obj_id]
+            b = CATALOGUE[it.name].geometry().bounds
+            T_obj = spec.T_base_item(it.s_m, it.lateral_m, it.yaw_rad)
+            rel = lip - T_obj[:3, 3]
+            reach = float(np.abs(b).max()) * math.sqrt(2.0) + cup.radius_m
+            if math.hypot(rel[0], rel[1]) > reach or not (
+                -cup.max_press_m <= rel[2] <= b[1, 2] + cup.seal_gap_m + 0.01
+            ):
+                continue
+            T_obj_cup = np.linalg.inv(T_obj) @ T_cup
+            hit = ray_to_object(it.name, T_obj_cup, max_back_m=cup.max_press_m)
+            if hit is None:
+                continue
+            dist, normal = hit
+            if not (-cup.max_press_m <= dist <= cup.seal_gap_m):
+                continue
+            if float(-(T_obj_cup[:3, 2] @ normal)) < cos_tilt:
+                continue
+            if payload_mass_kg(it.name) > cup.max_payload_kg:
+                continue
+            # Suction pulls a part that is a little short of the lip up against it.
+            T_seal = T_obj.copy()
+            T_seal[:3, 3] -= max(dist, 0.0) * axis
+            held = _Held(obj_id, it.name, np.linalg.inv(T_cup) @ T_seal)
+            del self.conveyor.items[obj_id]
+            self._held = held
+            self._set_payload_locked(held)
+            return True
+        return False
+
+    def _release_locked(self) -> Landing:
+        held = self._held
+        assert held is not None
+        T = self._T_base_cup_locked() @ held.T_cup_obj
+        self._held = None
+        self._set_payload_locked(None)
+        spec = self.config.layout.conveyor
+        x, y = float(T[0, 3]), float(T[1, 3])
+        place = "floor"
+        for b in self.config.layout.bins:
+            if b.contains((x, y)):
+                place = b.name
+                break
+        else:
+            on_belt = (
+                abs(x - spec.centre_x_m) <= spec.width_m / 2.0
+                and spec.start_y_m <= y <= spec.end_y_m
+                and T[2, 3] >= spec.surface_z_m - 0.01
+            )
+            if on_belt:
+                place = "belt"
+        landing = Landing(held.id, held.name, place, T[:3, 3].copy(), float(self.data.time))
+        self._landings.append(landing)
+        if place == "belt":
+            yaw = math.atan2(T[1, 0], T[0, 0])
+            self.conveyor.items[held.id] = BeltItem(
+                held.id, held.name, y - spec.start_y_m, x - spec.centre_x_m, yaw
+            )
+        else:
+            self._free_slot(held.id)
+        return landing
+
+    def grip(self, on: bool) -> GripReport:
+        """Switch the suction on (seal on the part under the cup now, or on contact later)
+        or off (release the part: it drops into the bin, onto the belt or the floor below).
+
+        Raises :class:`~robot.errors.DriverError` during an emergency stop.
+        """
+        on = check_grip_flag(on)
+        with self._lock:
+            if self._estopped:
+                raise DriverError("emergency stop is active: the gripper keeps its state")
+            if on:
+                self._suction = True
+                if self._held is None and not self._try_seal_locked():
+                    return GripReport(True, False, detail="suction on; no part under the cup")
+                assert self._held is not None
+                return GripReport(True, True, part_id=self._held.id, detail="part held")
+            self._suction = False
+            if self._held is None:
+                return GripReport(False, False, detail="suction off; nothing was held")
+            landing = self._release_locked()
+            return GripReport(
+                False, False, released_id=landing.id, detail=f"released over {landing.place}"
+            )
+
+    @property
+    def gripper_on(self) -> bool:
+        """True while the suction is on."""
+        return self._suction
+
+    def held_object(self) -> tuple[int, str, NDArray[np.float64]] | None:
+        """The part on the cup now: ``(id, catalogue name, T_base_obj)``, or None (truth)."""
+        with self._lock:
+            if self._held is None:
+                return None
+            T = self._T_base_cup_locked() @ self._held.T_cup_obj
+            return self._held.id, self._held.name, T
+
+    def bins(self) -> dict[str, tuple[int, ...]]:
+        """Ids of the objects that landed in each bin, every bin listed (truth)."""
+        with self._lock:
+            out: dict[str, tuple[int, ...]] = {b.name: () for b in self.config.layout.bins}
+            for landing in self._landings:
+                if landing.place in out:
+                    out[landing.place] = (*out[landing.place], landing.id)
+            return out
+
+    def landings(self) -> list[Landing]:
+        """Every release so far, in order (truth: bins, the belt or the floor)."""
+        with self._lock:
+            return list(self._landings)

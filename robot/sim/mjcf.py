@@ -31,12 +31,20 @@ from robot.sim.boards import add_board_body
 from robot.sim.builder import MjcfBuilder, fmt, quat_from_matrix
 from robot.sim.camera import CameraSpec, Lens
 from robot.sim.catalogue import CATALOGUE
+from robot.sim.gripper import SuctionCupSpec
 from robot.sim.world import add_world
 
 if TYPE_CHECKING:
     from robot.sim.config import SimConfig
 
-__all__ = ["JOINT_NAMES", "ArmDynamics", "CellModel", "add_arm", "build_cell"]
+__all__ = [
+    "JOINT_NAMES",
+    "ArmDynamics",
+    "CellModel",
+    "add_arm",
+    "add_suction_cup",
+    "build_cell",
+]
 
 JOINT_NAMES = ("q1", "q2", "q3", "q4", "q5")
 #: Sites on the chain, in the order of :func:`robot.kinematics.joint_positions` rows 1-4.
@@ -133,8 +141,9 @@ def _joint(
 
 def add_arm(
     b: MjcfBuilder, model: ArmModel, dyn: ArmDynamics, camera: CameraSpec, lens: Lens
-) -> None:
-    """The arm's bodies, joints, motors, chain sites and the eye-in-hand camera."""
+) -> ET.Element:
+    """The arm's bodies, joints, motors, chain sites and the eye-in-hand camera; returns
+    the flange body (tools are added to it)."""
     L1, L2, L3, L45, L5 = model.L1, model.L2, model.L3, model.L45, model.link_lengths_m[4]
     lo, hi = model.lower, model.upper
     mass = dyn.link_mass_kg
@@ -295,6 +304,53 @@ def add_arm(
             gear="1",
             ctrlrange=fmt((-dyn.torque_limit_n_m[i], dyn.torque_limit_n_m[i])),
         )
+    return flange
+
+
+def add_suction_cup(b: MjcfBuilder, flange: ET.Element, cup: SuctionCupSpec) -> None:
+    """The suction cup beside the camera (bracket, tube, bellows, lip) and the ``payload``
+    body at its lip that carries a gripped part's mass (see :mod:`robot.sim.gripper`)."""
+    T = cup.T_ee_cup
+    p, z = T[:3, 3], T[:3, 2]
+    quat = fmt(quat_from_matrix(T[:3, :3]))
+    b.material("cup", rgba=(0.12, 0.12, 0.13, 1), specular=0.2, shininess=0.2)
+    b.material("tube", rgba=(0.75, 0.77, 0.8, 1), specular=0.6, shininess=0.5)
+    vg = b.visual_geom
+    base = p - (p @ z) * z  # where the cup's axis meets the flange face
+    half = max(float(np.linalg.norm(base)) / 2.0, 0.012)  # bracket along x_ee
+    vg(
+        flange,
+        type="box",
+        size=fmt((half, 0.012, 0.01)),
+        pos=fmt(base / 2 + 0.01 * z),
+        material="tube",
+    )
+    vg(
+        flange,
+        type="cylinder",
+        fromto=fmt((*(base + 0.01 * z), *(p - 0.025 * z))),
+        size="0.008",
+        material="tube",
+        mass="0.05",
+    )
+    vg(
+        flange,
+        type="cylinder",
+        fromto=fmt((*(p - 0.025 * z), *(p - 0.008 * z))),
+        size=f"{0.7 * cup.radius_m:.6g}",
+        material="cup",
+        mass="0.02",
+    )
+    vg(
+        flange,
+        type="cylinder",
+        fromto=fmt((*(p - 0.008 * z), *p)),
+        size=f"{cup.radius_m:.6g}",
+        material="cup",
+        mass="0.01",
+    )
+    payload = ET.SubElement(flange, "body", name="payload", pos=fmt(p), quat=quat)
+    ET.SubElement(payload, "inertial", pos="0 0 0", mass="1e-6", diaginertia="1e-9 1e-9 1e-9")
 
 
 def _add_catalogue(b: MjcfBuilder, slots: int) -> dict[str, tuple[str, ...]]:
@@ -360,7 +416,8 @@ def build_cell(config: SimConfig, model: ArmModel = ASEA) -> CellModel:
         width="32",
         height="192",
     )
-    add_arm(b, model, config.dynamics, config.camera, lens)
+    flange = add_arm(b, model, config.dynamics, config.camera, lens)
+    add_suction_cup(b, flange, config.gripper)
     cleats = add_world(b, config.layout)
     slots = _add_catalogue(b, config.slots_per_object)
     boards = {spec.kind: add_board_body(b, spec, f"board_{spec.kind}") for spec in config.boards}

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot.sim import textures as tx
+from robot.sim.bins import BinSpec, add_bins, check_bins, default_bins
 from robot.sim.builder import MjcfBuilder, fmt
 
 __all__ = [
@@ -124,6 +125,18 @@ class WorldLayout:
         LightSpec("fill", (-1.5, 1.5, 2.0), (1.0, -1.0, -1.0), 0.2),
     )
     ambient: float = 0.3
+    #: Sorting bins beside the belt (:mod:`robot.sim.bins`).
+    bins: tuple[BinSpec, ...] = field(default_factory=default_bins)
+
+    def __post_init__(self) -> None:
+        check_bins(tuple(self.bins))
+
+    def bin(self, name: str) -> BinSpec:
+        """The bin called ``name`` (``KeyError`` naming the bins if there is none)."""
+        for b in self.bins:
+            if b.name == name:
+                return b
+        raise KeyError(f"no bin {name!r}; bins: {', '.join(b.name for b in self.bins)}")
 
     @property
     def light_names(self) -> tuple[str, ...]:
@@ -459,6 +472,7 @@ def add_world(b: MjcfBuilder, layout: WorldLayout) -> list[str]:
             attrs["cutoff"] = f"{spec.cutoff_deg:g}"
             attrs["exponent"] = "2"
         ET.SubElement(wb, "light", attrs)
+    add_bins(b, layout.bins)
     return names
 
 

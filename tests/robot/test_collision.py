@@ -51,8 +51,11 @@ def test_bad_input():
 
 
 def test_sim_cell_furniture():
+    from robot.sim.bins import default_bins
     from robot.sim.obstacles import collision_world
 
     world = collision_world()
-    assert {b.name for b in world.boxes} == {"table", "conveyor"}
+    names = {b.name for b in world.boxes}
+    assert {"table", "conveyor", "conveyor rail inner", "conveyor rail outer"} <= names
+    assert {n for n in names if n.startswith("bin ")} == {f"bin {b.name}" for b in default_bins()}
     assert not world.collides(ASEA.q_ready)

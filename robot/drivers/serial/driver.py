@@ -45,7 +45,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from robot.drivers.base import MoveReport, RobotState, StateHub
+from robot.drivers.base import GripReport, MoveReport, RobotState, StateHub, check_grip_flag
 from robot.drivers.serial.device import SerialDevice
 from robot.drivers.serial.frames import (
     PROTOCOL_VERSION,
@@ -57,6 +57,7 @@ from robot.drivers.serial.frames import (
     Event,
     GetLimits,
     GetState,
+    Grip,
     Hello,
     HelloInfo,
     LimitsInfo,
@@ -344,6 +345,35 @@ class SerialDriver:
         await self._refresh_state()
 
     # -- extra queries ------------------------------------------------------------------------
+    async def grip(self, on: bool) -> GripReport:
+        """Suction gripper on or off (``GRIP 1`` / ``GRIP 0``), within ``command_timeout_s``.
+
+        Raises
+        ------
+        LinkDown
+            The link is down (nothing sent).
+        CommandTimeout
+            No reply in time: whether the gripper switched is unknown (the next state
+            event's ``G``/``H`` flags will tell).
+        RobotBusy
+            The controller refused it during an emergency stop.
+        CommandRejected
+            Any other refusal.
+        """
+        on = check_grip_flag(on)
+        try:
+            ack = await self._cmd(lambda s: Grip(s, on))
+        except CommandRejected as exc:
+            raise self._refusal(exc) from exc
+        on_now, holding = Grip.parse_reply(ack.args)
+        with contextlib.suppress(RobotError):
+            await self._refresh_state()
+        if on_now:
+            detail = "part held" if holding else "suction on; no part held"
+        else:
+            detail = "suction off"
+        return GripReport(on_now, holding, detail=detail)
+
     async def ping(self) -> float:
         """Round trip of one ``PING``, seconds."""
         t0 = time.perf_counter()
@@ -657,5 +687,7 @@ class SerialDriver:
                 moving=snap.moving,
                 estopped=snap.estopped,
                 fault=snap.fault,
+                gripper_on=snap.gripper_on,
+                holding=snap.holding,
             )
         )

@@ -58,6 +58,7 @@ __all__ = [
     "FrameParser",
     "GetLimits",
     "GetState",
+    "Grip",
     "Hello",
     "HelloInfo",
     "LimitsInfo",
@@ -297,11 +298,35 @@ class Reset(Command):
     VERB: ClassVar[str] = "RESET"
 
 
+@dataclass(frozen=True)
+class Grip(Command):
+    """Suction gripper on (``GRIP 1``) or off (``GRIP 0``); the reply ``A s GRIP <on>
+    <holding>`` says whether a part is held."""
+
+    on: bool
+    VERB: ClassVar[str] = "GRIP"
+
+    def args(self) -> list[str]:
+        return ["1" if self.on else "0"]
+
+    @classmethod
+    def from_args(cls, seq: int, args: Sequence[str]) -> Grip:
+        expect_nargs(args, 1, "GRIP")
+        return cls(seq, parse_word(args[0], "GRIP state", ("0", "1")) == "1")
+
+    @staticmethod
+    def parse_reply(args: Sequence[str]) -> tuple[bool, bool]:
+        """``(on, holding)`` from the acknowledgement's arguments."""
+        expect_nargs(args, 2, "GRIP reply")
+        on = parse_word(args[0], "GRIP reply state", ("0", "1")) == "1"
+        return on, parse_word(args[1], "GRIP reply holding", ("0", "1")) == "1"
+
+
 COMMANDS: dict[str, type[Command]] = {
     c.VERB: c
     for c in (
         Hello, Ping, GetState, GetLimits, SetRate, MoveJoints, TrajBegin, TrajPoint, Run,
-        QueryMove, Stop, EStop, Reset,
+        QueryMove, Stop, EStop, Reset, Grip,
     )
 }  # fmt: skip
 

@@ -146,6 +146,9 @@ class ArmSnapshot:
         Status of ``mid`` (one of :data:`MOVE_STATUSES`).
     fault : str
         Empty when healthy, else the controller's fault text.
+    gripper_on, holding : bool
+        The suction gripper is on; it holds a part (vacuum established).  Flags ``G`` and
+        ``H``, sent only by controllers with a gripper.
     """
 
     stamp_ms: int
@@ -156,9 +159,16 @@ class ArmSnapshot:
     mid: int
     move_status: str
     fault: str = ""
+    gripper_on: bool = False
+    holding: bool = False
 
     def to_args(self) -> list[str]:
-        flags = ("M" if self.moving else "") + ("E" if self.estopped else "") or "-"
+        flags = (
+            ("M" if self.moving else "")
+            + ("E" if self.estopped else "")
+            + ("G" if self.gripper_on else "")
+            + ("H" if self.holding else "")
+        ) or "-"
         out = [str(self.stamp_ms), *fmt_vec(self.q), *(fmt(v, 4) for v in self.qd), flags]
         out += [str(self.mid), self.move_status]
         return out + ([safe_text(self.fault)] if safe_text(self.fault) else [])
@@ -168,8 +178,10 @@ class ArmSnapshot:
         if len(args) < 14:
             raise ProtocolError(f"state needs at least 14 fields, got {len(args)}")
         flags = args[11]
-        if not re.fullmatch(r"-|M?E?", flags) or flags == "":
-            raise ProtocolError(f"state flags must be '-', 'M', 'E' or 'ME', got {flags!r}")
+        if not re.fullmatch(r"-|M?E?G?H?", flags) or flags == "":
+            raise ProtocolError(
+                f"state flags must be '-' or letters of 'MEGH' in that order, got {flags!r}"
+            )
         return cls(
             stamp_ms=parse_int(args[0], "stamp_ms", 2**63),
             q=parse_vec(args[1:6], "q"),
@@ -179,6 +191,8 @@ class ArmSnapshot:
             mid=parse_int(args[12], "mid"),
             move_status=parse_word(args[13], "move status", MOVE_STATUSES),
             fault=" ".join(args[14:]),
+            gripper_on="G" in flags,
+            holding="H" in flags,
         )
 
 

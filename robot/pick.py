@@ -1,0 +1,479 @@
+"""Pick and place with a suction cup: the motion sequence as a pure planner, and its execution.
+
+Given where an object is (``T_base_obj``: footprint centre on the belt, z up) and how tall it
+is, :func:`plan_pick_place` plans the chapter's manipulation (section 1: "move the robot to
+the desired pose relative to the object", then sort it):
+
+1. ``approach``: a joint move to the pre-grasp pose, the cup's lip ``approach_m`` above the
+   grasp point (and above the object's top), pointing down the object's z axis;
+2. ``descend``: a straight line down (:func:`robot.trajectory_cartesian.plan_cartesian_line`)
+   until the lip is ``press_m`` into the surface;
+3. ``grip`` (suction on), then ``lift``: straight up until the part's bottom clears every
+   obstacle (the highest box of the collision world) by ``clearance_m``;
+4. ``transfer``: a joint move to above the bin, then (if lower) a straight line down to the
+   drop pose, the part's footprint centre over the bin's drop point and its bottom
+   ``drop_clearance_m`` above the rim;
+5. ``release`` (suction off), ``retreat`` straight up and ``return`` to ``q_return``.
+
+Every pose passes the closed-form IK within the joint ranges, every path the collision
+model (:class:`robot.collision.CollisionWorld`, sampled), with the held part represented by
+a sphere round its bounding box below the cup; the object being picked is an obstacle for
+the approach only.  Failures raise :class:`~robot.errors.Unreachable` naming the stage and
+the reason.  The 5-DOF arm approaches only vertically (its approach axis stays in the
+column's plane), so objects must stand upright (z within ``max_tilt_deg`` of vertical).
+
+:func:`execute_pick_place` runs a plan on any :class:`~robot.drivers.base.RobotDriver` with
+a gripper, checking every move's report and that the part is held after gripping.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robot.collision import Box, CollisionWorld
+from robot.drivers.base import GripReport, MoveReport, RobotDriver
+from robot.errors import JointLimitsBlock, OutOfReach, Unreachable
+from robot.kinematics import T_base_ee, ik
+from robot.model import ASEA, ArmModel, check_joints
+from robot.trajectory import JointTrajectory, plan_joint_move
+from robot.trajectory_cartesian import plan_cartesian_line
+
+__all__ = [
+    "T_EE_SUCTION_CUP",
+    "PickOutcome",
+    "PickPlan",
+    "PickStep",
+    "execute_pick_place",
+    "plan_pick_place",
+    "tool_flange_pose",
+]
+
+
+def _cup() -> NDArray[np.float64]:
+    T = np.eye(4)
+    T[:3, 3] = (-0.05, 0.0, 0.12)
+    T.setflags(write=False)
+    return T
+
+
+#: The suction cup's lip on the flange: 50 mm along ``-x_ee`` (opposite the camera), 120 mm
+#: past the flange face, its axis along the approach axis.
+T_EE_SUCTION_CUP = _cup()
+
+
+@dataclass(frozen=True)
+class PickStep:
+    """One step of a plan: a move (``trajectory``), or a gripper action (``grip``)."""
+
+    name: str
+    trajectory: JointTrajectory | None = None
+    grip: bool | None = None
+
+
+@dataclass(frozen=True)
+class PickPlan:
+    """A planned pick and place.
+
+    Attributes
+    ----------
+    steps : tuple of PickStep
+        In order: approach, descend, grip, lift, transfer[, lower], release, retreat, return.
+    q_grasp, q_drop : ndarray of shape (5,)
+        Joints at the grasp and at the release.
+    T_base_lip_grasp : ndarray of shape (4, 4)
+        The cup's lip at the grasp.
+    duration_s : float
+        Sum of the moves' durations.
+    """
+
+    steps: tuple[PickStep, ...]
+    q_grasp: NDArray[np.float64]
+    q_drop: NDArray[np.float64]
+    T_base_lip_grasp: NDArray[np.float64]
+    duration_s: float = field(default=0.0)
+
+
+def _R_down(q1: float, roll: float) -> NDArray[np.float64]:
+    """Flange rotation pointing straight down (phi = -pi/2) at azimuth q1 with roll q5."""
+    c1, s1, c5, s5 = math.cos(q1), math.sin(q1), math.cos(roll), math.sin(roll)
+    xa = np.array([-c1, -s1, 0.0])
+    ya = np.array([-s1, c1, 0.0])
+    za = np.array([0.0, 0.0, -1.0])
+    return np.stack([c5 * xa + s5 * ya, -s5 * xa + c5 * ya, za], axis=-1)
+
+
+def tool_flange_pose(
+    p_lip: ArrayLike, *, roll_rad: float = 0.0, T_ee_tool: ArrayLike = T_EE_SUCTION_CUP
+) -> tuple[float, float, float, float, float]:
+    """Chapter pose ``(x, y, z, u, w)`` of the flange, pointing down, with the tool's tip at
+    ``p_lip`` (the flange's azimuth and the tool's offset are solved together by
+    fixed-point iteration: the offset turns with the azimuth)."""
+    p = np.asarray(p_lip, dtype=np.float64)
+    t = np.asarray(T_ee_tool, dtype=np.float64)[:3, 3]
+    q1 = math.atan2(p[1], p[0])
+    for _ in range(50):
+        f = p - _R_down(q1, roll_rad) @ t
+        q1_new = math.atan2(f[1], f[0])
+        if abs(math.remainder(q1_new - q1, 2 * math.pi)) < 1e-13:
+            break
+        q1 = q1_new
+    f = p - _R_down(q1, roll_rad) @ t
+    return (float(f[0]), float(f[1]), float(f[2]), 0.0, -1.0)
+
+
+@dataclass(frozen=True)
+class _HeldPart:
+    """The part on the cup for collision checks: its footprint centre's offset from the
+    lip (base frame, horizontal), the lip's height above its bottom, its half-width and
+    height."""
+
+    offset_xy: NDArray[np.float64]
+    grasp_z: float
+    radius: float
+    height: float
+
+    def box(self, lip: NDArray[np.float64]) -> Box:
+        c = lip[:2] - self.offset_xy
+        z0 = float(lip[2]) - self.grasp_z
+        r = self.radius
+        return Box("held part", (c[0] - r, c[1] - r, z0), (c[0] + r, c[1] + r, z0 + self.height))
+
+
+def _box_gap(a: Box, b: Box) -> float:
+    """Distance between two axis-aligned boxes (0 when they touch or overlap)."""
+    lo_a, hi_a = np.asarray(a.lower), np.asarray(a.upper)
+    lo_b, hi_b = np.asarray(b.lower), np.asarray(b.upper)
+    d = np.maximum(np.maximum(lo_b - hi_a, lo_a - hi_b), 0.0)
+    return float(np.linalg.norm(d))
+
+
+def _check_path(
+    what: str,
+    traj: JointTrajectory,
+    world: CollisionWorld,
+    *,
+    part: tuple[NDArray[np.float64], _HeldPart] | None,
+    support_z: float | None = None,
+    step_rad: float = 0.03,
+) -> None:
+    """Raise Unreachable if the arm (or the held part) comes near an obstacle on ``traj``.
+
+    ``support_z``: the part is being lifted off a surface at this height; only its portion
+    above the surface (plus the clearance) is checked.
+    """
+    q = traj.q
+    dq = np.abs(np.diff(q, axis=0)).max(axis=1) if len(q) > 1 else np.zeros(0)
+    keep = [0]
+    acc = 0.0
+    for i, d in enumerate(dq, start=1):
+        acc += d
+        if acc >= step_rad or i == len(q) - 1:
+            keep.append(i)
+            acc = 0.0
+    hits = world.collides_many(q[keep])
+    for k, i in enumerate(keep):
+        contacts = world.contacts(q[i]) if hits[k] else []
+        if contacts:
+            raise Unreachable(
+                f"{what}: collision at {100 * i / max(len(q) - 1, 1):.0f} % of the move: "
+                + "; ".join(str(c) for c in contacts[:3])
+            )
+        if part is not None:
+            T_tool, held = part
+            pb = held.box((T_base_ee(q[i]) @ T_tool)[:3, 3])
+            if support_z is not None:  # leaving the surface it stood on
+                z0 = max(pb.lower[2], support_z + world.clearance_m + 1e-3)
+                pb = Box(pb.name, (pb.lower[0], pb.lower[1], min(z0, pb.upper[2])), pb.upper)
+            for box in world.boxes:
+                gap = _box_gap(pb, box)
+                if gap < world.clearance_m:
+                    raise Unreachable(
+                        f"{what}: the held part comes {gap * 1e3:.0f} mm from the {box.name} "
+                        f"at {100 * i / max(len(q) - 1, 1):.0f} % of the move"
+                    )
+            if pb.lower[2] - world.floor_z_m < world.clearance_m:
+                raise Unreachable(f"{what}: the held part comes near the floor")
+
+
+def plan_pick_place(
+    q_start: ArrayLike,
+    T_base_obj: ArrayLike,
+    object_height_m: float,
+    drop_point: ArrayLike,
+    *,
+    object_radius_m: float = 0.18,
+    grasp_obj: ArrayLike | None = None,
+    world: CollisionWorld | None = None,
+    T_ee_tool: ArrayLike = T_EE_SUCTION_CUP,
+    roll_rad: float = 0.0,
+    approach_m: float = 0.08,
+    press_m: float = 0.004,
+    clearance_m: float = 0.05,
+    drop_clearance_m: float = 0.03,
+    q_return: ArrayLike | None = None,
+    transit_max_z_m: float = 0.9,
+    speed: float = 0.5,
+    max_tilt_deg: float = 2.0,
+    model: ArmModel = ASEA,
+) -> PickPlan:
+    """Plan picking the object at ``T_base_obj`` and dropping it at ``drop_point``.
+
+    Parameters
+    ----------
+    q_start : array_like of shape (5,)
+        Where the arm is.
+    T_base_obj : array_like of shape (4, 4)
+        Object frame: footprint centre on its support, z up.
+    object_height_m : float
+        Height of the object, metres (in (0, 0.5]).
+    drop_point : array_like of shape (3,)
+        Centre of the bin's opening at rim height, base frame.
+    object_radius_m : float
+        Half-width of the object (its obstacle box for the approach, its sphere when held).
+    grasp_obj : array_like of shape (3,), optional
+        Where the cup seals, object frame; default the top face's centre
+        ``(0, 0, object_height_m)``.
+    world : CollisionWorld, optional
+        The cell's obstacles (default: the floor only).
+    T_ee_tool : array_like of shape (4, 4)
+        The cup's lip on the flange (its z axis along the approach axis).
+    roll_rad : float
+        Flange roll q5 during the pick.
+    approach_m, press_m, clearance_m, drop_clearance_m : float
+        Pre-grasp height above the grasp point, how far the lip is pressed into the surface,
+        the part's clearance above every obstacle in transit, and above the rim at the drop.
+    q_return : array_like of shape (5,), optional
+        Where to go at the end (default ``q_start``).
+    transit_max_z_m : float
+        Obstacles up to this height are flown over in transit; taller ones (fences,
+        columns) are not, the collision check keeps the arm and the part clear of them.
+    speed : float in (0, 1]
+        Fraction of the joint and Cartesian speed limits.
+    max_tilt_deg : float
+        Largest tilt of the object's z axis from vertical.
+    model : ArmModel
+
+    Returns
+    -------
+    PickPlan
+
+    Raises
+    ------
+    ValueError
+        Malformed or non-finite inputs, values out of range.
+    Unreachable
+        A pose or path is out of reach, blocked by a joint range or collides; the message
+        names the stage.
+    """
+    qs = check_joints(np.asarray(q_start, dtype=np.float64).reshape(5), model)
+    T = np.asarray(T_base_obj, dtype=np.float64)
+    if T.shape != (4, 4) or not np.isfinite(T).all():
+        raise ValueError(
+            f"T_base_obj must be a finite 4x4 matrix, got {np.asarray(T_base_obj).tolist()}"
+        )
+    R = T[:3, :3]
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise ValueError(f"T_base_obj must be a rigid transform, got {T.tolist()}")
+    if isinstance(object_height_m, bool) or not (
+        isinstance(object_height_m, int | float) and 0.0 < object_height_m <= 0.5
+    ):
+        raise ValueError(f"object_height_m must be in (0, 0.5] m, got {object_height_m!r}")
+    drop = np.asarray(drop_point, dtype=np.float64).reshape(-1)
+    if drop.shape != (3,) or not np.isfinite(drop).all() or np.linalg.norm(drop[:2]) > 2.0:
+        raise ValueError(f"drop_point must be 3 finite numbers within 2 m, got {drop_point!r}")
+    for name, v, lo, hi in (
+        ("object_radius_m", object_radius_m, 0.0, 0.5),
+        ("approach_m", approach_m, 0.0, 0.5),
+        ("press_m", press_m, 0.0, 0.03),
+        ("clearance_m", clearance_m, 0.0, 0.5),
+        ("drop_clearance_m", drop_clearance_m, 0.0, 0.5),
+        ("roll_rad", roll_rad, -math.pi, math.pi),
+        ("max_tilt_deg", max_tilt_deg, 0.0, 10.0),
+        ("transit_max_z_m", transit_max_z_m, 0.0, 2.0),
+    ):
+        if isinstance(v, bool) or not (
+            isinstance(v, int | float) and math.isfinite(v) and lo <= v <= hi
+        ):
+            raise ValueError(f"{name} must be in [{lo}, {hi}], got {v!r}")
+    tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(R[2, 2])))))
+    if tilt > max_tilt_deg:
+        raise Unreachable(
+            f"the object's z axis is {tilt:.1f} deg off vertical (limit {max_tilt_deg:g} deg): "
+            "the 5-DOF arm picks only from straight above"
+        )
+    Tt = np.asarray(T_ee_tool, dtype=np.float64)
+    if Tt.shape != (4, 4) or abs(float(Tt[2, 2]) - 1.0) > 1e-9:
+        raise ValueError("T_ee_tool must be a 4x4 transform with its z axis along the flange's")
+    g_obj = (
+        np.array([0.0, 0.0, float(object_height_m)])
+        if grasp_obj is None
+        else np.asarray(grasp_obj, dtype=np.float64).reshape(3)
+    )
+    if not np.isfinite(g_obj).all() or not 0.0 <= g_obj[2] <= object_height_m + 1e-9:
+        raise ValueError(
+            f"grasp_obj must be a finite point within the object's height, got {grasp_obj!r}"
+        )
+    q_end = qs if q_return is None else check_joints(np.asarray(q_return, float).reshape(5), model)
+    obstacles = world or CollisionWorld(model=model)
+    p_obj = T[:3, 3]
+    r_obj = float(object_radius_m)
+    obj_box = Box(
+        "object",
+        (p_obj[0] - r_obj, p_obj[1] - r_obj, p_obj[2]),
+        (p_obj[0] + r_obj, p_obj[1] + r_obj, p_obj[2] + object_height_m),
+    )
+    grasp = T[:3, :3] @ g_obj + T[:3, 3]
+    grasp_z = float(g_obj[2]) - press_m  # lip height above the part's bottom when held
+    off = T[:3, :3] @ np.array([g_obj[0], g_obj[1], 0.0])
+    part = (Tt, _HeldPart(off[:2], grasp_z, r_obj, float(object_height_m)))
+    top_z = max(
+        [b.upper[2] for b in obstacles.boxes if b.upper[2] <= transit_max_z_m]
+        + [obstacles.floor_z_m]
+    )
+    z_transit = max(top_z + clearance_m + grasp_z, grasp[2] + approach_m)
+    z_transit = max(z_transit, float(p_obj[2]) + object_height_m + clearance_m)
+
+    def solve(
+        p_lip: NDArray[np.float64], seed: NDArray[np.float64], stage: str
+    ) -> NDArray[np.float64]:
+        pose = tool_flange_pose(p_lip, roll_rad=roll_rad, T_ee_tool=Tt)
+        try:
+            return ik(pose, roll=roll_rad, seed=seed, model=model)
+        except JointLimitsBlock as e:
+            raise JointLimitsBlock(f"{stage}: {e.detail}", e.joints) from None
+        except OutOfReach as e:
+            raise OutOfReach(f"{stage}: {e.detail}") from None
+
+    def line(q0: NDArray[np.float64], p_lip: NDArray[np.float64], stage: str) -> JointTrajectory:
+        try:
+            return plan_cartesian_line(
+                q0,
+                tool_flange_pose(p_lip, roll_rad=roll_rad, T_ee_tool=Tt),
+                roll=roll_rad,
+                speed=speed,
+                model=model,
+            )
+        except Unreachable as e:
+            raise Unreachable(f"{stage}: {e.detail}") from None
+
+    steps: list[PickStep] = []
+    # 1. approach (the object itself is an obstacle).
+    p_pre = grasp + np.array([0.0, 0.0, approach_m])
+    p_pre[2] = max(p_pre[2], float(p_obj[2]) + object_height_m + approach_m)
+    q_pre = solve(p_pre, qs, "pre-grasp pose")
+    t_app = plan_joint_move(qs, q_pre, speed=speed, model=model)
+    _check_path("approach", t_app, obstacles.with_boxes(obj_box), part=None)
+    steps.append(PickStep("approach", t_app))
+    # 2. descend (touching the object: it is not an obstacle now).
+    p_grasp = grasp - np.array([0.0, 0.0, press_m])
+    t_down = line(q_pre, p_grasp, "descent to the grasp")
+    _check_path("descent", t_down, obstacles, part=None)
+    q_grasp = t_down.goal
+    steps += [PickStep("descend", t_down), PickStep("grip", grip=True)]
+    # 3. lift to the transit height.
+    p_lift = np.array([p_grasp[0], p_grasp[1], z_transit])
+    t_up = line(q_grasp, p_lift, "lift")
+    _check_path("lift", t_up, obstacles, part=part, support_z=float(p_obj[2]))
+    steps.append(PickStep("lift", t_up))
+    # 4. transfer over the bin, lower to the drop pose.
+    z_drop = float(drop[2]) + drop_clearance_m + grasp_z
+    # The part turns with the flange about the vertical (by the change of q1): its
+    # footprint centre's offset from the lip is turned with it, found by iteration.
+    q_over = t_up.goal
+    for _ in range(30):
+        dq1 = float(q_over[0] - q_grasp[0])
+        c, s_ = math.cos(dq1), math.sin(dq1)
+        off_d = np.array([c * off[0] - s_ * off[1], s_ * off[0] + c * off[1]])
+        p_over = np.array([drop[0] + off_d[0], drop[1] + off_d[1], max(z_drop, z_transit)])
+        q_prev, q_over = q_over, solve(p_over, t_up.goal, "above the bin")
+        if abs(q_over[0] - q_prev[0]) < 1e-12:
+            break
+    t_tr = plan_joint_move(t_up.goal, q_over, speed=speed, model=model)
+    _check_path("transfer", t_tr, obstacles, part=part)
+    steps.append(PickStep("transfer", t_tr))
+    q_drop = q_over
+    if z_drop < p_over[2] - 1e-6:
+        t_low = line(q_over, np.array([p_over[0], p_over[1], z_drop]), "lowering into the bin")
+        _check_path("lowering", t_low, obstacles, part=part)
+        steps.append(PickStep("lower", t_low))
+        q_drop = t_low.goal
+    steps.append(PickStep("release", grip=False))
+    # 5. retreat and return.
+    q_last = q_drop
+    if z_drop < p_over[2] - 1e-6:
+        t_ret = line(q_drop, p_over, "retreat")
+        _check_path("retreat", t_ret, obstacles, part=None)
+        steps.append(PickStep("retreat", t_ret))
+        q_last = t_ret.goal
+    t_home = plan_joint_move(q_last, q_end, speed=speed, model=model)
+    _check_path("return", t_home, obstacles, part=None)
+    steps.append(PickStep("return", t_home))
+    T_lip = T_base_ee(q_grasp, model) @ Tt
+    total = sum(s.trajectory.duration_s for s in steps if s.trajectory is not None)
+    return PickPlan(tuple(steps), q_grasp, q_drop, T_lip, float(total))
+
+
+@dataclass(frozen=True)
+class PickOutcome:
+    """How executing a plan went.
+
+    Attributes
+    ----------
+    ok : bool
+        True if every step completed and the part was held until the release.
+    stage : str
+        The last step reached (the failing one when ``ok`` is False).
+    reason : str
+        ``"done"`` or why it stopped.
+    grip : GripReport or None
+        The report of the grip step.
+    moves : tuple of MoveReport
+        Reports of the moves executed, in order.
+    """
+
+    ok: bool
+    stage: str
+    reason: str
+    grip: GripReport | None
+    moves: tuple[MoveReport, ...]
+
+
+async def execute_pick_place(driver: RobotDriver, plan: PickPlan) -> PickOutcome:
+    """Run ``plan`` on ``driver``: each move must complete, the grip must hold a part.
+
+    If the grip holds nothing, the suction is switched off and the arm goes back up the
+    descent's line (the failure is reported, the arm left safe above the object).  A move
+    that does not complete (stop, e-stop, fault) ends the run at once with its reason; the
+    gripper keeps its state (a part is not dropped where it happens to be).
+    """
+    moves: list[MoveReport] = []
+    grip: GripReport | None = None
+    descent: JointTrajectory | None = None
+    for step in plan.steps:
+        if step.trajectory is not None:
+            report = await driver.move(step.trajectory)
+            moves.append(report)
+            if not report.completed:
+                return PickOutcome(False, step.name, report.reason, grip, tuple(moves))
+            if step.name == "descend":
+                descent = step.trajectory
+            continue
+        if step.grip:
+            grip = await driver.grip(True)
+            if not grip.holding:
+                await driver.grip(False)
+                if descent is not None:
+                    back = JointTrajectory(
+                        descent.t_s[-1] - descent.t_s[::-1], descent.q[::-1], -descent.qd[::-1]
+                    )
+                    moves.append(await driver.move(back))
+                return PickOutcome(
+                    False, step.name, f"no part held: {grip.detail}", grip, tuple(moves)
+                )
+        else:
+            await driver.grip(False)
+    return PickOutcome(True, plan.steps[-1].name, "done", grip, tuple(moves))
