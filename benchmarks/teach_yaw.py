@@ -63,7 +63,7 @@ def run(*, queries: int = 4, objects: int = 12, seed: int = 0) -> dict[str, Any]
         for ss in shots.values():
             for s in ss:
                 backgrounds[s.key] = capture(engine, s.q).rgb
-        options = FEATURE_OPTIONS["sift"]
+        options = FEATURE_OPTIONS.get("sift", {})
         indexes = {label: ViewIndex("sift", feature_options=options) for label in ROLL_SETS}
         snake_used: dict[str, int] = {}
         t0 = time.perf_counter()

@@ -87,11 +87,11 @@ class LoadReport:
     seconds: float
 
 
-#: Extraction options per method, chosen by measurement on the simulated cell's top views:
-#: SIFT's contrast threshold at 0.02 instead of OpenCV's 0.04 finds about three times the
-#: features on plain parts (the gear housing's top: 13 -> 42 inside its mask; the steel
-#: wheel: 390 -> 550), which verification needs; lower thresholds add none there.
-FEATURE_OPTIONS: dict[str, dict[str, float]] = {"sift": {"threshold": 0.02}}
+#: Extraction options per method beyond the engine's own (none: ``ViewIndex`` already halves
+#: the detector threshold on low-texture views, which raised the gear housing's top view
+#: from 13 SIFT features to 42 in the simulated cell; a fixed threshold here would turn
+#: that adaptation off).  Options given here become part of the stored descriptor version.
+FEATURE_OPTIONS: dict[str, dict[str, float]] = {}
 
 
 def _probe_image() -> NDArray[np.uint8]:

@@ -104,6 +104,13 @@ def _detail(choice: ThresholdChoice, n_views: int) -> dict[str, Any]:
         "far": choice.far,
         "frr": choice.frr,
         "per_model": {k: float(v) for k, v in choice.per_model.items()},
+        "candidate": float(choice.candidate),
+        "per_viewpoint": {str(k): float(v) for k, v in choice.per_viewpoint.items()},
+        "per_model_viewpoint": {
+            str(vp): {m: float(t) for m, t in row.items()}
+            for vp, row in choice.per_model_viewpoint.items()
+        },
+        "candidate_viewpoint": {str(k): float(v) for k, v in choice.candidate_viewpoint.items()},
         "views": n_views,
         "genuine": [round(float(x), 5) for x in choice.genuine],
         "impostor": [round(float(x), 5) for x in choice.impostor],
@@ -134,6 +141,15 @@ def choice_from_detail(global_threshold: float, detail: Mapping[str, Any]) -> Th
             int(vp): {a: dict(row) for a, row in table.items()}
             for vp, table in detail.get("confusion", {}).items()
         },
+        candidate=float(detail.get("candidate", 0.0)),
+        per_viewpoint={int(k): float(v) for k, v in detail.get("per_viewpoint", {}).items()},
+        per_model_viewpoint={
+            int(vp): {str(m): float(t) for m, t in row.items()}
+            for vp, row in detail.get("per_model_viewpoint", {}).items()
+        },
+        candidate_viewpoint={
+            int(k): float(v) for k, v in detail.get("candidate_viewpoint", {}).items()
+        },
     )
 
 
@@ -161,7 +177,12 @@ async def current_choice(session: AsyncSession) -> ThresholdChoice:
         return choice
     from dataclasses import replace
 
-    return replace(choice, per_model={**choice.per_model, **overrides})
+    per_vp = {vp: {**row, **overrides} for vp, row in choice.per_model_viewpoint.items()}
+    for (
+        vp
+    ) in choice.per_viewpoint:  # the per-viewpoint choice replaces per_model: override there too
+        per_vp.setdefault(vp, dict(overrides))
+    return replace(choice, per_model={**choice.per_model, **overrides}, per_model_viewpoint=per_vp)
 
 
 def _choose(snapshot: bytes, target_far: float) -> tuple[ThresholdChoice, int]:
