@@ -37,6 +37,8 @@ from backend.db.models import Cell as CellRow
 from backend.db.session import Database
 from backend.hardware import make_hardware
 from backend.jobs import JobManager
+from backend.recognition.index import LiveIndex, load_live_index
+from backend.recognition.teach import BackgroundStore
 from backend.settings import Settings
 
 if TYPE_CHECKING:
@@ -117,6 +119,9 @@ class CellRuntime:
         self.cell_id: int | None = None
         self.sim: SimEngine | None = None
         self.view3d: View3D | None = None
+        self._live_index: LiveIndex | None = None
+        #: Empty-belt backgrounds grabbed by teaches, for later teaches of this cell.
+        self.teach_backgrounds = BackgroundStore()
         self._stack: contextlib.AsyncExitStack | None = None
 
     # -- accessors (raise a clear error before start) -----------------------------------------
@@ -133,6 +138,13 @@ class CellRuntime:
         if self._cell is None:
             raise RuntimeError("the cell runtime is not running")
         return self._cell
+
+    @property
+    def live_index(self) -> LiveIndex:
+        """The index of every trained view, built from the database at start (after entering)."""
+        if self._live_index is None:
+            raise RuntimeError("the cell runtime is not running")
+        return self._live_index
 
     @property
     def jobs(self) -> JobManager:
@@ -176,6 +188,7 @@ class CellRuntime:
     def _clear(self) -> None:
         self._cell = None
         self._database = None
+        self._live_index = None
         self.view3d = None
         self.sim = None
 
@@ -186,6 +199,7 @@ class CellRuntime:
         await check_database(db)
         self._database = db
         self.cell_id = await ensure_cell_row(db, s.cell_name)
+        self._live_index = await load_live_index(db, s)
 
         hardware = await asyncio.to_thread(make_hardware, s)
         if hardware.sim is not None:

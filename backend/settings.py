@@ -115,6 +115,14 @@ class Settings(BaseSettings):
         description="Simulator: start with a few catalogue objects on the belt, indexing at the station.",
     )
     log_level: Literal["debug", "info", "warning", "error"] = "info"
+    recognition_method: Literal["sift", "orb", "akaze", "color-sift"] = Field(
+        "sift",
+        description="Feature method of trained views and inspections (changing it makes the "
+        "stored views stale until `visioncell models reextract`).",
+    )
+    recognition_max_features: int = Field(
+        1000, ge=50, le=4000, description="Strongest keypoints kept per trained view."
+    )
 
     @field_validator("http_host", "viser_host")
     @classmethod

@@ -1,7 +1,8 @@
 """The ``visioncell`` command line, one module per command group: ``serve``
 (:mod:`backend.cli.serve`), ``db`` (:mod:`backend.cli.db`), ``user``
 (:mod:`backend.cli.users`), ``calibrate`` (:mod:`backend.cli.calibrate`), ``train-pca``
-(:mod:`backend.cli.features`) and ``emulator`` (:mod:`backend.cli.emulator`)."""
+(:mod:`backend.cli.features`), ``emulator`` (:mod:`backend.cli.emulator`) and ``models``
+(:mod:`backend.cli.models`)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from backend.cli.common import err, load_settings, out
 from backend.cli.db import db_app
 from backend.cli.emulator import emulator
 from backend.cli.features import train_pca
+from backend.cli.models import register as register_models
 from backend.cli.serve import serve
 from backend.cli.users import user_app
 
@@ -29,6 +31,7 @@ app.add_typer(db_app, name="db")
 app.add_typer(user_app, name="user")
 app.add_typer(calibrate_app, name="calibrate")
 app.command("train-pca")(train_pca)
+register_models(app)
 
 
 @app.command()

@@ -160,6 +160,9 @@ class ObjectModel(Base):
 
     id: Mapped[int] = mapped_column(primary_key=True)
     name: Mapped[str] = mapped_column(String(64), unique=True)
+    #: The physical part (sorting has one bin per part); the sitting bases of one part are
+    #: separate models sharing it (chapter 3.5.3).
+    part: Mapped[str] = mapped_column(String(64), index=True, server_default="")
     kind: Mapped[ObjectKind] = mapped_column(_enum(ObjectKind, "object_kind"))
     sitting_base: Mapped[str] = mapped_column(String(64), default="default")
     threshold: Mapped[float | None] = mapped_column(Float, default=None)
@@ -188,15 +191,34 @@ class TrainedView(Base):
     )
     viewpoint: Mapped[int] = mapped_column(Integer)
     image_png: Mapped[bytes] = mapped_column(LargeBinary)
+    #: The object's region (PNG, one channel, 255 inside), None when the whole image is used.
+    mask_png: Mapped[bytes | None] = mapped_column(LargeBinary, default=None)
+    #: Small JPEG of the view for lists (longest side ``THUMBNAIL_PX``).
+    thumbnail_jpeg: Mapped[bytes | None] = mapped_column(LargeBinary, default=None)
+    width: Mapped[int] = mapped_column(Integer, server_default="0")
+    height: Mapped[int] = mapped_column(Integer, server_default="0")
+    #: Features in :meth:`vision.features.Features.to_bytes` form (what the index adds).
     features: Mapped[bytes] = mapped_column(LargeBinary)
     descriptor_kind: Mapped[str] = mapped_column(String(32))
     descriptor_version: Mapped[str] = mapped_column(String(32))
     keypoint_count: Mapped[int] = mapped_column(Integer, default=0)
+    #: Object yaw about the belt normal relative to the model's frame when taught, radians.
+    yaw_rad: Mapped[float] = mapped_column(Float, server_default="0")
+    #: Camera roll about its optical axis (joint q5) the view was taken with, radians.
+    roll_rad: Mapped[float] = mapped_column(Float, server_default="0")
+    #: ``teach`` (the arm took it), ``upload`` (REST) or ``import`` (CLI folder).
+    source: Mapped[str] = mapped_column(String(16), server_default="upload")
+    #: Joints (rad) and camera pose (4x4, metres) at exposure, when the arm took the view.
+    joints: Mapped[list[Any] | None] = mapped_column(JSON, default=None)
+    T_base_cam: Mapped[list[Any] | None] = mapped_column(JSON, default=None)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
     model: Mapped[ObjectModel] = relationship(back_populates="views")
 
-    __table_args__ = (CheckConstraint("viewpoint BETWEEN 1 AND 3", name="viewpoint_range"),)
+    __table_args__ = (
+        CheckConstraint("viewpoint BETWEEN 1 AND 3", name="viewpoint_range"),
+        CheckConstraint("source IN ('teach', 'upload', 'import')", name="source"),
+    )
 
 
 class CalibrationSession(Base):

@@ -1,0 +1,421 @@
+"""Object models and their trained views; teaching (a job).
+
+Reading needs the viewer role; creating, changing, deleting, uploading and teaching need
+the engineer role.  The work is in :mod:`backend.recognition`; handlers only parse, call
+it and shape the answer.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from fastapi import APIRouter, Depends, File, Form, Path, Query, UploadFile, status
+from fastapi.responses import Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from backend.api.deps import CellDep, DatabaseDep, EngineerUser, RuntimeDep, SessionDep, ViewerUser
+from backend.recognition import images as im
+from backend.recognition import models as svc
+from backend.recognition import teach as teach_svc
+from backend.recognition import views as views_svc
+from backend.recognition.index import IndexedModel, LiveIndex
+from vision.errors import InvalidInput
+
+__all__ = ["LiveIndexDep", "get_live_index", "router"]
+
+router = APIRouter(prefix="/models", tags=["models"])
+
+#: Database integer keys are 32-bit signed on PostgreSQL.
+DB_ID_MAX = 2**31 - 1
+ModelId = Annotated[int, Path(ge=1, le=DB_ID_MAX, description="Object model id")]
+ViewId = Annotated[int, Path(ge=1, le=DB_ID_MAX, description="Trained view id")]
+Name = Annotated[str, Field(min_length=1, max_length=64, pattern=svc.NAME_PATTERN.pattern)]
+
+
+def get_live_index(runtime: RuntimeDep) -> LiveIndex:
+    """The live index of the running cell (built from the database at start-up)."""
+    return runtime.live_index
+
+
+LiveIndexDep = Annotated[LiveIndex, Depends(get_live_index)]
+
+
+class ModelCreate(BaseModel):
+    """A new object model."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    name: Name
+    part: Name | None = Field(None, description="Physical part (default: the name)")
+    sitting_base: Name = "default"
+    kind: Literal["2d", "3d"] = Field(description="2d: top view only; 3d: side views too")
+    threshold: float | None = Field(
+        None, ge=0.0, le=1.0, allow_inf_nan=False, description="Own score threshold"
+    )
+    description: str = Field("", max_length=2000)
+
+
+class ModelUpdate(BaseModel):
+    """Fields to change (absent ones keep their value; ``threshold: null`` clears it)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    name: Name | None = None
+    part: Name | None = None
+    sitting_base: Name | None = None
+    kind: Literal["2d", "3d"] | None = None
+    threshold: float | None = Field(None, ge=0.0, le=1.0, allow_inf_nan=False)
+    description: str | None = Field(None, max_length=2000)
+
+
+class ModelPublic(BaseModel):
+    id: int
+    name: str
+    part: str
+    sitting_base: str
+    kind: str
+    threshold: float | None
+    description: str
+    created_at: datetime
+    views: int
+    views_per_viewpoint: dict[str, int]
+    indexed_views: int = Field(description="Views in the live index")
+    stale_views: int = Field(description="Views refused by the index (stale features)")
+
+
+class ModelList(BaseModel):
+    data: list[ModelPublic]
+    count: int
+
+
+class ViewPublic(BaseModel):
+    id: int
+    model_id: int
+    viewpoint: int
+    width: int
+    height: int
+    keypoints: int
+    descriptor: dict[str, str]
+    yaw_rad: float
+    roll_rad: float
+    source: str
+    joints: list[float] | None
+    T_base_cam: list[list[float]] | None
+    created_at: datetime
+    image_url: str
+    thumbnail_url: str
+    mask_url: str
+    indexed: bool
+    stale: str | None = Field(description="Why the index refused the view, if it did")
+
+
+class ViewList(BaseModel):
+    data: list[ViewPublic]
+    count: int
+
+
+def _model_out(row: Any, counts: dict[int, int], live: LiveIndex) -> dict[str, Any]:
+    out = svc.model_public(row, counts)
+    out["indexed_views"] = len(live.views_of(row.id))
+    out["stale_views"] = sum(1 for s in live.stale.values() if s.model_id == row.id)
+    return out
+
+
+def _view_out(row: Any, live: LiveIndex) -> dict[str, Any]:
+    out = views_svc.view_public(row)
+    out["indexed"] = live.has_view(row.id)
+    stale = live.stale.get(row.id)
+    out["stale"] = None if stale is None else stale.reason
+    return out
+
+
+# -- models ---------------------------------------------------------------------------------
+
+
+@router.get("", response_model=ModelList, summary="Object models, by name")
+async def read_models(
+    _: ViewerUser,
+    session: SessionDep,
+    live: LiveIndexDep,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+    offset: Annotated[int, Query(ge=0, le=DB_ID_MAX)] = 0,
+    part: Annotated[str | None, Query(max_length=64)] = None,
+) -> dict[str, Any]:
+    rows, total = await svc.list_models(session, limit=limit, offset=offset, part=part)
+    counts = await svc.view_counts(session, [r.id for r in rows])
+    return {"data": [_model_out(r, counts[r.id], live) for r in rows], "count": total}
+
+
+@router.post(
+    "",
+    response_model=ModelPublic,
+    status_code=status.HTTP_201_CREATED,
+    summary="Create an object model (engineer)",
+)
+async def create_model(
+    _: EngineerUser, db: DatabaseDep, live: LiveIndexDep, body: ModelCreate
+) -> dict[str, Any]:
+    fields = svc.ModelFields(**body.model_dump())
+    row = await svc.create_model(db, fields)
+    live.put_model(IndexedModel.of(row))
+    return _model_out(row, {}, live)
+
+
+@router.get("/{model_id}", response_model=ModelPublic, summary="One object model")
+async def read_model(
+    _: ViewerUser, session: SessionDep, live: LiveIndexDep, model_id: ModelId
+) -> dict[str, Any]:
+    row = await svc.get_model(session, model_id)
+    counts = await svc.view_counts(session, [row.id])
+    return _model_out(row, counts[row.id], live)
+
+
+@router.patch("/{model_id}", response_model=ModelPublic, summary="Change a model (engineer)")
+async def update_model(
+    _: EngineerUser,
+    db: DatabaseDep,
+    session: SessionDep,
+    live: LiveIndexDep,
+    model_id: ModelId,
+    body: ModelUpdate,
+) -> dict[str, Any]:
+    given = body.model_fields_set
+    for key in ("name", "part", "sitting_base", "kind", "description"):
+        if key in given and getattr(body, key) is None:
+            raise InvalidInput(f"{key} may not be null (leave it out to keep it)")
+    fields = svc.ModelFields(
+        **{k: getattr(body, k) for k in given}, threshold_given="threshold" in given
+    )
+    _, row = await svc.update_model(db, model_id, fields)
+    live.put_model(IndexedModel.of(row))
+    counts = await svc.view_counts(session, [row.id])
+    return _model_out(row, counts[row.id], live)
+
+
+@router.delete(
+    "/{model_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    summary="Delete a model and its trained views (engineer)",
+)
+async def delete_model(
+    _: EngineerUser, db: DatabaseDep, live: LiveIndexDep, model_id: ModelId
+) -> Response:
+    await svc.delete_model(db, model_id)
+    live.drop_model(model_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+# -- teaching -------------------------------------------------------------------------------
+
+
+class TeachIn(BaseModel):
+    """Options of a teach (see ``backend.recognition.teach.TeachOptions``)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    viewpoints: list[int] | None = Field(
+        None, min_length=1, max_length=3, description="Default: [1] for 2d, [1, 2, 3] for 3d"
+    )
+    top_rolls_rad: list[float] | None = Field(
+        None, min_length=1, max_length=12, description="Camera rolls of the top view, rad"
+    )
+    background: Literal["grab", "stored"] = Field(
+        "grab",
+        description="grab: the station must be empty; the job grabs the background, then "
+        "waits for the object. stored: the backgrounds of an earlier teach",
+    )
+    object_height_m: float = Field(0.1, gt=0.0, le=0.5, allow_inf_nan=False)
+    yaw_rad: float = Field(0.0, ge=-math.pi, le=math.pi, allow_inf_nan=False)
+    speed: float | None = Field(None, gt=0.0, le=1.0, allow_inf_nan=False)
+    wait_s: float = Field(120.0, ge=0.0, le=teach_svc.MAX_WAIT_S, allow_inf_nan=False)
+    replace: bool = Field(False, description="Replace the model's earlier views")
+    point: list[float] | None = Field(
+        None, min_length=3, max_length=3, description="Station point x, y, z in metres"
+    )
+
+
+class JobAccepted(BaseModel):
+    job: dict[str, Any]
+
+
+def get_backgrounds(runtime: RuntimeDep) -> teach_svc.BackgroundStore:
+    """The backgrounds grabbed by earlier teaches of this cell."""
+    return runtime.teach_backgrounds
+
+
+@router.post(
+    "/{model_id}/teach",
+    response_model=JobAccepted,
+    status_code=status.HTTP_202_ACCEPTED,
+    summary="Teach the model with the arm: a job (engineer)",
+)
+async def teach_model(
+    _: EngineerUser,
+    db: DatabaseDep,
+    live: LiveIndexDep,
+    cell: CellDep,
+    model_id: ModelId,
+    body: TeachIn,
+    store: Annotated[teach_svc.BackgroundStore, Depends(get_backgrounds)],
+) -> dict[str, Any]:
+    options = teach_svc.TeachOptions(
+        viewpoints=None if body.viewpoints is None else tuple(body.viewpoints),
+        top_rolls_rad=teach_svc.TOP_ROLLS_RAD
+        if body.top_rolls_rad is None
+        else tuple(body.top_rolls_rad),
+        background=body.background,
+        object_height_m=body.object_height_m,
+        yaw_rad=body.yaw_rad,
+        speed=body.speed,
+        wait_s=body.wait_s,
+        replace=body.replace,
+    )
+    job = await teach_svc.start_teach(
+        cell=cell,
+        db=db,
+        live=live,
+        model_id=model_id,
+        options=options,
+        store=store,
+        point=None if body.point is None else np.asarray(body.point, dtype=np.float64),
+    )
+    return {"job": job.public()}
+
+
+# -- views ----------------------------------------------------------------------------------
+
+
+@router.get("/{model_id}/views", response_model=ViewList, summary="A model's trained views")
+async def read_views(
+    _: ViewerUser,
+    session: SessionDep,
+    live: LiveIndexDep,
+    model_id: ModelId,
+    viewpoint: Annotated[int | None, Query(ge=1, le=3)] = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 100,
+    offset: Annotated[int, Query(ge=0, le=DB_ID_MAX)] = 0,
+) -> dict[str, Any]:
+    rows, total = await views_svc.list_views(
+        session, model_id, viewpoint=viewpoint, limit=limit, offset=offset
+    )
+    return {"data": [_view_out(r, live) for r in rows], "count": total}
+
+
+@router.get(
+    "/{model_id}/views/{view_id}/image",
+    summary="A view's image (PNG), thumbnail (JPEG, ?thumb=1) or mask (PNG, ?mask=1)",
+    responses={200: {"content": {"image/png": {}, "image/jpeg": {}}}},
+    response_class=Response,
+)
+async def read_view_image(
+    _: ViewerUser,
+    session: SessionDep,
+    model_id: ModelId,
+    view_id: ViewId,
+    thumb: Annotated[bool, Query()] = False,
+    mask: Annotated[bool, Query()] = False,
+) -> Response:
+    if thumb and mask:
+        raise InvalidInput("ask for thumb or mask, not both")
+    part = "thumb" if thumb else "mask" if mask else "image"
+    data, media = await views_svc.view_image(session, model_id, view_id, part=part)
+    return Response(data, media_type=media, headers={"Cache-Control": "private, max-age=3600"})
+
+
+@router.delete(
+    "/{model_id}/views/{view_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    summary="Delete a trained view (engineer)",
+)
+async def delete_view(
+    _: EngineerUser, db: DatabaseDep, live: LiveIndexDep, model_id: ModelId, view_id: ViewId
+) -> Response:
+    await views_svc.delete_view(db, live, model_id, view_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+def _number_list(text: str | None, n: int, what: str, *, lo: float, hi: float) -> list[float]:
+    """A form field holding one number for every image, or a JSON list of ``n`` numbers."""
+    if text is None or text.strip() == "":
+        return []
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        raise InvalidInput(
+            f"{what} must be a number or a JSON list of numbers, got {text[:80]!r}"
+        ) from None
+    values = value if isinstance(value, list) else [value] * n
+    if len(values) != n:
+        raise InvalidInput(f"{what} must list one value per image ({n}), got {len(values)}")
+    out = []
+    for k, v in enumerate(values):
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise InvalidInput(f"{what}[{k}] must be a finite number, got {v!r}")
+        if not lo <= v <= hi:
+            raise InvalidInput(f"{what}[{k}] must be within [{lo}, {hi}], got {v!r}")
+        out.append(v)
+    return out
+
+
+async def _read_capped(f: UploadFile, limit: int) -> bytes:
+    data = await f.read(limit + 1)
+    if len(data) > limit:
+        raise im.ImageTooLarge(
+            f"{f.filename!r} has more than {limit} bytes; the limit is {limit} bytes per image"
+        )
+    return data
+
+
+@router.post(
+    "/{model_id}/views",
+    response_model=ViewList,
+    status_code=status.HTTP_201_CREATED,
+    summary="Upload trained views: images with their viewpoint, optional masks (engineer)",
+)
+async def create_views(
+    _: EngineerUser,
+    db: DatabaseDep,
+    live: LiveIndexDep,
+    model_id: ModelId,
+    images: Annotated[list[UploadFile], File(description="PNG or JPEG images")],
+    viewpoints: Annotated[
+        str, Form(description="1, 2 or 3 for every image, or a JSON list, one per image")
+    ] = "1",
+    masks: Annotated[
+        list[UploadFile] | None, File(description="Optional masks, one per image (white = object)")
+    ] = None,
+    yaws: Annotated[
+        str | None, Form(description="Object yaw per image, radians (number or JSON list)")
+    ] = None,
+) -> dict[str, Any]:
+    n = len(images)
+    if n > views_svc.MAX_VIEWS_PER_REQUEST:
+        raise InvalidInput(f"at most {views_svc.MAX_VIEWS_PER_REQUEST} images at once, got {n}")
+    vps = _number_list(viewpoints, n, "viewpoints", lo=1, hi=3)
+    if any(v != int(v) for v in vps):
+        raise InvalidInput(f"viewpoints must be 1, 2 or 3, got {viewpoints!r}")
+    yaw = _number_list(yaws, n, "yaws", lo=-2 * math.pi, hi=2 * math.pi) or [0.0] * n
+    masks = masks or []
+    if masks and len(masks) != n:
+        raise InvalidInput(f"give one mask per image ({n}) or none, got {len(masks)}")
+    inputs = []
+    for k, f in enumerate(images):
+        name = f.filename or f"image {k}"
+        rgb = im.decode_image(await _read_capped(f, im.MAX_IMAGE_BYTES), name=name)
+        mask = None
+        if masks:
+            mname = masks[k].filename or f"mask {k}"
+            mask = im.decode_mask(
+                await _read_capped(masks[k], im.MAX_IMAGE_BYTES), shape=rgb.shape[:2], name=mname
+            )
+        inputs.append(
+            views_svc.ViewInput(
+                rgb, int(vps[k]), mask, yaw_rad=float(yaw[k]), source="upload", name=name
+            )
+        )
+    rows = await views_svc.add_views(db, live, model_id, inputs)
+    return {"data": [_view_out(r, live) for r in rows], "count": len(rows)}

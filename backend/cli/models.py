@@ -1,0 +1,380 @@
+"""``visioncell models list | add | teach | import | remove | reextract``: object models
+from the command line.
+
+``list``, ``add``, ``import``, ``remove`` and ``reextract`` work on the database of the
+settings (``VISIONCELL_DATABASE_URL``) through the same services as the REST API; a cell
+that is running rebuilds its index from the database at its next start (``teach`` and
+changes made through the REST API update a running cell at once).  ``teach`` needs the
+arm, so it asks the running cell (``--url``, ``--token``) to run its teach job and follows
+the job's progress.
+
+``import`` reads a folder of PNG or JPEG images.  The viewpoint of each image is in its
+name (``top``/``vp1``/``v1`` = 1, ``vp2``/``v2``/``inner`` = 2, ``vp3``/``v3``/``outer`` = 3)
+or in a ``manifest.json`` beside them: ``[{"file": "a.png", "viewpoint": 1, "mask":
+"a_mask.png", "yaw_rad": 0.0}, ...]``; a file ``NAME_mask.png`` next to ``NAME.png`` is
+taken as its mask.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import re
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+__all__ = ["models_app", "parse_viewpoint", "read_folder", "register"]
+
+models_app = typer.Typer(help="Object models and their trained views.", no_args_is_help=True)
+
+_VP_PATTERNS = (
+    (re.compile(r"(^|[^a-z0-9])(top|vp1|v1|view1)([^a-z0-9]|$)"), 1),
+    (re.compile(r"(^|[^a-z0-9])(inner|vp2|v2|view2)([^a-z0-9]|$)"), 2),
+    (re.compile(r"(^|[^a-z0-9])(outer|vp3|v3|view3)([^a-z0-9]|$)"), 3),
+)
+_SUFFIXES = (".png", ".jpg", ".jpeg")
+MAX_IMPORT_FILES = 500
+
+
+def register(app: typer.Typer) -> None:
+    """Add the ``models`` command group to the ``visioncell`` app."""
+    app.add_typer(models_app, name="models")
+
+
+def _fail(message: str) -> typer.Exit:
+    typer.echo(f"error: {message}", err=True)
+    return typer.Exit(2)
+
+
+def _settings() -> Any:
+    from backend.cli.common import load_settings
+
+    return load_settings()
+
+
+def _run(coro_fn: Any) -> Any:
+    """Run ``coro_fn(db)`` on the settings' database (migrated first)."""
+    from backend.db.migrate import upgrade
+    from backend.db.session import Database
+    from vision.errors import VisionCellError
+
+    settings = _settings()
+    upgrade(settings.database_url)
+
+    async def main() -> Any:
+        db = Database(settings.database_url)
+        try:
+            return await coro_fn(db, settings)
+        finally:
+            await db.dispose()
+
+    try:
+        return asyncio.run(main())
+    except VisionCellError as exc:
+        raise _fail(exc.detail) from None
+
+
+def parse_viewpoint(name: str) -> int | None:
+    """The viewpoint a file name names (module docstring), or None."""
+    stem = Path(name).stem.lower()
+    found = {vp for pat, vp in _VP_PATTERNS if pat.search(stem)}
+    return found.pop() if len(found) == 1 else None
+
+
+def read_folder(folder: Path) -> list[dict[str, Any]]:
+    """The images of ``folder`` with their viewpoint, mask and yaw (module docstring).
+
+    Raises ``ValueError`` naming the file whose viewpoint is unknown or whose manifest
+    entry is malformed.
+    """
+    if not folder.is_dir():
+        raise ValueError(f"{str(folder)!r} is not a folder")
+    manifest = folder / "manifest.json"
+    if manifest.exists():
+        try:
+            entries = json.loads(manifest.read_text())
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{str(manifest)!r} is not JSON: {exc}") from None
+        if not isinstance(entries, list) or not entries:
+            raise ValueError(f"{str(manifest)!r} must hold a non-empty list of entries")
+        out = []
+        for k, e in enumerate(entries):
+            if not isinstance(e, dict) or not isinstance(e.get("file"), str):
+                raise ValueError(f"manifest entry {k} must be an object with a 'file', got {e!r}")
+            vp = e.get("viewpoint")
+            if isinstance(vp, bool) or vp not in (1, 2, 3):
+                raise ValueError(f"manifest entry {k} ({e['file']}): viewpoint must be 1, 2 or 3")
+            yaw = e.get("yaw_rad", 0.0)
+            if isinstance(yaw, bool) or not isinstance(yaw, int | float) or not math.isfinite(yaw):
+                raise ValueError(f"manifest entry {k} ({e['file']}): yaw_rad must be finite")
+            mask = e.get("mask")
+            if mask is not None and not isinstance(mask, str):
+                raise ValueError(f"manifest entry {k} ({e['file']}): mask must be a file name")
+            for f in (e["file"], mask):
+                if f is not None and (Path(f).name != f or not (folder / f).is_file()):
+                    raise ValueError(f"manifest entry {k}: no file {f!r} in the folder")
+            out.append(
+                {
+                    "file": folder / e["file"],
+                    "viewpoint": vp,
+                    "yaw_rad": float(yaw),
+                    "mask": None if mask is None else folder / mask,
+                }
+            )
+        return out
+    files = sorted(
+        p
+        for p in folder.iterdir()
+        if p.suffix.lower() in _SUFFIXES and not p.stem.lower().endswith("_mask")
+    )
+    if not files:
+        raise ValueError(f"no PNG or JPEG images in {str(folder)!r}")
+    out = []
+    for p in files:
+        vp = parse_viewpoint(p.name)
+        if vp is None:
+            raise ValueError(
+                f"{p.name!r} names no viewpoint: put top/vp1, vp2/inner or vp3/outer in its "
+                "name, or list it in a manifest.json"
+            )
+        mask = next((q for q in (p.with_name(p.stem + "_mask.png"),) if q.is_file()), None)
+        out.append({"file": p, "viewpoint": vp, "yaw_rad": 0.0, "mask": mask})
+    return out
+
+
+@models_app.command("list")
+def list_models() -> None:
+    """Print every object model with its views."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from backend.recognition import models as svc
+
+    async def work(db: Any, _: Any) -> list[dict[str, Any]]:
+        async with db.session() as session:
+            rows, _total = await svc.list_models(session, limit=1000)
+            counts = await svc.view_counts(session, [r.id for r in rows])
+            return [svc.model_public(r, counts[r.id]) for r in rows]
+
+    models = _run(work)
+    table = Table("id", "name", "part", "base", "kind", "threshold", "views (1/2/3)")
+    for m in models:
+        per = m["views_per_viewpoint"]
+        table.add_row(
+            str(m["id"]),
+            m["name"],
+            m["part"],
+            m["sitting_base"],
+            m["kind"],
+            "auto" if m["threshold"] is None else f"{m['threshold']:.3f}",
+            f"{m['views']} ({per.get('1', 0)}/{per.get('2', 0)}/{per.get('3', 0)})",
+        )
+    Console().print(table)
+    print(f"{len(models)} models")
+
+
+@models_app.command("add")
+def add_model(
+    name: Annotated[str, typer.Argument(help="Model name (letters, digits, _ . -)")],
+    kind: Annotated[str, typer.Option(help="2d (top view only) or 3d (side views too)")] = "3d",
+    part: Annotated[str | None, typer.Option(help="Physical part (default: the name)")] = None,
+    base: Annotated[str, typer.Option(help="Sitting base")] = "default",
+    threshold: Annotated[float | None, typer.Option(help="Own threshold in [0, 1]")] = None,
+) -> None:
+    """Create an object model; prints its id on the last line."""
+    from backend.recognition import models as svc
+
+    try:
+        fields = svc.ModelFields(
+            name=name, part=part, sitting_base=base, kind=kind, threshold=threshold
+        )
+    except ValueError as exc:
+        raise _fail(str(exc)) from None
+
+    async def work(db: Any, _: Any) -> Any:
+        return await svc.create_model(db, fields)
+
+    row = _run(work)
+    print(f"created model {row.name!r} ({row.kind.value}, part {row.part!r})")
+    print(row.id)
+
+
+@models_app.command("remove")
+def remove_model(name: Annotated[str, typer.Argument(help="Model name")]) -> None:
+    """Delete a model and its trained views."""
+    from backend.recognition import models as svc
+
+    async def work(db: Any, _: Any) -> int:
+        async with db.session() as session:
+            row = await svc.get_model_by_name(session, name)
+        await svc.delete_model(db, row.id)
+        return row.id
+
+    model_id = _run(work)
+    print(f"removed model {name!r} (id {model_id}) and its views")
+
+
+@models_app.command("import")
+def import_views(
+    name: Annotated[str, typer.Argument(help="Model name (created as --kind if missing)")],
+    folder: Annotated[Path, typer.Argument(help="Folder of images (see `--help` of models)")],
+    kind: Annotated[str, typer.Option(help="Kind of a model created by the import")] = "3d",
+    replace: Annotated[bool, typer.Option(help="Replace the model's earlier views")] = False,
+) -> None:
+    """Add trained views from a folder of images (teaching without a robot)."""
+    from backend.recognition import images as im
+    from backend.recognition import models as svc
+    from backend.recognition.index import LiveIndex
+    from backend.recognition.views import ViewInput, add_views
+    from vision.errors import NotFound
+
+    try:
+        entries = read_folder(folder)
+    except ValueError as exc:
+        raise _fail(str(exc)) from None
+    if len(entries) > MAX_IMPORT_FILES:
+        raise _fail(f"{len(entries)} images in {str(folder)!r}; at most {MAX_IMPORT_FILES}")
+    inputs = []
+    try:
+        for e in entries:
+            rgb = im.decode_image(e["file"].read_bytes(), name=e["file"].name)
+            mask = None
+            if e["mask"] is not None:
+                mask = im.decode_mask(
+                    e["mask"].read_bytes(), shape=rgb.shape[:2], name=e["mask"].name
+                )
+            inputs.append(
+                ViewInput(
+                    rgb,
+                    e["viewpoint"],
+                    mask,
+                    yaw_rad=e["yaw_rad"],
+                    source="import",
+                    name=e["file"].name,
+                )
+            )
+    except ValueError as exc:
+        raise _fail(str(exc)) from None
+
+    async def work(db: Any, settings: Any) -> tuple[int, int]:
+        async with db.session() as session:
+            try:
+                model_id = (await svc.get_model_by_name(session, name)).id
+            except NotFound:
+                model_id = None
+        if model_id is None:
+            model_id = (await svc.create_model(db, svc.ModelFields(name=name, kind=kind))).id
+        live = LiveIndex(
+            method=settings.recognition_method, max_features=settings.recognition_max_features
+        )
+        rows = []
+        for start in range(0, len(inputs), 72):  # MAX_VIEWS_PER_REQUEST per transaction
+            rows += await add_views(
+                db, live, model_id, inputs[start : start + 72], replace=replace and start == 0
+            )
+        return model_id, len(rows)
+
+    model_id, n = _run(work)
+    print(f"imported {n} views into model {name!r} (id {model_id})")
+
+
+@models_app.command("reextract")
+def reextract(
+    name: Annotated[str | None, typer.Argument(help="Only this model")] = None,
+    all_views: Annotated[bool, typer.Option("--all", help="Every view, not only stale")] = False,
+) -> None:
+    """Extract features again from the stored images (after a descriptor version change)."""
+    from backend.recognition import models as svc
+    from backend.recognition.index import LiveIndex
+    from backend.recognition.views import reextract_views
+
+    async def work(db: Any, settings: Any) -> int:
+        model_id = None
+        if name is not None:
+            async with db.session() as session:
+                model_id = (await svc.get_model_by_name(session, name)).id
+        live = LiveIndex(
+            method=settings.recognition_method, max_features=settings.recognition_max_features
+        )
+        await live.load(db)
+        return await reextract_views(db, live, model_id=model_id, only_stale=not all_views)
+
+    print(f"re-extracted {_run(work)} views")
+
+
+def _request(url: str, token: str, method: str = "GET", body: Any = None) -> dict[str, Any]:
+    data = None if body is None else json.dumps(body).encode()
+    req = urllib.request.Request(url, data=data, method=method)
+    req.add_header("Authorization", f"Bearer {token}")
+    if data is not None:
+        req.add_header("Content-Type", "application/json")
+    try:
+        with urllib.request.urlopen(req, timeout=30) as resp:
+            return json.loads(resp.read() or b"{}")
+    except urllib.error.HTTPError as exc:
+        try:
+            detail = json.loads(exc.read()).get("detail", "")
+        except Exception:
+            detail = ""
+        raise _fail(f"{method} {url}: HTTP {exc.code} {detail}") from None
+    except urllib.error.URLError as exc:
+        raise _fail(f"cannot reach the cell at {url}: {exc.reason}") from None
+
+
+@models_app.command("teach")
+def teach(
+    name: Annotated[str, typer.Argument(help="Model name")],
+    token: Annotated[str, typer.Option(help="Engineer token", envvar="VISIONCELL_TOKEN")],
+    url: Annotated[str | None, typer.Option(help="Cell URL (default: from the settings)")] = None,
+    background: Annotated[str, typer.Option(help="grab or stored")] = "grab",
+    viewpoints: Annotated[str | None, typer.Option(help="e.g. 1,2,3")] = None,
+    height: Annotated[float, typer.Option(help="Object height, metres")] = 0.1,
+    wait: Annotated[float, typer.Option(help="Longest wait for the object, s")] = 120.0,
+    replace: Annotated[bool, typer.Option(help="Replace the model's earlier views")] = False,
+) -> None:
+    """Teach a model with the arm of the running cell and follow the job."""
+    if background not in ("grab", "stored"):
+        raise _fail(f"--background must be 'grab' or 'stored', got {background!r}")
+    vps = None
+    if viewpoints is not None:
+        try:
+            vps = [int(v) for v in viewpoints.split(",")]
+        except ValueError:
+            raise _fail(f"--viewpoints must be like 1,2,3, got {viewpoints!r}") from None
+    if url is None:
+        s = _settings()
+        url = f"http://{s.http_host}:{s.http_port}"
+    base = url.rstrip("/") + "/api"
+    found = _request(f"{base}/models?limit=1000", token)
+    model = next((m for m in found["data"] if m["name"] == name), None)
+    if model is None:
+        raise _fail(f"no object model named {name!r} at {url}")
+    body: dict[str, Any] = {
+        "background": background,
+        "object_height_m": height,
+        "wait_s": wait,
+        "replace": replace,
+    }
+    if vps is not None:
+        body["viewpoints"] = vps
+    job = _request(f"{base}/models/{model['id']}/teach", token, "POST", body)["job"]
+    last = ""
+    while job["state"] == "running":
+        if job["message"] != last:
+            last = job["message"]
+            print(f"{100 * job['progress']:5.1f} %  {last}", flush=True)
+        time.sleep(0.5)
+        job = _request(f"{base}/jobs/{job['id']}", token)
+    if job["state"] != "done":
+        err = job.get("error") or {}
+        raise _fail(f"the teach {job['state']}: {err.get('detail', job['message'])}")
+    res = job["result"]
+    print(f"taught {len(res['views'])} views of {name!r}; threshold: {res['threshold']['reason']}")
+    for p in res["confusable_from_top"]:
+        print(f"  alike from the top: {p['model']} ~ {p['confused_with']} ({p['rate']:.0%})")

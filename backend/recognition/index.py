@@ -1,0 +1,336 @@
+"""The live index: every trained view of the database in one :class:`vision.recognition.ViewIndex`.
+
+It is built once from the database at start-up (from the stored features: nothing is
+re-extracted) and then updated in place on every change (a view taught, uploaded or
+deleted, a model renamed or deleted), so an inspection never rebuilds it.  Views whose
+stored features were extracted by another descriptor version than the one this VisionCell
+extracts are refused (listed in :attr:`LiveIndex.stale`, with the way to re-extract them
+from their stored images) rather than mixed with the others.
+
+The index is not thread-safe and recognition runs in worker threads, so readers and writers
+share one lock: ``with live.reading() as index: recognise(index, ...)``.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from sqlalchemy import select
+
+from backend.db.models import ObjectModel, TrainedView
+from backend.db.session import Database
+from vision.errors import InvalidInput, VisionCellError
+from vision.features import Features
+from vision.recognition import ViewIndex
+
+__all__ = [
+    "IndexedModel",
+    "LiveIndex",
+    "LoadReport",
+    "StaleFeatures",
+    "StaleView",
+    "load_live_index",
+]
+
+log = logging.getLogger(__name__)
+
+
+class StaleFeatures(VisionCellError):
+    """Stored features come from another descriptor method or version than the index uses."""
+
+    code = "stale_features"
+    http_status = 409
+
+
+@dataclass(frozen=True)
+class IndexedModel:
+    """What the index keeps about a model (from its database row)."""
+
+    id: int
+    name: str
+    part: str
+    sitting_base: str
+    kind: str
+    threshold: float | None
+    """The model's own threshold (engineer's override), None for the automatic one."""
+
+    @classmethod
+    def of(cls, row: ObjectModel) -> IndexedModel:
+        return cls(row.id, row.name, row.part, row.sitting_base, row.kind.value, row.threshold)
+
+
+@dataclass(frozen=True)
+class StaleView:
+    """A stored view left out of the index because its features are stale."""
+
+    view_id: int
+    model_id: int
+    descriptor_kind: str
+    descriptor_version: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class LoadReport:
+    """Outcome of building the index from the database."""
+
+    models: int
+    views: int
+    stale: tuple[StaleView, ...]
+    seconds: float
+
+
+#: Extraction options per method beyond the engine's own (none: ``ViewIndex`` already halves
+#: the detector threshold on low-texture views, which raised the gear housing's top view
+#: from 13 SIFT features to 42 in the simulated cell; a fixed threshold here would turn
+#: that adaptation off).  Options given here become part of the stored descriptor version.
+FEATURE_OPTIONS: dict[str, dict[str, float]] = {}
+
+
+def _probe_image() -> NDArray[np.uint8]:
+    rng = np.random.default_rng(7)
+    img = rng.integers(0, 256, size=(24, 24), dtype=np.uint8)
+    return np.kron(
+        img, np.ones((4, 4), dtype=np.uint8)
+    )  # 96 x 96 blocks: corners for every detector
+
+
+class LiveIndex:
+    """The in-memory index of every trained view, kept in step with the database.
+
+    Parameters
+    ----------
+    method : str
+        Feature method of every view (:func:`vision.features.extract`).
+    max_features : int
+        Strongest keypoints kept per view.
+    """
+
+    def __init__(self, *, method: str = "sift", max_features: int = 1000) -> None:
+        options = dict(FEATURE_OPTIONS.get(method, {}))
+        self._index = ViewIndex(method, max_features=max_features, feature_options=options)
+        self._lock = threading.RLock()
+        self._models: dict[int, IndexedModel] = {}
+        self._view_model: dict[int, int] = {}
+        self._stale: dict[int, StaleView] = {}
+        # The descriptor version this build extracts (changes with OpenCV, a PCA basis...),
+        # with the extraction options that change what is extracted (stored per view).
+        self.feature_version = self._index.features(_probe_image()).version
+        tag = ",".join(f"{k}={v}" for k, v in sorted(options.items()))
+        self.version = self.feature_version + (f";{tag}" if tag else "")
+        if len(self.version) > 32:  # the database column
+            raise ValueError(f"descriptor version tag {self.version!r} is over 32 characters")
+
+    # -- reading ------------------------------------------------------------------------
+    @property
+    def method(self) -> str:
+        """Feature method of the index."""
+        return self._index.method
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._index)
+
+    @contextmanager
+    def reading(self) -> Iterator[ViewIndex]:
+        """Hold the lock and yield the index (do not keep it beyond the ``with``)."""
+        with self._lock:
+            yield self._index
+
+    def model(self, model_id: int) -> IndexedModel | None:
+        """What the index knows about a model (None if it holds no entry for it)."""
+        with self._lock:
+            return self._models.get(model_id)
+
+    def models(self) -> dict[int, IndexedModel]:
+        """Every model the index knows, by id."""
+        with self._lock:
+            return dict(self._models)
+
+    def model_of_name(self, name: str) -> IndexedModel | None:
+        """The model called ``name`` (None if unknown)."""
+        with self._lock:
+            return next((m for m in self._models.values() if m.name == name), None)
+
+    def views_of(self, model_id: int) -> list[int]:
+        """Ids of the indexed views of a model."""
+        with self._lock:
+            return sorted(v for v, m in self._view_model.items() if m == model_id)
+
+    def has_view(self, view_id: int) -> bool:
+        with self._lock:
+            return view_id in self._view_model
+
+    @property
+    def stale(self) -> dict[int, StaleView]:
+        """Stored views refused because of their descriptor version, by view id."""
+        with self._lock:
+            return dict(self._stale)
+
+    # -- features -----------------------------------------------------------------------
+    def extract(self, image: NDArray[np.uint8], mask: NDArray[np.bool_] | None) -> Features:
+        """Features of ``image`` inside ``mask`` with the index's method and options."""
+        return self._index.features(image, mask=None if mask is None else mask.astype(np.uint8))
+
+    def check_features(self, kind: str, version: str, *, what: str = "the features") -> None:
+        """Raise :class:`StaleFeatures` unless ``kind``/``version`` match what the index uses."""
+        if kind != self.method or version != self.version:
+            raise StaleFeatures(
+                f"{what} were extracted with {kind!r} version {version!r}; this VisionCell "
+                f"uses {self.method!r} version {self.version!r}: re-extract them from the "
+                "stored images with `visioncell models reextract`"
+            )
+
+    # -- building -----------------------------------------------------------------------
+    async def load(self, db: Database) -> LoadReport:
+        """Fill the (empty) index from every model and trained view in the database."""
+        import time
+
+        t0 = time.perf_counter()
+        async with db.session() as session:
+            models = list(await session.scalars(select(ObjectModel)))
+            rows = (
+                await session.execute(
+                    select(
+                        TrainedView.id,
+                        TrainedView.model_id,
+                        TrainedView.viewpoint,
+                        TrainedView.features,
+                        TrainedView.descriptor_kind,
+                        TrainedView.descriptor_version,
+                    ).order_by(TrainedView.id)
+                )
+            ).all()
+        by_id = {m.id: IndexedModel.of(m) for m in models}
+        with self._lock:
+            if len(self._index):
+                raise RuntimeError("LiveIndex.load() fills an empty index only")
+            self._models = dict(by_id)
+            for vid, mid, viewpoint, blob, kind, version in rows:
+                model = by_id[mid]
+                try:
+                    self.check_features(kind, version, what=f"view {vid} of {model.name!r}")
+                    feats = Features.from_bytes(blob)
+                    self._index.add(
+                        model.name,
+                        feats,
+                        viewpoint=viewpoint,
+                        part=model.part,
+                        base=model.sitting_base,
+                        view_id=vid,
+                    )
+                except (ValueError, VisionCellError) as exc:
+                    reason = getattr(exc, "detail", str(exc))
+                    self._stale[vid] = StaleView(vid, mid, kind, version, reason)
+                    continue
+                self._view_model[vid] = mid
+            report = LoadReport(
+                len(by_id),
+                len(self._view_model),
+                tuple(self._stale.values()),
+                time.perf_counter() - t0,
+            )
+        if report.stale:
+            log.warning(
+                "%d trained views left out of the index: %s",
+                len(report.stale),
+                report.stale[0].reason,
+            )
+        return report
+
+    # -- changes (call after the database accepted them) ----------------------------------
+    def put_model(self, model: IndexedModel) -> None:
+        """Add or update a model's entry; views follow a rename or a new part or base."""
+        with self._lock:
+            old = self._models.get(model.id)
+            self._models[model.id] = model
+            if old is None or (old.name, old.part, old.sitting_base) == (
+                model.name,
+                model.part,
+                model.sitting_base,
+            ):
+                return
+            for vid in self.views_of(model.id):
+                view = self._index.view(vid)
+                self._index.remove_view(vid)
+                self._index.add(
+                    model.name,
+                    view.features,
+                    viewpoint=view.viewpoint,
+                    part=model.part,
+                    base=model.sitting_base,
+                    view_id=vid,
+                )
+
+    def drop_model(self, model_id: int) -> int:
+        """Forget a model and its views; return how many views left the index."""
+        with self._lock:
+            model = self._models.pop(model_id, None)
+            gone = self.views_of(model_id)
+            for vid in gone:
+                self._index.remove_view(vid)
+                del self._view_model[vid]
+            for vid in [v for v, s in self._stale.items() if s.model_id == model_id]:
+                del self._stale[vid]
+            if model is not None:
+                assert not self._index.views_of(model.name)
+            return len(gone)
+
+    def add_view(
+        self, model: IndexedModel, view_id: int, viewpoint: int, features: Features
+    ) -> None:
+        """Index one stored view (its features must be of the index's method and version)."""
+        if features.method != self.method or features.version != self.feature_version:
+            self.check_features(features.method, features.version, what=f"view {view_id}")
+        with self._lock:
+            self._models[model.id] = model
+            try:
+                self._index.add(
+                    model.name,
+                    features,
+                    viewpoint=viewpoint,
+                    part=model.part,
+                    base=model.sitting_base,
+                    view_id=view_id,
+                )
+            except ValueError as exc:
+                raise InvalidInput(str(exc)) from exc
+            self._view_model[view_id] = model.id
+            self._stale.pop(view_id, None)
+
+    def remove_view(self, view_id: int) -> bool:
+        """Take one view out of the index; False if it was not in it."""
+        with self._lock:
+            self._stale.pop(view_id, None)
+            if view_id not in self._view_model:
+                return False
+            self._index.remove_view(view_id)
+            del self._view_model[view_id]
+            return True
+
+
+async def load_live_index(db: Database, settings: Any) -> LiveIndex:
+    """Build the live index of ``settings``' feature method from the database (at start-up)."""
+    import asyncio
+
+    live = await asyncio.to_thread(
+        LiveIndex,
+        method=settings.recognition_method,
+        max_features=settings.recognition_max_features,
+    )
+    report = await live.load(db)
+    log.info(
+        "recognition index: %d views of %d models in %.2f s (%d stale)",
+        report.views,
+        report.models,
+        report.seconds,
+        len(report.stale),
+    )
+    return live

@@ -1,0 +1,235 @@
+"""Object models in the database: create, read, update, delete (the service behind
+``/api/models`` and ``visioncell models``).
+
+An object model is one physical ``part`` on one sitting base (chapter 3.5.3: an object on
+another base is another model); ``kind`` says whether recognition needs only the top view
+(``2d``) or may visit the side views (``3d``); ``threshold`` overrides the automatic one.
+Every change that the live index must know about (a rename, a new part, a deletion) is
+applied to it after the database accepted it, so the index never holds what the database
+refused.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy import delete, func, select
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.ext.asyncio import AsyncSession
+
+from backend.db.models import ObjectKind, ObjectModel, TrainedView
+from backend.db.session import Database
+from vision.errors import Conflict, InvalidInput, NotFound
+
+__all__ = [
+    "MAX_MODELS",
+    "NAME_PATTERN",
+    "ModelFields",
+    "check_name",
+    "check_threshold",
+    "create_model",
+    "delete_model",
+    "get_model",
+    "get_model_by_name",
+    "list_models",
+    "model_public",
+    "update_model",
+    "view_counts",
+]
+
+#: Names of models, parts and bases: letters, digits and ``_ . -``, starting with a letter
+#: or digit, at most 64 characters (the database column).
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}$")
+#: Most models one database holds (a plant's catalogue; the index stays in memory).
+MAX_MODELS = 10_000
+_FIELDS = ("name", "part", "sitting_base", "kind", "threshold", "description")
+
+
+def check_name(value: object, what: str) -> str:
+    """Validate a model, part or base name; return it."""
+    if not isinstance(value, str) or not NAME_PATTERN.match(value):
+        raise InvalidInput(
+            f"{what} must be 1-64 letters, digits or '_ . -' starting with a letter or digit, "
+            f"got {value!r}"
+        )
+    return value
+
+
+def check_threshold(value: object) -> float | None:
+    """Validate an optional score threshold in [0, 1]."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InvalidInput(f"threshold must be a number in [0, 1] or null, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v) or not 0.0 <= v <= 1.0:
+        raise InvalidInput(f"threshold must be within [0, 1], got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class ModelFields:
+    """Validated fields of a model (``None`` = not given, for updates)."""
+
+    name: str | None = None
+    part: str | None = None
+    sitting_base: str | None = None
+    kind: ObjectKind | None = None
+    threshold: float | None = None
+    description: str | None = None
+    threshold_given: bool = False
+    """True when ``threshold`` was given (``None`` then clears it)."""
+
+    def __post_init__(self) -> None:
+        for what in ("name", "part", "sitting_base"):
+            value = getattr(self, what)
+            if value is not None:
+                check_name(value, what)
+        if self.kind is not None and not isinstance(self.kind, ObjectKind):
+            try:
+                object.__setattr__(self, "kind", ObjectKind(self.kind))
+            except ValueError:
+                raise InvalidInput(f"kind must be '2d' or '3d', got {self.kind!r}") from None
+        object.__setattr__(self, "threshold", check_threshold(self.threshold))
+        if self.description is not None and (
+            not isinstance(self.description, str) or len(self.description) > 2000
+        ):
+            raise InvalidInput("description must be text of at most 2000 characters")
+
+
+async def view_counts(session: AsyncSession, model_ids: list[int]) -> dict[int, dict[int, int]]:
+    """``{model_id: {viewpoint: number of trained views}}``."""
+    if not model_ids:
+        return {}
+    rows = await session.execute(
+        select(TrainedView.model_id, TrainedView.viewpoint, func.count())
+        .where(TrainedView.model_id.in_(model_ids))
+        .group_by(TrainedView.model_id, TrainedView.viewpoint)
+    )
+    out: dict[int, dict[int, int]] = {i: {} for i in model_ids}
+    for model_id, viewpoint, n in rows:
+        out[int(model_id)][int(viewpoint)] = int(n)
+    return out
+
+
+def model_public(row: ObjectModel, counts: dict[int, int] | None = None) -> dict[str, Any]:
+    """JSON form of a model (``counts``: trained views per viewpoint)."""
+    counts = counts or {}
+    return {
+        "id": row.id,
+        "name": row.name,
+        "part": row.part,
+        "sitting_base": row.sitting_base,
+        "kind": row.kind.value,
+        "threshold": row.threshold,
+        "description": row.description,
+        "created_at": row.created_at.isoformat(),
+        "views": sum(counts.values()),
+        "views_per_viewpoint": {str(k): v for k, v in sorted(counts.items())},
+    }
+
+
+async def list_models(
+    session: AsyncSession, *, limit: int = 100, offset: int = 0, part: str | None = None
+) -> tuple[list[ObjectModel], int]:
+    """Models ordered by name, one page of them, and the total count."""
+    if not 1 <= limit <= 1000 or offset < 0:
+        raise InvalidInput(f"limit must be in 1..1000 and offset >= 0, got {limit}, {offset}")
+    where = [] if part is None else [ObjectModel.part == check_name(part, "part")]
+    total = await session.scalar(select(func.count()).select_from(ObjectModel).where(*where))
+    rows = await session.scalars(
+        select(ObjectModel).where(*where).order_by(ObjectModel.name).limit(limit).offset(offset)
+    )
+    return list(rows), int(total or 0)
+
+
+async def get_model(session: AsyncSession, model_id: int) -> ObjectModel:
+    """The model with this id, or :class:`NotFound`."""
+    row = await session.get(ObjectModel, model_id)
+    if row is None:
+        raise NotFound(f"no object model with id {model_id}")
+    return row
+
+
+async def get_model_by_name(session: AsyncSession, name: str) -> ObjectModel:
+    """The model with this name, or :class:`NotFound`."""
+    row = await session.scalar(select(ObjectModel).where(ObjectModel.name == name))
+    if row is None:
+        raise NotFound(f"no object model named {name!r}")
+    return row
+
+
+async def _check_free_name(session: AsyncSession, name: str, *, not_id: int | None = None) -> None:
+    other = await session.scalar(select(ObjectModel.id).where(ObjectModel.name == name))
+    if other is not None and other != not_id:
+        raise Conflict(f"an object model named {name!r} exists already (id {other})")
+
+
+async def create_model(db: Database, fields: ModelFields) -> ObjectModel:
+    """Insert a model; ``part`` defaults to the name, ``sitting_base`` to ``"default"``."""
+    if fields.name is None or fields.kind is None:
+        raise InvalidInput("a new model needs a name and a kind ('2d' or '3d')")
+    try:
+        async with db.session() as session:
+            await _check_free_name(session, fields.name)
+            n = await session.scalar(select(func.count()).select_from(ObjectModel))
+            if int(n or 0) >= MAX_MODELS:
+                raise Conflict(f"the database holds {n} models, the most it may hold")
+            row = ObjectModel(
+                name=fields.name,
+                part=fields.part or fields.name,
+                sitting_base=fields.sitting_base or "default",
+                kind=fields.kind,
+                threshold=fields.threshold,
+                description=fields.description or "",
+            )
+            session.add(row)
+            await session.flush()
+    except IntegrityError as exc:  # a concurrent insert of the same name
+        raise Conflict(f"an object model named {fields.name!r} exists already") from exc
+    return row
+
+
+async def update_model(
+    db: Database, model_id: int, fields: ModelFields
+) -> tuple[ObjectModel, ObjectModel]:
+    """Apply the given fields; return the row before (detached copy) and after."""
+    try:
+        async with db.session() as session:
+            row = await get_model(session, model_id)
+            before = ObjectModel(
+                id=row.id,
+                name=row.name,
+                part=row.part,
+                sitting_base=row.sitting_base,
+                kind=row.kind,
+                threshold=row.threshold,
+                description=row.description,
+                created_at=row.created_at,
+            )
+            if fields.name is not None and fields.name != row.name:
+                await _check_free_name(session, fields.name, not_id=row.id)
+                row.name = fields.name
+            for what in ("part", "sitting_base", "kind", "description"):
+                value = getattr(fields, what)
+                if value is not None:
+                    setattr(row, what, value)
+            if fields.threshold_given:
+                row.threshold = fields.threshold
+            await session.flush()
+    except IntegrityError as exc:
+        raise Conflict(f"an object model named {fields.name!r} exists already") from exc
+    return before, row
+
+
+async def delete_model(db: Database, model_id: int) -> ObjectModel:
+    """Delete a model and its trained views (inspections keep their rows, model unset)."""
+    async with db.session() as session:
+        row = await get_model(session, model_id)
+        # Bulk deletes: the views' images are never loaded just to be removed.
+        await session.execute(delete(TrainedView).where(TrainedView.model_id == model_id))
+        await session.execute(delete(ObjectModel).where(ObjectModel.id == model_id))
+    return row

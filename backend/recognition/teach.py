@@ -1,0 +1,397 @@
+"""Teaching a model with the arm (issue 14, part 1): the chapter's training of section 3.5,
+done by the cell.
+
+With the object at the station the job
+
+1. plans the viewpoints from the station point (:func:`backend.inspection.viewpoints.
+   plan_viewpoints`, the planner inspections use): the top view (1) for a ``2d`` model; the
+   top and the two side views (2 inner, 3 outer) for a ``3d`` one.  The top view is taken at
+   several camera rolls about the optical axis (joint q5, :data:`TOP_ROLLS_RAD`), so a model
+   is recognised at any yaw on the belt (how many was chosen by measurement: ``python -m
+   benchmarks.teach_yaw``);
+2. has an empty-belt background for each shot: grabbed first (``background="grab"``: the
+   station must be empty; the job then waits until an object has arrived and lies still) or
+   taken from an earlier teach with the same shots (``background="stored"``);
+3. visits each shot (move, settle, and a frame exposed after the arm was still:
+   ``cell.look``), segments the object with the active contour initialised from the
+   background difference (:mod:`backend.recognition.segment`), extracts the features inside
+   the object's region and stores the trained view (image, mask, features, joints, camera
+   pose) in one transaction with the others, then in the live index;
+4. recomputes the automatic threshold (:mod:`backend.recognition.thresholds`) and reports
+   the models confusable from the top.
+
+Progress is reported per shot.  Nothing is stored unless every shot succeeded.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from backend.db.session import Database
+from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
+from backend.recognition import thresholds
+from backend.recognition.index import LiveIndex
+from backend.recognition.models import get_model
+from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
+from backend.recognition.views import ViewInput, add_views, view_public
+from robot.collision import CollisionWorld
+from vision.errors import InvalidInput, VisionCellError
+from vision.segmentation import iou
+
+__all__ = [
+    "TOP_ROLLS_RAD",
+    "BackgroundStore",
+    "Shot",
+    "TeachOptions",
+    "TeachTimeout",
+    "plan_shots",
+    "run_teach",
+]
+
+#: Camera rolls (q5 offsets, radians) of the top view: 0 and +-120 deg cover the circle in
+#: thirds within q5's +-165.75 deg (see ``benchmarks/teach_yaw.py`` for the measurement).
+TOP_ROLLS_RAD = (0.0, math.radians(120.0), math.radians(-120.0))
+#: Longest a teach waits for an object to arrive after grabbing the background, seconds.
+MAX_WAIT_S = 600.0
+
+
+class TeachTimeout(VisionCellError):
+    """No object arrived at the station in time."""
+
+    code = "teach_timeout"
+    http_status = 409
+
+
+@dataclass(frozen=True)
+class TeachOptions:
+    """How to teach.
+
+    Attributes
+    ----------
+    viewpoints : tuple of int, optional
+        Viewpoints to take (default: ``(1,)`` for 2d models, ``(1, 2, 3)`` for 3d).
+    top_rolls_rad : tuple of float
+        Camera rolls of the top view, radians (each within +-pi).
+    background : {"grab", "stored"}
+        Grab the empty-belt backgrounds first, or use those of an earlier teach.
+    object_height_m : float
+        Rough height of the object (aims the camera at its top face), metres.
+    yaw_rad : float
+        The object's yaw relative to its taught pose, when an operator turned it by hand
+        for another round of views (stored with the views).
+    speed : float, optional
+        Arm speed fraction (default: the cell's).
+    wait_s : float
+        With ``background="grab"``: longest wait for the object, seconds.
+    replace : bool
+        Delete the model's earlier views (in the same transaction as storing the new ones).
+    """
+
+    viewpoints: tuple[int, ...] | None = None
+    top_rolls_rad: tuple[float, ...] = TOP_ROLLS_RAD
+    background: Literal["grab", "stored"] = "grab"
+    object_height_m: float = 0.1
+    yaw_rad: float = 0.0
+    speed: float | None = None
+    wait_s: float = 120.0
+    replace: bool = False
+
+    def __post_init__(self) -> None:
+        if self.viewpoints is not None:
+            vps = tuple(self.viewpoints)
+            if (
+                not vps
+                or len(set(vps)) != len(vps)
+                or any(isinstance(v, bool) or v not in (1, 2, 3) for v in vps)
+            ):
+                raise InvalidInput(f"viewpoints must be distinct values of 1, 2, 3, got {vps!r}")
+            object.__setattr__(self, "viewpoints", tuple(sorted(vps)))
+        rolls = tuple(float(r) for r in self.top_rolls_rad)
+        if not 1 <= len(rolls) <= 12 or not all(
+            math.isfinite(r) and abs(r) <= math.pi for r in rolls
+        ):
+            raise InvalidInput(f"top_rolls_rad must be 1 to 12 angles within +-pi, got {rolls!r}")
+        object.__setattr__(self, "top_rolls_rad", rolls)
+        if self.background not in ("grab", "stored"):
+            raise InvalidInput(f"background must be 'grab' or 'stored', got {self.background!r}")
+        h = self.object_height_m
+        if isinstance(h, bool) or not (math.isfinite(h) and 0.0 < h <= 0.5):
+            raise InvalidInput(f"object_height_m must be in (0, 0.5] m, got {h!r}")
+        if not (math.isfinite(self.yaw_rad) and abs(self.yaw_rad) <= math.pi):
+            raise InvalidInput(f"yaw_rad must be within +-pi, got {self.yaw_rad!r}")
+        if not (math.isfinite(self.wait_s) and 0.0 <= self.wait_s <= MAX_WAIT_S):
+            raise InvalidInput(f"wait_s must be in [0, {MAX_WAIT_S:g}] s, got {self.wait_s!r}")
+        if self.speed is not None and not (math.isfinite(self.speed) and 0.0 < self.speed <= 1.0):
+            raise InvalidInput(f"speed must be in (0, 1], got {self.speed!r}")
+
+
+@dataclass(frozen=True)
+class Shot:
+    """One image to take: viewpoint, camera roll and the joints that give them."""
+
+    viewpoint: int
+    name: str
+    roll_rad: float
+    q: NDArray[np.float64]
+    T_base_cam: NDArray[np.float64]
+    reason: str = ""
+    """Why the planner replaced the nominal viewpoint (empty when it did not)."""
+
+    @property
+    def key(self) -> tuple[float, ...]:
+        """Joints rounded to 0.1 mrad: the same shot on another teach has the same key."""
+        return tuple(round(float(v), 4) for v in self.q)
+
+
+def plan_shots(
+    point: NDArray[np.float64],
+    viewpoints: tuple[int, ...],
+    *,
+    T_ee_cam: NDArray[np.float64],
+    object_height_m: float,
+    top_rolls_rad: tuple[float, ...],
+    world: CollisionWorld | None = None,
+) -> list[Shot]:
+    """The shots of a teach at ``point`` (base frame): the top view at every roll, then
+    the side views (roll 0)."""
+    shots: list[Shot] = []
+    for vp in viewpoints:
+        name = VIEW_NAMES[vp - 1]
+        rolls = top_rolls_rad if vp == 1 else (0.0,)
+        for roll in rolls:
+            plan = plan_viewpoints(
+                point,
+                T_ee_cam=T_ee_cam,
+                views=(name,),
+                object_height_m=object_height_m,
+                roll_rad=roll,
+                world=world,
+            )
+            v = plan.views[0]
+            shots.append(Shot(vp, name, roll, v.q, v.T_base_cam, v.reason))
+    return shots
+
+
+@dataclass
+class BackgroundStore:
+    """Empty-belt images per shot (by joints), kept for later teaches of this cell."""
+
+    images: dict[tuple[float, ...], NDArray[np.uint8]] = field(default_factory=dict)
+    taken_at: float = 0.0
+
+    def get(self, shot: Shot) -> NDArray[np.uint8] | None:
+        return self.images.get(shot.key)
+
+    def put(self, shot: Shot, image: NDArray[np.uint8]) -> None:
+        self.images[shot.key] = image
+        self.taken_at = time.time()
+
+
+async def _wait_for_object(
+    cell: Any, shot: Shot, background: NDArray[np.uint8], wait_s: float, job: Any
+) -> None:
+    """Watch the top view until an object lies still at the station."""
+    deadline = time.monotonic() + wait_s
+    last: NDArray[np.bool_] | None = None
+    job.report(job.progress, "waiting for an object at the station")
+    while True:
+        frame = await cell.look(None)
+        try:
+            mask = await asyncio.to_thread(foreground_mask, frame.rgb, background)
+        except SegmentationFailed:
+            mask = None
+        if mask is not None and last is not None and iou(mask, last) > 0.97:
+            return  # there, and not moving
+        last = mask
+        if time.monotonic() >= deadline:
+            raise TeachTimeout(
+                f"no object lay still at the station within {wait_s:g} s of grabbing the "
+                "background; place the object and teach again with background='stored'"
+            )
+        await asyncio.sleep(0.3)
+
+
+async def run_teach(
+    job: Any,
+    *,
+    cell: Any,
+    db: Database,
+    live: LiveIndex,
+    model_id: int,
+    options: TeachOptions,
+    point: NDArray[np.float64],
+    T_ee_cam: NDArray[np.float64],
+    store: BackgroundStore,
+    world: CollisionWorld | None = None,
+) -> dict[str, Any]:
+    """The teach job's body (module docstring); runs holding the arm.
+
+    Parameters
+    ----------
+    job : Job
+        For progress reports.
+    cell : Cell
+        Provides ``await cell.look(q, speed=...)`` (move, settle, fresh frame).
+    point : ndarray of shape (3,)
+        The station point (footprint centre of the object), base frame, metres.
+    T_ee_cam : ndarray of shape (4, 4)
+        Camera mounting (the active hand-eye calibration, or the nominal one).
+    store : BackgroundStore
+        Backgrounds of earlier teaches (read for ``"stored"``, written for ``"grab"``).
+    """
+    async with db.session() as session:
+        model = await get_model(session, model_id)
+        kind, name = model.kind.value, model.name
+    vps = options.viewpoints or ((1,) if kind == "2d" else (1, 2, 3))
+    shots = await asyncio.to_thread(
+        plan_shots,
+        point,
+        vps,
+        T_ee_cam=T_ee_cam,
+        object_height_m=options.object_height_m,
+        top_rolls_rad=options.top_rolls_rad,
+        world=world,
+    )
+    n = len(shots)
+    steps = 2 * n if options.background == "grab" else n
+    done = 0
+    backgrounds: dict[int, NDArray[np.uint8]] = {}
+    if options.background == "grab":
+        for k, shot in enumerate(shots):
+            job.report(done / steps, f"background {k + 1}/{n}: viewpoint {shot.viewpoint}")
+            frame = await cell.look(shot.q, speed=options.speed)
+            backgrounds[k] = frame.rgb
+            store.put(shot, frame.rgb)
+            done += 1
+        first = await cell.look(shots[0].q, speed=options.speed)
+        await _wait_for_object(cell, shots[0], backgrounds[0], options.wait_s, job)
+        del first
+    else:
+        for k, shot in enumerate(shots):
+            bg = store.get(shot)
+            if bg is None:
+                raise InvalidInput(
+                    f"no stored background for viewpoint {shot.viewpoint} at roll "
+                    f"{math.degrees(shot.roll_rad):.0f} deg: teach once with background='grab'"
+                )
+            backgrounds[k] = bg
+    inputs: list[ViewInput] = []
+    shots_out: list[dict[str, Any]] = []
+    for k, shot in enumerate(shots):
+        job.report(
+            done / steps,
+            f"view {k + 1}/{n}: viewpoint {shot.viewpoint}, "
+            f"roll {math.degrees(shot.roll_rad):.0f} deg",
+        )
+        t0 = time.monotonic()
+        frame = await cell.look(shot.q, speed=options.speed)
+        t1 = time.monotonic()
+        try:
+            region = await asyncio.to_thread(segment_object, frame.rgb, backgrounds[k])
+        except SegmentationFailed as exc:
+            raise SegmentationFailed(f"viewpoint {shot.viewpoint}: {exc.detail}") from exc
+        mask = region.mask
+        state = frame.robot_state
+        q_seen = np.asarray(getattr(state, "q", shot.q), dtype=np.float64)
+        inputs.append(
+            ViewInput(
+                frame.rgb,
+                shot.viewpoint,
+                mask,
+                yaw_rad=options.yaw_rad,
+                roll_rad=shot.roll_rad,
+                source="teach",
+                joints=q_seen,
+                T_base_cam=shot.T_base_cam,
+                name=f"viewpoint {shot.viewpoint} roll {math.degrees(shot.roll_rad):.0f} deg",
+            )
+        )
+        shots_out.append(
+            {
+                "viewpoint": shot.viewpoint,
+                "roll_rad": shot.roll_rad,
+                "joints": [float(v) for v in q_seen],
+                "mask_px": int(mask.sum()),
+                "segmentation": region.method,
+                "segmentation_note": region.note,
+                "planner": shot.reason,
+                "look_s": round(t1 - t0, 3),
+                "segment_s": round(time.monotonic() - t1, 3),
+            }
+        )
+        done += 1
+    job.report(done / steps, "storing the views")
+    rows = await add_views(db, live, model_id, inputs, replace=options.replace)
+    job.report(1.0, "choosing the threshold")
+    outcome = await thresholds.recompute(db, live)
+    return {
+        "model": {"id": model_id, "name": name, "kind": kind},
+        "views": [view_public(r) for r in rows],
+        "shots": shots_out,
+        "threshold": outcome.public(),
+        "confusable_from_top": list(outcome.confusable),
+    }
+
+
+async def start_teach(
+    *,
+    cell: Any,
+    db: Database,
+    live: LiveIndex,
+    model_id: int,
+    options: TeachOptions,
+    store: BackgroundStore,
+    point: NDArray[np.float64] | None = None,
+) -> Any:
+    """Check what can be checked at once (the model exists, the arm is free), then start
+    the teach as a motion job; returns the job.
+
+    ``point`` defaults to the station point of the cell's conveyor; the camera mounting is
+    the active hand-eye calibration of the cell, else the nominal one.
+    """
+    from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
+    from robot.sim.world import ConveyorSpec
+
+    async with db.session() as session:
+        await get_model(session, model_id)
+        cell_id = getattr(cell, "db_id", None)
+        T_ee_cam = None
+        if cell_id is not None:
+            T_ee_cam = (await active_camera_calibration(session, cell_id)).T_ee_cam
+    T = np.asarray(NOMINAL_T_EE_CAM if T_ee_cam is None else T_ee_cam, dtype=np.float64)
+    p = np.asarray(ConveyorSpec().station_point if point is None else point, dtype=np.float64)
+    if p.shape != (3,) or not np.all(np.isfinite(p)) or np.linalg.norm(p[:2]) > 1.6:
+        raise InvalidInput(
+            f"point must be 3 finite coordinates within 1.6 m of the column, got {p}"
+        )
+    cell.check_can_move()
+
+    async def body(job: Any) -> dict[str, Any]:
+        return await run_teach(
+            job,
+            cell=cell,
+            db=db,
+            live=live,
+            model_id=model_id,
+            options=options,
+            point=p,
+            T_ee_cam=T,
+            store=store,
+        )
+
+    params = {
+        "model_id": model_id,
+        "background": options.background,
+        "viewpoints": list(options.viewpoints) if options.viewpoints else None,
+        "top_rolls_rad": list(options.top_rolls_rad),
+        "point": [float(v) for v in p],
+        "hand_eye": "active" if T_ee_cam is not None else "nominal",
+    }
+    return cell.jobs.start("teach", body, motion=True, params=params)

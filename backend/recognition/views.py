@@ -1,0 +1,329 @@
+"""Trained views in the database: add (teach, upload, import), list, read images, delete,
+re-extract stale features.  Every change is made in one transaction and mirrored in the
+live index only once it is certain (a failed commit takes its views back out), so the
+database and the index never disagree and bad input leaves no row behind.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from sqlalchemy import delete, func, select
+from sqlalchemy.ext.asyncio import AsyncSession
+from sqlalchemy.orm import defer
+
+from backend.db.models import ObjectModel, TrainedView
+from backend.db.session import Database
+from backend.recognition import images as im
+from backend.recognition.index import IndexedModel, LiveIndex
+from backend.recognition.models import get_model
+from vision.errors import Conflict, InvalidInput, NotFound
+from vision.features import Features
+
+__all__ = [
+    "MAX_VIEWS_PER_MODEL",
+    "MAX_VIEWS_PER_REQUEST",
+    "MIN_FEATURES",
+    "ViewInput",
+    "add_views",
+    "delete_view",
+    "get_view",
+    "list_views",
+    "reextract_views",
+    "view_image",
+    "view_public",
+]
+
+#: Most trained views of one model (3 viewpoints x yaw steps x retakes, with room).
+MAX_VIEWS_PER_MODEL = 500
+#: Most views one upload or teach adds.
+MAX_VIEWS_PER_REQUEST = 72
+#: Fewest features a view needs (a match is verified by an affine fit: 3 points).
+MIN_FEATURES = 3
+Source = Literal["teach", "upload", "import"]
+
+
+@dataclass(frozen=True, eq=False)
+class ViewInput:
+    """One view to store.
+
+    Attributes
+    ----------
+    image : ndarray of shape (H, W, 3), uint8
+        RGB image.
+    viewpoint : int
+        1 (top), 2 or 3 (sides).
+    mask : ndarray of shape (H, W), bool, optional
+        The object's region; features are extracted inside it.
+    yaw_rad, roll_rad : float
+        Object yaw relative to the taught pose, and camera roll (q5), radians.
+    source : str
+        ``teach``, ``upload`` or ``import``.
+    joints : ndarray of shape (5,), optional
+        Arm joints at exposure (radians).
+    T_base_cam : ndarray of shape (4, 4), optional
+        Camera pose at exposure (metres).
+    name : str
+        What to call the view in error messages (a file name).
+    """
+
+    image: NDArray[np.uint8]
+    viewpoint: int
+    mask: NDArray[np.bool_] | None = None
+    yaw_rad: float = 0.0
+    roll_rad: float = 0.0
+    source: Source = "upload"
+    joints: NDArray[np.float64] | None = None
+    T_base_cam: NDArray[np.float64] | None = None
+    name: str = "view"
+
+    def __post_init__(self) -> None:
+        img = self.image
+        if not isinstance(img, np.ndarray) or img.dtype != np.uint8 or img.ndim != 3:
+            raise InvalidInput(f"{self.name}: the image must be RGB uint8 (H, W, 3)")
+        if isinstance(self.viewpoint, bool) or self.viewpoint not in (1, 2, 3):
+            raise InvalidInput(f"{self.name}: viewpoint must be 1, 2 or 3, got {self.viewpoint!r}")
+        for what in ("yaw_rad", "roll_rad"):
+            v = getattr(self, what)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+                raise InvalidInput(f"{self.name}: {what} must be a finite number, got {v!r}")
+            if abs(v) > 2 * math.pi:
+                raise InvalidInput(f"{self.name}: {what} must be within +-2 pi rad, got {v!r}")
+        if self.mask is not None:
+            m = self.mask
+            if m.shape != img.shape[:2] or m.dtype != np.bool_:
+                raise InvalidInput(f"{self.name}: the mask must be boolean of the image's size")
+            if not m.any():
+                raise InvalidInput(f"{self.name}: the mask is empty")
+        if self.source not in ("teach", "upload", "import"):
+            raise InvalidInput(f"source must be teach, upload or import, got {self.source!r}")
+
+
+def view_public(row: TrainedView) -> dict[str, Any]:
+    """JSON form of a view, with URLs of its image, thumbnail and mask."""
+    base = f"/api/models/{row.model_id}/views/{row.id}/image"
+    return {
+        "id": row.id,
+        "model_id": row.model_id,
+        "viewpoint": row.viewpoint,
+        "width": row.width,
+        "height": row.height,
+        "keypoints": row.keypoint_count,
+        "descriptor": {"kind": row.descriptor_kind, "version": row.descriptor_version},
+        "yaw_rad": row.yaw_rad,
+        "roll_rad": row.roll_rad,
+        "source": row.source,
+        "joints": row.joints,
+        "T_base_cam": row.T_base_cam,
+        "created_at": row.created_at.isoformat(),
+        "image_url": base,
+        "thumbnail_url": f"{base}?thumb=1",
+        "mask_url": f"{base}?mask=1",
+    }
+
+
+async def _view_total(session: AsyncSession, model_id: int) -> int:
+    n = await session.scalar(
+        select(func.count()).select_from(TrainedView).where(TrainedView.model_id == model_id)
+    )
+    return int(n or 0)
+
+
+async def list_views(
+    session: AsyncSession,
+    model_id: int,
+    *,
+    viewpoint: int | None = None,
+    limit: int = 100,
+    offset: int = 0,
+) -> tuple[list[TrainedView], int]:
+    """A page of a model's views (image blobs not loaded) and the total."""
+    await get_model(session, model_id)
+    where = [TrainedView.model_id == model_id]
+    if viewpoint is not None:
+        where.append(TrainedView.viewpoint == viewpoint)
+    total = await session.scalar(select(func.count()).select_from(TrainedView).where(*where))
+    rows = await session.scalars(
+        select(TrainedView)
+        .where(*where)
+        .options(
+            defer(TrainedView.image_png),
+            defer(TrainedView.mask_png),
+            defer(TrainedView.features),
+            defer(TrainedView.thumbnail_jpeg),
+        )
+        .order_by(TrainedView.id)
+        .limit(limit)
+        .offset(offset)
+    )
+    return list(rows), int(total or 0)
+
+
+async def get_view(session: AsyncSession, model_id: int, view_id: int) -> TrainedView:
+    """The view ``view_id`` of model ``model_id``, or :class:`NotFound`."""
+    row = await session.get(TrainedView, view_id)
+    if row is None or row.model_id != model_id:
+        await get_model(session, model_id)
+        raise NotFound(f"model {model_id} has no trained view with id {view_id}")
+    return row
+
+
+async def view_image(
+    session: AsyncSession, model_id: int, view_id: int, *, part: str = "image"
+) -> tuple[bytes, str]:
+    """Bytes and media type of a view's ``image`` (PNG), ``thumb`` (JPEG) or ``mask`` (PNG)."""
+    row = await get_view(session, model_id, view_id)
+    if part == "thumb":
+        if row.thumbnail_jpeg is None:
+            rgb = im.rgb_from_png(row.image_png)
+            mask = None if row.mask_png is None else im.mask_from_png(row.mask_png)
+            return im.thumbnail(rgb, mask), "image/jpeg"
+        return row.thumbnail_jpeg, "image/jpeg"
+    if part == "mask":
+        if row.mask_png is None:
+            raise NotFound(f"view {view_id} has no mask (its whole image is the object)")
+        return row.mask_png, "image/png"
+    return row.image_png, "image/png"
+
+
+def _prepare(
+    live: LiveIndex, views: Sequence[ViewInput]
+) -> list[tuple[Features, bytes, bytes | None, bytes]]:
+    """Extract features and encode the images (CPU work, run in a thread)."""
+    out = []
+    for v in views:
+        feats = live.extract(v.image, v.mask)
+        if len(feats) < MIN_FEATURES:
+            raise InvalidInput(
+                f"{v.name}: only {len(feats)} {live.method} features inside the object's "
+                f"region (need {MIN_FEATURES}); use a sharper, larger or more textured view"
+            )
+        out.append(
+            (
+                feats,
+                im.encode_png(v.image),
+                None if v.mask is None else im.encode_mask_png(v.mask),
+                im.thumbnail(v.image, v.mask),
+            )
+        )
+    return out
+
+
+async def add_views(
+    db: Database,
+    live: LiveIndex,
+    model_id: int,
+    views: Sequence[ViewInput],
+    *,
+    replace: bool = False,
+) -> list[TrainedView]:
+    """Store ``views`` of a model (all or none) and add them to the live index; with
+    ``replace``, the model's earlier views are deleted in the same transaction."""
+    if not views:
+        raise InvalidInput("no views given")
+    if len(views) > MAX_VIEWS_PER_REQUEST:
+        raise InvalidInput(f"at most {MAX_VIEWS_PER_REQUEST} views at once, got {len(views)}")
+    async with db.session() as session:
+        model = IndexedModel.of(await get_model(session, model_id))
+        have = 0 if replace else await _view_total(session, model_id)
+    if have + len(views) > MAX_VIEWS_PER_MODEL:
+        raise Conflict(
+            f"model {model.name!r} has {have} views; {len(views)} more would pass the limit "
+            f"of {MAX_VIEWS_PER_MODEL}: delete some first"
+        )
+    prepared = await asyncio.to_thread(_prepare, live, views)
+    added: list[int] = []
+    try:
+        async with db.session() as session:
+            row_model = await get_model(session, model_id)  # still there, and locked in
+            old: list[int] = []
+            if replace:
+                old = list(
+                    await session.scalars(
+                        select(TrainedView.id).where(TrainedView.model_id == model_id)
+                    )
+                )
+                await session.execute(delete(TrainedView).where(TrainedView.model_id == model_id))
+            rows = []
+            for v, (feats, png, mask_png, thumb) in zip(views, prepared, strict=True):
+                row = TrainedView(
+                    model_id=row_model.id,
+                    viewpoint=v.viewpoint,
+                    image_png=png,
+                    mask_png=mask_png,
+                    thumbnail_jpeg=thumb,
+                    width=int(v.image.shape[1]),
+                    height=int(v.image.shape[0]),
+                    features=feats.to_bytes(),
+                    descriptor_kind=feats.method,
+                    descriptor_version=live.version,
+                    keypoint_count=len(feats),
+                    yaw_rad=float(v.yaw_rad),
+                    roll_rad=float(v.roll_rad),
+                    source=v.source,
+                    joints=None if v.joints is None else [float(x) for x in v.joints],
+                    T_base_cam=None if v.T_base_cam is None else np.asarray(v.T_base_cam).tolist(),
+                )
+                session.add(row)
+                rows.append(row)
+            await session.flush()
+            for row, (feats, *_rest) in zip(rows, prepared, strict=True):
+                live.add_view(model, row.id, row.viewpoint, feats)
+                added.append(row.id)
+    except BaseException:
+        for vid in added:
+            live.remove_view(vid)
+        raise
+    for vid in old:
+        live.remove_view(vid)
+    return rows
+
+
+async def delete_view(db: Database, live: LiveIndex, model_id: int, view_id: int) -> None:
+    """Delete one view from the database and the live index."""
+    async with db.session() as session:
+        row = await get_view(session, model_id, view_id)
+        await session.delete(row)
+    live.remove_view(view_id)
+
+
+async def reextract_views(
+    db: Database, live: LiveIndex, *, model_id: int | None = None, only_stale: bool = True
+) -> int:
+    """Extract features again from the stored images (and masks) of stale views (or of
+    every view with ``only_stale=False``), store them and index them; return the count."""
+    async with db.session() as session:
+        q = select(TrainedView.id).order_by(TrainedView.id)
+        if model_id is not None:
+            await get_model(session, model_id)
+            q = q.where(TrainedView.model_id == model_id)
+        ids = list(await session.scalars(q))
+    if only_stale:
+        ids = [i for i in ids if i in live.stale]
+    done = 0
+    for vid in ids:
+        async with db.session() as session:
+            row = await session.get(TrainedView, vid)
+            if row is None:
+                continue
+            model = IndexedModel.of(await session.get_one(ObjectModel, row.model_id))
+            rgb = im.rgb_from_png(row.image_png)
+            mask = None if row.mask_png is None else im.mask_from_png(row.mask_png)
+            feats = await asyncio.to_thread(live.extract, rgb, mask)
+            if len(feats) < MIN_FEATURES:
+                raise InvalidInput(f"view {vid}: only {len(feats)} features on re-extraction")
+            row.features = feats.to_bytes()
+            row.descriptor_kind = feats.method
+            row.descriptor_version = live.version
+            row.keypoint_count = len(feats)
+            await session.flush()
+            live.remove_view(vid)
+            live.add_view(model, vid, row.viewpoint, feats)
+        done += 1
+    return done
