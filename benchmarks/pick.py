@@ -78,6 +78,7 @@ async def _picks(repeats: int, error_mm: float, error_deg: float, seed: int) -> 
                     T[:3, :3] = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ T[:3, :3]
                     b = CATALOGUE[name].geometry().bounds
                     bin_name = _bin_for(engine, name)
+                    grasp = suction_point(name)  # the model's drawing (cached), not planning
                     t0 = time.perf_counter()
                     plan = plan_pick_place(
                         driver.state.q,
@@ -85,12 +86,12 @@ async def _picks(repeats: int, error_mm: float, error_deg: float, seed: int) -> 
                         float(b[1, 2]),
                         engine.config.layout.bin(bin_name).drop_point,
                         object_radius_m=float(np.abs(b[:, :2]).max()),
-                        grasp_obj=suction_point(name),
+                        grasp_obj=grasp,
                         world=world,
                     )
                     t_plan = time.perf_counter() - t0
                     outcome = await execute_pick_place(driver, plan)
-                    held = [m for m in outcome.moves[2:5]]  # lift, transfer, lower
+                    held = outcome.moves[2:5]  # lift, transfer, lower: a part on the cup
                     rows.append(
                         {
                             "condition": cond,
