@@ -198,16 +198,21 @@ def _belt(rt: Any) -> tuple[str, float, float]:
     return ("continuous" if moving else "index"), float(st.speed_m_s), float(st.travel_m)
 
 
-def _truth_near(rt: Any, point: NDArray[np.float64]) -> dict[str, Any] | None:
-    """Simulator only, for evaluation: the object nearest ``point`` (never read by decisions)."""
+def _truth_near(rt: Any, point: NDArray[np.float64], back_m: float = 0.0) -> dict[str, Any] | None:
+    """Simulator only, for evaluation: the object nearest ``point`` (never read by decisions),
+    moved back ``back_m`` along the belt (its travel since the exposure)."""
     if rt.sim is None:
         return None
     objs = rt.sim.objects()
     if not objs:
         return None
-    o = min(objs, key=lambda o: float(np.linalg.norm(o.T_base_obj[:2, 3] - point[:2])))
+    o = min(
+        objs, key=lambda o: float(np.linalg.norm(o.T_base_obj[:2, 3] - point[:2] + [0, back_m]))
+    )
+    T = o.T_base_obj.copy()
+    T[1, 3] -= back_m
     return {"id": o.id, "name": o.name, "trainable": o.trainable,
-            "T_base_obj": o.T_base_obj.tolist(), "yaw_rad": o.yaw_rad}  # fmt: skip
+            "T_base_obj": T.tolist(), "yaw_rad": o.yaw_rad}  # fmt: skip
 
 
 def _draw(rgb: NDArray[np.uint8], mask: NDArray[np.bool_] | None, label: str) -> bytes:
@@ -371,11 +376,13 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     z_mid = ctx.surface_z + AIM_HEIGHT_M / 2
     found = plane_points(np.array([[xs.mean(), ys.mean()]]), ctx.camera, T_cam_top, z_mid)[0]
     found[2] = ctx.surface_z
-    state["truth"] = _truth_near(rt, found)
+    state["truth"] = _truth_near(rt, found, _belt(rt)[2] - travel0)
     frames: dict[int, tuple[Any, NDArray[np.bool_] | None, str]] = {
         1: (frame, region.mask, region.method)
     }
     cams.append(T_cam_top)
+
+    planning: dict[str, Any] = {"s": 0.0, "notes": []}
 
     async def look(vp: int) -> Any:
         if vp == 1:
@@ -385,8 +392,12 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
         point = found.copy()
         if mode == "continuous":
             point = point + np.array([0.0, _belt(rt)[2] - travel0 + 1.5 * speed_m_s, 0.0])
+        t_plan = time.monotonic()
         plan = await asyncio.to_thread(plan_viewpoints, point, T_ee_cam=T_plan, views=(VIEW_NAMES[vp - 1],),
                                        object_height_m=AIM_HEIGHT_M)  # fmt: skip
+        planning["s"] += time.monotonic() - t_plan
+        if plan.views[0].reason:
+            planning["notes"].append(f"viewpoint {vp}: {plan.views[0].reason}")
         f = await cell.look(plan.views[0].q, speed=opts.speed)
         _look_times(f, durations)
         cams.append(_T_cam(f.robot_state.q, ctx.T_ee_cam))
@@ -404,7 +415,8 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     feat = sum(r.retrieval_s for r in res.views)
     match = sum(r.verification_s for r in res.views)
     _add(durations, "match", match)
-    _add(durations, "features", max(0.0, spent - move_like - feat - match) + feat)
+    _add(durations, "plan", planning["s"])
+    _add(durations, "features", max(0.0, spent - move_like - planning["s"] - feat - match) + feat)
     t = time.monotonic()
     state["viewpoints"] = res.viewpoints
     state["scores"] = {k: round(float(v), 4) for k, v in res.scores.items()}
@@ -425,8 +437,15 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
         state["reason"] = f"{res.model} scored {res.score:.2f} over {len(res.viewpoints)} view(s)"
     else:
         state["decision"], state["score"] = "unknown", float(res.score)
-        state["reason"] = (f"ambiguous between {', '.join(res.contenders)}" if res.decision == "ambiguous"
-                           else f"no model passed its threshold (best score {res.score:.2f})")  # fmt: skip
+        if res.decision == "ambiguous" and len(res.contenders) > 1:
+            state["reason"] = f"ambiguous between {', '.join(res.contenders)}"
+        elif res.decision == "ambiguous":
+            state["reason"] = (f"{res.contenders[0]} not confirmed by the side views "
+                               f"(fused score {res.score:.2f})")  # fmt: skip
+        else:
+            state["reason"] = f"no model passed its threshold (best score {res.score:.2f})"
+    if planning["notes"]:
+        state["reason"] += "; " + "; ".join(planning["notes"])
     _add(durations, "decide", time.monotonic() - t)
     # -- pose --------------------------------------------------------------------------
     t = time.monotonic()
@@ -553,6 +572,21 @@ class InspectionRun:
     ids: list[int] = field(default_factory=list)
     stop_requested: bool = False
     job: Any = None
+
+
+async def grab_background(rt: Any, *, speed: float | None = None) -> None:
+    """Grab the empty-belt background of the top view at the station (the station must be
+    empty), e.g. after the lights changed; stored with the teaches' backgrounds."""
+    from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
+
+    async with rt.database.session() as session:
+        T = (await active_camera_calibration(session, rt.cell_id)).T_ee_cam
+    T = np.asarray(NOMINAL_T_EE_CAM if T is None else T, dtype=np.float64)
+    ctx = await context(rt)
+    top = (await asyncio.to_thread(plan_shots, ctx.station, (1,), T_ee_cam=T,
+                                   object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
+    frame = await rt.cell.look(top.q, speed=speed)
+    rt.teach_backgrounds.put(top, frame.rgb)
 
 
 def _check_ready(rt: Any) -> None:
