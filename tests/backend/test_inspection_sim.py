@@ -100,7 +100,9 @@ def test_teach_then_continuous_inspection_matches_truth(cell):
     page = client.get("/api/inspections?limit=10", headers=h["viewer"]).json()
     assert page["count"] == 3
     rows = sorted(page["data"], key=lambda d: d["id"])
-    seen = [((r["truth"] or {}).get("name"), r["decision"], r["model"], r["reason"][:80]) for r in rows]
+    seen = [
+        ((r["truth"] or {}).get("name"), r["decision"], r["model"], r["reason"][:80]) for r in rows
+    ]
     for row, (name, _s, _lat, _yaw) in zip(rows, placed, strict=True):
         assert row["truth"] is not None and row["truth"]["name"] == name, seen
         if name == "oil-filter":
