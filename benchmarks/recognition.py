@@ -448,7 +448,7 @@ def print_tables(closed, open_res, lat, pol, tgt, extract_ms) -> None:
     for label in ("conformal", "youden"):
         r = open_res[label]
         t.add_row(
-            r["rule"],
+            label,
             f"{r['threshold']:.3f}",
             f"{100 * r['far']:.2f} %",
             f"{100 * r['frr']:.2f} %",
@@ -456,6 +456,8 @@ def print_tables(closed, open_res, lat, pol, tgt, extract_ms) -> None:
             str(r["ambiguous"]),
         )
     out.print(t)
+    for label in ("conformal", "youden"):
+        out.print(f"  {label}: {open_res[label]['rule']}")
     t = Table(title="Latency per query after extraction (median)")
     for col in ("views", "descriptors", "view index ms", "brute force ms", "speed-up"):
         t.add_column(col, justify="right")
@@ -481,6 +483,7 @@ def print_tables(closed, open_res, lat, pol, tgt, extract_ms) -> None:
         t.add_column(col, justify="right")
     for r in pol:
         t.add_row(
+            r["scenario"],
             r["policy"],
             f"{100 * r['accuracy']:.1f} %",
             f"{r['mean_views']:.2f}",

@@ -11,16 +11,16 @@ searchers.
 
 from __future__ import annotations
 
-import io
 import json
 from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 
-from vision.errors import VisionCellError
-from vision.features import METHODS, Features, Keypoints, extract
+from vision.features import METHODS, Features, extract
+from vision.recognition import serial
 from vision.recognition.search import Searcher
+from vision.recognition.serial import FORMAT, FORMAT_VERSION, IndexFormatError
 
 __all__ = [
     "FORMAT",
@@ -35,10 +35,6 @@ __all__ = [
     "check_viewpoint",
 ]
 
-#: Magic name and version of :meth:`ViewIndex.to_bytes`; bump the version whenever the layout
-#: or the meaning of a stored field changes.
-FORMAT = "visioncell.view-index"
-FORMAT_VERSION = 1
 #: Viewpoints of the cell: 1 = top, 2 and 3 = the two side positions (section 3.5.3).
 VIEWPOINTS = (1, 2, 3)
 #: Caps that keep one index within memory and the ANN build within a second or two.
@@ -56,13 +52,6 @@ DEFAULT_MIN_FEATURES = 80
 ADAPT_STEPS = 2
 #: Default detector thresholds of the methods that adapt (OpenCV's defaults).
 _DEFAULT_DETECTOR_THRESHOLD = {"sift": 0.04, "akaze": 0.001}
-
-
-class IndexFormatError(VisionCellError, ValueError):
-    """A serialised index is not one, or was written by another (stale) format version."""
-
-    code = "bad_view_index"
-    http_status = 422
 
 
 @dataclass(frozen=True, eq=False)
@@ -387,55 +376,19 @@ class ViewIndex:
         return self._searchers[key]
 
     # ----------------------------------------------------------------- bytes
+    @property
+    def next_id(self) -> int:
+        """The id the next view added without ``view_id`` gets."""
+        return self._next_id
+
     def to_bytes(self) -> bytes:
         """Serialise the index (views and options, not the ANN structures) to bytes.
 
         The blob is a compressed ``.npz`` with a JSON header naming :data:`FORMAT` and
-        :data:`FORMAT_VERSION`; :meth:`from_bytes` refuses any other.
+        :data:`FORMAT_VERSION` (:mod:`vision.recognition.serial`); :meth:`from_bytes`
+        refuses any other.
         """
-        views = self.views
-        header = {
-            "format": FORMAT,
-            "version": FORMAT_VERSION,
-            "method": self.method,
-            "max_features": self.max_features,
-            "geometry": self.geometry,
-            "feature_options": self.feature_options,
-            "min_features": self.min_features,
-            "next_id": self._next_id,
-            "views": [
-                {
-                    "id": v.view_id,
-                    "model": v.model,
-                    "viewpoint": v.viewpoint,
-                    "part": v.part,
-                    "base": v.base,
-                    "n": len(v.features),
-                    "feature_version": v.features.version,
-                    "binary": v.features.binary,
-                    "image_shape": list(v.features.image_shape),
-                }
-                for v in views
-            ],
-        }
-        fs = [v.features for v in views]
-        kps = [f.keypoints for f in fs]
-        dim = fs[0].dim if fs else 0
-        dtype = np.uint8 if fs and fs[0].binary else np.float32
-        arrays = {
-            "header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8),
-            "xy": np.concatenate([k.xy for k in kps]) if fs else np.zeros((0, 2)),
-            "size_px": np.concatenate([k.size_px for k in kps]) if fs else np.zeros(0),
-            "angle_rad": np.concatenate([k.angle_rad for k in kps]) if fs else np.zeros(0),
-            "response": np.concatenate([k.response for k in kps]) if fs else np.zeros(0),
-            "octave": np.concatenate([k.octave for k in kps]) if fs else np.zeros(0, np.int32),
-            "descriptors": (
-                np.concatenate([f.descriptors for f in fs]) if fs else np.zeros((0, dim), dtype)
-            ),
-        }
-        buf = io.BytesIO()
-        np.savez_compressed(buf, **arrays)
-        return buf.getvalue()
+        return serial.dump(self)
 
     @classmethod
     def from_bytes(cls, blob: bytes) -> ViewIndex:
@@ -447,56 +400,4 @@ class ViewIndex:
             Not a serialised view index, or one of another format version (stale: retrain or
             migrate it).
         """
-        if not isinstance(blob, bytes | bytearray | memoryview):
-            raise IndexFormatError(f"a view index blob must be bytes, got {type(blob).__name__}")
-        try:
-            with np.load(io.BytesIO(bytes(blob)), allow_pickle=False) as z:
-                header = json.loads(bytes(z["header"]).decode())
-                data = {k: z[k] for k in z.files if k != "header"}
-        except Exception as exc:
-            raise IndexFormatError(f"not a serialised view index: {exc}") from exc
-        if not isinstance(header, dict) or header.get("format") != FORMAT:
-            got = header.get("format") if isinstance(header, dict) else header
-            raise IndexFormatError(f"not a serialised view index (format {got!r})")
-        if header.get("version") != FORMAT_VERSION:
-            raise IndexFormatError(
-                f"view index format version {header.get('version')!r} is not the supported "
-                f"version {FORMAT_VERSION}: retrain the views (or migrate the stored index)"
-            )
-        try:
-            index = cls(
-                header["method"],
-                max_features=header["max_features"],
-                geometry=header["geometry"],
-                feature_options=header["feature_options"],
-                min_features=header["min_features"],
-            )
-            start = 0
-            for v in header["views"]:
-                sl = slice(start, start + int(v["n"]))
-                start = sl.stop
-                kp = Keypoints(
-                    data["xy"][sl],
-                    data["size_px"][sl],
-                    data["angle_rad"][sl],
-                    data["response"][sl],
-                    data["octave"][sl],
-                )
-                f = Features(
-                    kp,
-                    data["descriptors"][sl],
-                    header["method"],
-                    v["feature_version"],
-                    bool(v["binary"]),
-                    tuple(v["image_shape"]),
-                )
-                vid = int(v["id"])
-                index._views[vid] = TrainedView(
-                    vid, v["model"], check_viewpoint(v["viewpoint"]), v["part"], v["base"], f
-                )
-            if start != len(data["descriptors"]):
-                raise ValueError("descriptor count does not match the views")
-            index._next_id = max([int(header["next_id"]), *[k + 1 for k in index._views]])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise IndexFormatError(f"corrupt view index: {exc}") from exc
-        return index
+        return serial.load(cls, blob)

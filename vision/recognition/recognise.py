@@ -391,8 +391,9 @@ def recognise(
     mask : ndarray (H, W) bool or uint8, optional
         Object region from segmentation: features are detected inside it only.
     threshold : float in [0, 1] or ThresholdChoice, optional
-        Global threshold, or the result of :func:`choose_threshold` (per-model thresholds);
-        default :data:`DEFAULT_THRESHOLD`.
+        Global threshold, or the result of :func:`choose_threshold` (its per-model thresholds
+        of ``viewpoint``, see :meth:`ThresholdChoice.at`; pooled ones when ``viewpoint`` is
+        ``None``); default :data:`DEFAULT_THRESHOLD`.
     margin : float
         Relative confusion margin in [0, 1) (module docstring).
     models : sequence of str, optional

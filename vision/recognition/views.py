@@ -12,10 +12,12 @@ Policies
     loop never ends on an untrained object; here it stops after ``max_views``.
     ``top-only``: decide from viewpoint 1 alone (the 2D algorithm of section 3.5.1).
     ``two-views`` (section 3.5.3, the chapter's choice): top view against the top views of
-    every model; nothing passing means unknown; otherwise the contenders are verified with
-    side view 2 against the side views of the contenders only, and with view 3 if still
+    every model; its contenders (the passing best and the models within the margin of it,
+    or, when no model passes, every model above the choice's candidate bar) are verified
+    with side view 2 against the side views of the contenders only, and with view 3 if still
     uncertain (the fused decision is not a recognition, or the winner's own side score does
-    not pass); fail after three.
+    not pass); fail after three. Nothing above the candidate bar from the top: unknown
+    after one view.
     ``best-next`` (beyond the chapter): like ``two-views``, but a model recognised from the
     top that no other model is confused with from the top (confusion table of
     :func:`choose_threshold`, below ``confusion_limit``) is accepted at once, and the side
@@ -27,8 +29,8 @@ Fused score
     (:meth:`ThresholdChoice.at` each viewpoint); the decision rule of section 3.5.1 is
     applied to them. A top view that passes no threshold still sends the models above the
     choice's ``candidate`` bar (the best :data:`MAX_CONTENDERS`) to a side view, and then only
-    the side views are fused: models alike
-    from the top raise the top threshold beyond reach, and only the side view can decide.
+    the side views are fused: models alike from the top raise the top threshold beyond
+    reach, and only a side view can decide.
 """
 
 from __future__ import annotations
@@ -196,7 +198,11 @@ async def recognise_views(
         raise ValueError(f"look must be callable, got {type(look).__name__}")
     if policy == "best-next" and not isinstance(threshold, ThresholdChoice):
         raise ValueError("policy 'best-next' needs threshold=ThresholdChoice (its confusion table)")
-    if isinstance(confusion_limit, bool) or not 0.0 <= float(confusion_limit) <= 1.0:
+    if (
+        isinstance(confusion_limit, bool)
+        or not isinstance(confusion_limit, int | float)
+        or not 0.0 <= float(confusion_limit) <= 1.0
+    ):
         raise ValueError(f"confusion_limit must be in [0, 1], got {confusion_limit!r}")
     decide({}, threshold=threshold, margin=margin)  # validates threshold and margin before moving
     choice = threshold if isinstance(threshold, ThresholdChoice) else None
