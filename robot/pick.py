@@ -127,20 +127,19 @@ def tool_flange_pose(
 
 @dataclass(frozen=True)
 class _HeldPart:
-    """The part on the cup for collision checks: its footprint centre's offset from the
-    lip (base frame, horizontal), the lip's height above its bottom, its half-width and
-    height."""
+    """The part on the cup for collision checks: its footprint centre in the cup's frame
+    (fixed while it is held: the weld), its half-width and height."""
 
-    offset_xy: NDArray[np.float64]
-    grasp_z: float
+    centre_cup: NDArray[np.float64]
     radius: float
     height: float
 
-    def box(self, lip: NDArray[np.float64]) -> Box:
-        c = lip[:2] - self.offset_xy
-        z0 = float(lip[2]) - self.grasp_z
+    def box(self, T_base_cup: NDArray[np.float64]) -> Box:
+        c = T_base_cup[:3, :3] @ self.centre_cup + T_base_cup[:3, 3]
         r = self.radius
-        return Box("held part", (c[0] - r, c[1] - r, z0), (c[0] + r, c[1] + r, z0 + self.height))
+        return Box(
+            "held part", (c[0] - r, c[1] - r, c[2]), (c[0] + r, c[1] + r, c[2] + self.height)
+        )
 
 
 def _box_gap(a: Box, b: Box) -> float:
@@ -184,7 +183,7 @@ def _check_path(
             )
         if part is not None:
             T_tool, held = part
-            pb = held.box((T_base_ee(q[i]) @ T_tool)[:3, 3])
+            pb = held.box(T_base_ee(q[i]) @ T_tool)
             if support_z is not None:  # leaving the surface it stood on
                 z0 = max(pb.lower[2], support_z + world.clearance_m + 1e-3)
                 pb = Box(pb.name, (pb.lower[0], pb.lower[1], min(z0, pb.upper[2])), pb.upper)
@@ -329,7 +328,6 @@ def plan_pick_place(
     grasp = T[:3, :3] @ g_obj + T[:3, 3]
     grasp_z = float(g_obj[2]) - press_m  # lip height above the part's bottom when held
     off = T[:3, :3] @ np.array([g_obj[0], g_obj[1], 0.0])
-    part = (Tt, _HeldPart(off[:2], grasp_z, r_obj, float(object_height_m)))
     top_z = max(
         [b.upper[2] for b in obstacles.boxes if b.upper[2] <= transit_max_z_m]
         + [obstacles.floor_z_m]
@@ -373,6 +371,9 @@ def plan_pick_place(
     t_down = line(q_pre, p_grasp, "descent to the grasp")
     _check_path("descent", t_down, obstacles, part=None)
     q_grasp = t_down.goal
+    T_cup_grasp = T_base_ee(q_grasp, model) @ Tt
+    centre_cup = T_cup_grasp[:3, :3].T @ (p_obj - T_cup_grasp[:3, 3])
+    part = (Tt, _HeldPart(centre_cup, r_obj, float(object_height_m)))
     steps += [PickStep("descend", t_down), PickStep("grip", grip=True)]
     # 3. lift to the transit height.
     p_lift = np.array([p_grasp[0], p_grasp[1], z_transit])

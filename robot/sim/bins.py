@@ -54,7 +54,7 @@ class BinSpec:
     parts: tuple[str, ...]
     centre_xy: tuple[float, float]
     size_m: float = 0.40
-    rim_z_m: float = 0.25
+    rim_z_m: float = 0.30
     yaw_rad: float = 0.0
     reject: bool = False
 

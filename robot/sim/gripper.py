@@ -210,7 +210,6 @@ class Landing:
         }
 
 
-@functools.cache
 def suction_point(
     name: str, spec: SuctionCupSpec | None = None, *, step_m: float = 0.01
 ) -> NDArray[np.float64]:
@@ -228,14 +227,25 @@ def suction_point(
     ndarray of shape (3,)
         The point in the object frame.
     """
+    if name not in CATALOGUE:
+        raise ValueError(f"unknown catalogue name {name!r}")
     cup = spec or SuctionCupSpec()
+    if not (math.isfinite(step_m) and 0.002 <= step_m <= 0.05):
+        raise ValueError(f"step_m must be in [0.002, 0.05] m, got {step_m!r}")
+    return _suction_point(name, cup.radius_m, cup.max_tilt_deg, float(step_m)).copy()
+
+
+@functools.cache
+def _suction_point(
+    name: str, radius_m: float, max_tilt_deg: float, step_m: float
+) -> NDArray[np.float64]:
     b = CATALOGUE[name].geometry().bounds
     top = float(b[1, 2]) + 0.05
-    cos_tilt = math.cos(math.radians(cup.max_tilt_deg))
+    cos_tilt = math.cos(math.radians(max_tilt_deg))
     down = np.eye(4)
     down[:3, :3] = np.diag([1.0, -1.0, -1.0])
     ring = [
-        (cup.radius_m * math.cos(a), cup.radius_m * math.sin(a))
+        (radius_m * math.cos(a), radius_m * math.sin(a))
         for a in np.linspace(0.0, 2.0 * math.pi, 8, endpoint=False)
     ]
 

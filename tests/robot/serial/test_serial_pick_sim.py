@@ -20,9 +20,10 @@ async def serial_cell(tmp_path, make_driver):
     engine.configure_conveyor(mode="index", running=False)
     sim = SimDriver(engine, time_scale=20.0)
     await sim.connect()
-    emu = Emulator(sim, link=str(tmp_path / "robot-tty"), rate_hz=50.0, seed=7)
+    emu = Emulator(sim, link=str(tmp_path / "robot-tty"), rate_hz=50.0, seed=7, watchdog_s=5.0)
     await emu.start()
-    driver = make_driver(emu.path)
+    # Lenient timings: the simulator's physics thread shares the CPU with the serial stack.
+    driver = make_driver(emu.path, silence_timeout_s=5.0, command_timeout_s=5.0)
     await driver.connect()
     yield engine, driver
     await driver.close()
