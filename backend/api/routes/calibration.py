@@ -388,8 +388,10 @@ async def create_calibration_samples(
     responses={200: {"content": {"image/png": {}}, "description": "The image"}},
 )
 async def read_calibration_sample_image(
-    _: ViewerUser, row: CalibrationSessionDep, index: DbIndex
+    _: ViewerUser, session: SessionDep, session_id: DbId, index: DbIndex
 ) -> Response:
+    # Looked up here, not by a dependency, so that a bad index is a 422 before any 404.
+    row = await svc.get_session(session, session_id)
     for s in row.samples:
         if s.index == index:
             return Response(s.image_png, media_type="image/png")
