@@ -41,7 +41,13 @@ from typing import Any
 import cv2
 import numpy as np
 
-from vision.features.colour_input import TRANSFERS, check_white_level, srgb8_from_linear
+from vision.features.colour_input import (
+    M_SCALE,
+    TRANSFERS,
+    check_white_level,
+    m_images_uint8,
+    srgb8_from_linear,
+)
 from vision.features.colour_joint import NOISE_FLOOR, SATURATION, joint_raw
 from vision.features.patches import detect_sift
 from vision.features.pca import PcaBasis, default_basis
@@ -65,10 +71,6 @@ __all__ = [
 
 #: Guard of the logarithms, in digital numbers of the uint8 image.
 EPS = 1.0
-#: Fixed mapping of an m-image to uint8 for OpenCV's SIFT: ``128 + M_SCALE * M``, clipped.
-#: It covers log ratios in [-3.2, +3.2] (colour ratios up to 24:1 around the image's median)
-#: with a step of 1/40 = 0.025 (2.5 % in the ratio); stronger ratios saturate.
-M_SCALE = 40.0
 #: Descriptor layouts: ``"joint"`` (default) is the grey base descriptor followed by the
 #: contrast-weighted descriptors of the noise-aware m-images M1 and M3; ``"chapter"`` the
 #: three m-image descriptors of equations 15-17 alone, as first built (issue 6).
@@ -107,12 +109,6 @@ def m_images(rgb: np.ndarray, *, eps: float = EPS) -> np.ndarray:
     r, g, b = lg[..., 0], lg[..., 1], lg[..., 2]
     m = np.stack([r - g, r - b, g - b])
     return (m - np.median(m.reshape(3, -1), axis=1)[:, None, None]).astype(np.float32)
-
-
-def m_images_uint8(m: np.ndarray) -> np.ndarray:
-    """Map m-images to uint8 by the fixed ``128 + 40 M`` (:data:`M_SCALE`), rounded and
-    clipped, for OpenCV's SIFT, which reads only 8-bit images."""
-    return np.clip(np.rint(128.0 + M_SCALE * np.asarray(m)), 0, 255).astype(np.uint8)
 
 
 def describe_colour_sift(rgb: np.ndarray, keypoints: list[cv2.KeyPoint]) -> np.ndarray:
