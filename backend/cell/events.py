@@ -153,7 +153,7 @@ class CellStopped(CellEvent):
     """Names of the conveyors halted or resumed with the arm."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds an array: compared by identity
 class CalibrationView(CellEvent):
     """An automatic calibration run started (``cleared``) or stored one view."""
 

@@ -309,13 +309,13 @@ def test_upload_refuses_bad_files_and_keeps_nothing(client, headers, settings):
         (
             [good, ("flat.png", png_bytes(np.full((100, 100, 3), 90, np.uint8)))],
             422,
-            "validation_error",
+            "invalid_value",
             "features",
         ),
         (
             [good, ("tiny.png", png_bytes(np.zeros((8, 8, 3), np.uint8)))],
             422,
-            "validation_error",
+            "invalid_value",
             "8 x 8",
         ),
     ]

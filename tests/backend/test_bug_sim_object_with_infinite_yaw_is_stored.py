@@ -11,6 +11,7 @@ import time
 import pytest
 from fastapi.testclient import TestClient
 
+from backend.api.deps import runtime_of
 from backend.app import create_app
 from tests.utils.factories import make_settings, make_tokens, migrate
 
@@ -77,7 +78,7 @@ def test_a_good_object_still_spawns_after_bad_ones(sim_env):
 
 def test_engine_validates_before_changing_state(sim_env):
     c, _ = sim_env
-    sim = c.app.state.sim
+    sim = runtime_of(c.app).sim
     n = len(sim.objects())
     for kw in ({"yaw_rad": math.inf}, {"yaw_rad": math.nan}, {"yaw_rad": True}, {"s_m": 1e308}):
         with pytest.raises(ValueError):

@@ -36,10 +36,18 @@ taken as linear values with ``white_level`` (default 65535) as full scale.
 
 from __future__ import annotations
 
+from typing import Any
+
 import cv2
 import numpy as np
 
-from vision.features.colour_input import TRANSFERS, check_white_level, srgb8_from_linear
+from vision.features.colour_input import (
+    M_SCALE,
+    TRANSFERS,
+    check_white_level,
+    m_images_uint8,
+    srgb8_from_linear,
+)
 from vision.features.colour_joint import NOISE_FLOOR, SATURATION, joint_raw
 from vision.features.patches import detect_sift
 from vision.features.pca import PcaBasis, default_basis
@@ -63,10 +71,6 @@ __all__ = [
 
 #: Guard of the logarithms, in digital numbers of the uint8 image.
 EPS = 1.0
-#: Fixed mapping of an m-image to uint8 for OpenCV's SIFT: ``128 + M_SCALE * M``, clipped.
-#: It covers log ratios in [-3.2, +3.2] (colour ratios up to 24:1 around the image's median)
-#: with a step of 1/40 = 0.025 (2.5 % in the ratio); stronger ratios saturate.
-M_SCALE = 40.0
 #: Descriptor layouts: ``"joint"`` (default) is the grey base descriptor followed by the
 #: contrast-weighted descriptors of the noise-aware m-images M1 and M3; ``"chapter"`` the
 #: three m-image descriptors of equations 15-17 alone, as first built (issue 6).
@@ -107,18 +111,12 @@ def m_images(rgb: np.ndarray, *, eps: float = EPS) -> np.ndarray:
     return (m - np.median(m.reshape(3, -1), axis=1)[:, None, None]).astype(np.float32)
 
 
-def m_images_uint8(m: np.ndarray) -> np.ndarray:
-    """Map m-images to uint8 by the fixed ``128 + 40 M`` (:data:`M_SCALE`), rounded and
-    clipped, for OpenCV's SIFT, which reads only 8-bit images."""
-    return np.clip(np.rint(128.0 + M_SCALE * np.asarray(m)), 0, 255).astype(np.uint8)
-
-
 def describe_colour_sift(rgb: np.ndarray, keypoints: list[cv2.KeyPoint]) -> np.ndarray:
     """OpenCV SIFT descriptors of the three uint8-mapped m-images at given OpenCV keypoints
     (as returned by its detector, with the packed octave), concatenated: (N, 384) float32."""
     if not keypoints:
         return np.zeros((0, 384), np.float32)
-    sift = cv2.SIFT_create()
+    sift = cv2.SIFT_create()  # type: ignore[attr-defined]
     parts = []
     for mu8 in m_images_uint8(m_images(rgb)):
         kk, d = sift.compute(mu8, list(keypoints))
@@ -267,7 +265,7 @@ def colour_features(
     if reduce and basis is None:
         basis = default_basis(kind)
     grey = detection_grey(rgb, white_level=white_level)
-    detect = {"max_features": max_features, "threshold": threshold, "mask": mask}
+    detect: dict[str, Any] = {"max_features": max_features, "threshold": threshold, "mask": mask}
     if base == "sift" and base_options:
         raise ValueError(f"unknown options for color-sift: {', '.join(base_options)}")
     if layout == "joint":
@@ -289,6 +287,7 @@ def colour_features(
         raw_version = _VERSION_RAW.format(base=base)
     if not reduce:
         return Features(kp, raw, method, raw_version, False, grey.shape)
+    assert basis is not None  # set above whenever reduce is true
     if basis.dim_in != raw.shape[1]:
         raise ValueError(
             f"basis {basis.kind!r} reduces {basis.dim_in}-dim vectors, {method} gives "

@@ -23,6 +23,7 @@ from vision.features.colour_input import (
     check_white_level,
     clipped_weight,
     linear_from_image,
+    m_images_uint8,
     srgb_decode,
 )
 from vision.features.colour_input import noise_floor as _noise_floor
@@ -47,7 +48,6 @@ _JOINT_M = (0, 2)  # M1 = log(R/G) and M3 = log(G/B); M2 = M1 + M3
 
 
 def _m_images_uint8(m: np.ndarray) -> np.ndarray:
-    from vision.features.colour import m_images_uint8
 
     return m_images_uint8(m)
 

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -21,6 +20,7 @@ from vision.features import METHODS, Features, extract
 from vision.recognition import serial
 from vision.recognition.search import Searcher
 from vision.recognition.serial import FORMAT, FORMAT_VERSION, IndexFormatError
+from vision.recognition.trained import VIEWPOINTS, TrainedView, check_viewpoint
 
 __all__ = [
     "FORMAT",
@@ -36,7 +36,6 @@ __all__ = [
 ]
 
 #: Viewpoints of the cell: 1 = top, 2 and 3 = the two side positions (section 3.5.3).
-VIEWPOINTS = (1, 2, 3)
 #: Caps that keep one index within memory and the ANN build within a second or two.
 MAX_VIEWS = 50_000
 MAX_FEATURES_PER_VIEW = 4_000
@@ -54,32 +53,6 @@ ADAPT_STEPS = 2
 _DEFAULT_DETECTOR_THRESHOLD = {"sift": 0.04, "akaze": 0.001}
 
 
-@dataclass(frozen=True, eq=False)
-class TrainedView:
-    """One trained image of a model, kept as its features.
-
-    Attributes
-    ----------
-    view_id : int
-        Stable id (unique in the index, kept through serialisation).
-    model : str
-        Model name (one physical part on one sitting base).
-    viewpoint : int
-        1 (top), 2 or 3 (side positions).
-    part, base : str or None
-        Physical part and sitting base the model stands for (section 3.5.3), if given.
-    features : Features
-        Keypoints (pixels of the trained image) and descriptors, extracted inside the mask.
-    """
-
-    view_id: int
-    model: str
-    viewpoint: int
-    part: str | None
-    base: str | None
-    features: Features
-
-
 def _check_name(value: object, name: str, *, optional: bool = False) -> str | None:
     if value is None and optional:
         return None
@@ -88,17 +61,6 @@ def _check_name(value: object, name: str, *, optional: bool = False) -> str | No
     if len(value) > MAX_NAME_CHARS:
         raise ValueError(f"{name} must be at most {MAX_NAME_CHARS} characters, got {len(value)}")
     return value
-
-
-def check_viewpoint(viewpoint: object, *, allow_none: bool = False) -> int | None:
-    """Validate a viewpoint number (1, 2 or 3; ``None`` = every viewpoint where allowed)."""
-    if viewpoint is None and allow_none:
-        return None
-    if isinstance(viewpoint, bool) or not isinstance(viewpoint, int | np.integer):
-        raise ValueError(f"viewpoint must be one of {VIEWPOINTS}, got {viewpoint!r}")
-    if int(viewpoint) not in VIEWPOINTS:
-        raise ValueError(f"viewpoint must be one of {VIEWPOINTS}, got {viewpoint!r}")
-    return int(viewpoint)
 
 
 def check_image(image: object, mask: object = None) -> tuple[np.ndarray, np.ndarray | None]:

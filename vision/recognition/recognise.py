@@ -40,18 +40,15 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
 from vision.features import Features
+from vision.recognition.choice import ThresholdChoice
 from vision.recognition.index import ViewIndex, check_viewpoint
 from vision.recognition.search import DEFAULT_K, DEFAULT_RATIO
 from vision.registration import match, registration_score, verify
-
-if TYPE_CHECKING:
-    from vision.recognition.threshold import ThresholdChoice
 
 __all__ = [
     "DECISIONS",
@@ -195,8 +192,6 @@ def resolve_threshold(
 ) -> tuple[float, Mapping[str, float]]:
     """``(global, per_model)`` thresholds from a number, a :class:`ThresholdChoice` or
     ``None`` (:data:`DEFAULT_THRESHOLD`); raises ``ValueError`` on anything else."""
-    from vision.recognition.threshold import ThresholdChoice
-
     if threshold is None:
         return DEFAULT_THRESHOLD, {}
     if isinstance(threshold, ThresholdChoice):
@@ -420,8 +415,6 @@ def recognise(
     ):
         if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= hi:
             raise ValueError(f"{name} must be an int in 1..{hi}, got {value!r}")
-    from vision.recognition.threshold import ThresholdChoice
-
     if isinstance(threshold, ThresholdChoice) and viewpoint is not None:
         threshold = threshold.at(viewpoint)
     glob, per_model = resolve_threshold(threshold)

@@ -12,6 +12,7 @@ import numpy as np
 
 from vision.errors import VisionCellError
 from vision.features import Features, Keypoints
+from vision.recognition.trained import TrainedView, check_viewpoint
 
 if TYPE_CHECKING:
     from vision.recognition.index import ViewIndex
@@ -83,8 +84,6 @@ def load(cls: type[ViewIndex], blob: bytes) -> ViewIndex:
 
     Fills the new index's view table directly (this module is the index's storage half).
     """
-    from vision.recognition.index import TrainedView, check_viewpoint
-
     if not isinstance(blob, bytes | bytearray | memoryview):
         raise IndexFormatError(f"a view index blob must be bytes, got {type(blob).__name__}")
     try:

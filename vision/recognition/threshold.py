@@ -52,11 +52,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from vision.features import Features
+from vision.recognition.choice import ThresholdChoice, roc_curve
 from vision.recognition.index import ViewIndex
 from vision.recognition.recognise import DEFAULT_MARGIN, evaluate
 
@@ -70,95 +70,6 @@ __all__ = [
 
 RULES = ("conformal-far", "youden")
 MAX_NEGATIVES = 10_000
-
-
-@dataclass(frozen=True, eq=False)
-class ThresholdChoice:
-    """Thresholds chosen from the score distributions, with the figures used.
-
-    Attributes
-    ----------
-    threshold : float
-        Global threshold in [0, 1]; a model passes when its score is strictly above.
-    per_model : mapping of str to float
-        Threshold per model (each >= ``threshold``).
-    rule : str
-        Rule and figures in words (what was bounded, with how many scores).
-    rule_id : str
-        ``"conformal-far"`` or ``"youden"``.
-    target_far : float or None
-        Target false-accept rate (conformal rule).
-    far_bound : float or None
-        Finite-sample bound ``1 - k / (n + 1)`` achieved (conformal rule; ``None`` when too
-        few impostor scores to bound it).
-    far, frr : float
-        Empirical false-accept rate on the impostor scores and false-reject rate on the
-        genuine (leave-one-view-out) scores at ``threshold``.
-    genuine, impostor : ndarray
-        The score distributions (genuine per held-out view; impostor per held-out-model view
-        and per negative image).
-    genuine_models : tuple of str
-        Model of each genuine score.
-    confusion : mapping
-        ``confusion[viewpoint][a][b]``: share of ``a``'s held-out views on which ``b`` scores
-        above the viewpoint's candidate bar.
-    candidate : float
-        The rule on the impostor scores without twins (module docstring), at most
-        ``threshold``: the bar for considering a model worth verifying with another view.
-    per_viewpoint : mapping of int to float
-        Global threshold of the rule on each viewpoint's scores alone.
-    per_model_viewpoint : mapping of int to mapping of str to float
-        Per-model thresholds of each viewpoint.
-    candidate_viewpoint : mapping of int to float
-        ``candidate`` of each viewpoint.
-    """
-
-    threshold: float
-    per_model: Mapping[str, float]
-    rule: str
-    rule_id: str
-    target_far: float | None
-    far_bound: float | None
-    far: float
-    frr: float
-    genuine: np.ndarray
-    impostor: np.ndarray
-    genuine_models: tuple[str, ...]
-    confusion: Mapping[int, Mapping[str, Mapping[str, float]]]
-    candidate: float = 0.0
-    per_viewpoint: Mapping[int, float] = field(default_factory=dict)
-    per_model_viewpoint: Mapping[int, Mapping[str, float]] = field(default_factory=dict)
-    candidate_viewpoint: Mapping[int, float] = field(default_factory=dict)
-
-    def at(self, viewpoint: int) -> ThresholdChoice:
-        """The choice for one viewpoint (itself when that viewpoint has no thresholds)."""
-        if viewpoint not in self.per_viewpoint:
-            return self
-        return replace(
-            self,
-            threshold=self.per_viewpoint[viewpoint],
-            per_model=self.per_model_viewpoint.get(viewpoint, {}),
-            candidate=self.candidate_viewpoint.get(viewpoint, self.candidate),
-            per_viewpoint={},
-            per_model_viewpoint={},
-            candidate_viewpoint={},
-        )
-
-    def roc(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(thresholds, far, tpr)`` over every observed score (accept when score > t)."""
-        return roc_curve(self.genuine, self.impostor)
-
-
-def roc_curve(
-    genuine: np.ndarray, impostor: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """False-accept and true-accept rates at every distinct score (accept when score > t)."""
-    g = np.sort(np.asarray(genuine, dtype=np.float64))
-    i = np.sort(np.asarray(impostor, dtype=np.float64))
-    t = np.unique(np.concatenate([[0.0], g, i, [1.0]]))
-    far = 1.0 - np.searchsorted(i, t, side="right") / max(len(i), 1)
-    tpr = 1.0 - np.searchsorted(g, t, side="right") / max(len(g), 1)
-    return t, far, tpr
 
 
 def _check_scores(x: object, name: str, *, allow_empty: bool = False) -> np.ndarray:

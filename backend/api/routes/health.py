@@ -24,6 +24,7 @@ class HealthOut(BaseModel):
 class StatusOut(BaseModel):
     """Driver, camera, database, 3D view, running jobs and library versions."""
 
+    cell: dict[str, Any]
     driver: dict[str, Any]
     camera: dict[str, Any]
     database: dict[str, Any]

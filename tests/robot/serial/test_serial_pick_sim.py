@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robot.drivers.emulator import Emulator
+from robot.drivers.serial.emulator import Emulator
 from robot.pick import execute_pick_place, plan_pick_place
 from robot.sim import SimDriver, SimEngine
 from robot.sim.catalogue import CATALOGUE
