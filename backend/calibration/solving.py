@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from sqlalchemy import func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
+from backend import audit
 from backend.calibration.sessions import (
     NotFound,
     ProgressFn,
@@ -23,7 +24,6 @@ from backend.calibration.sessions import (
     load_detections,
     sample_name,
 )
-from backend import audit
 from backend.db.models import Calibration, CalibrationKind, CalibrationSession
 from vision.calibration import (
     HandEyeOptions,

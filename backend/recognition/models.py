@@ -272,9 +272,7 @@ async def update_model(
     return before, row
 
 
-async def delete_model(
-    db: Database, model_id: int, *, by: audit.By | None = None
-) -> ObjectModel:
+async def delete_model(db: Database, model_id: int, *, by: audit.By | None = None) -> ObjectModel:
     """Delete a model and its trained views (inspections keep their rows, model unset)."""
     async with db.session() as session:
         row = await get_model(session, model_id)

@@ -257,7 +257,9 @@ def test_views_added_deleted_and_reextracted_are_recorded(client, headers, setti
         assert e.new["keypoints"] > 0 and e.reason == "first images"
         assert "image_png" not in e.new and "features" not in e.new
 
-    r = client.delete(f"/api/models/{mid}/views/{ids[0]}?reason=blurred", headers=headers["engineer"])
+    r = client.delete(
+        f"/api/models/{mid}/views/{ids[0]}?reason=blurred", headers=headers["engineer"]
+    )
     assert r.status_code == 204
     (gone,) = _rows(settings, kind="view", entity_id=str(ids[0]), until=None)[:1]
     assert gone.action == "delete" and gone.new is None and gone.old["source"] == "upload"
@@ -401,9 +403,9 @@ def test_users_and_tokens_are_recorded_without_secrets(client, headers, settings
     assert role.new == {"name": "bob", "role": "operator"} and role.reason == "trained"
     assert disable.new == {"name": "bob", "disabled": True, "tokens_revoked": 1}
     assert disable.reason == "left"
-    assert client.get("/api/users/me", headers={"Authorization": f"Bearer {token}"}).status_code == (
-        401
-    )
+    assert client.get(
+        "/api/users/me", headers={"Authorization": f"Bearer {token}"}
+    ).status_code == (401)
 
     async def hashes() -> list[str]:
         db = Database(settings.database_url)

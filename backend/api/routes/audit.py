@@ -31,7 +31,9 @@ class AuditPublic(BaseModel):
     reason: str
 
 
-@router.get("", summary="The audit trail, newest first (engineer)", response_model=Page[AuditPublic])
+@router.get(
+    "", summary="The audit trail, newest first (engineer)", response_model=Page[AuditPublic]
+)
 async def read_audit(
     _: EngineerUser,
     session: SessionDep,

@@ -15,8 +15,8 @@ from fastapi import APIRouter, File, Form, Path, Query, UploadFile, status
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, Field, model_validator
 
-from backend import calibration as svc
 from backend import audit
+from backend import calibration as svc
 from backend.api.deps import CellDep, DatabaseDep, EngineerUser, SessionDep, SimDep, ViewerUser
 from backend.api.errors import ApiError, error_body
 from backend.api.schemas import JobOut, Page
@@ -449,7 +449,9 @@ async def create_calibration_solve(
 
 
 @router.get(
-    "/calibrations", summary="This cell's calibration history, newest first", response_model=Page[Open]
+    "/calibrations",
+    summary="This cell's calibration history, newest first",
+    response_model=Page[Open],
 )
 async def read_calibrations(
     _: ViewerUser,
