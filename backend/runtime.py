@@ -122,6 +122,8 @@ class CellRuntime:
         self._live_index: LiveIndex | None = None
         #: Empty-belt backgrounds grabbed by teaches, for later teaches of this cell.
         self.teach_backgrounds = BackgroundStore()
+        #: The continuous inspection run, if one was started (``backend.inspection.service``).
+        self.inspection_run: Any = None
         self._stack: contextlib.AsyncExitStack | None = None
 
     # -- accessors (raise a clear error before start) -----------------------------------------

@@ -6,8 +6,8 @@ cross-validation on the real illumination scenes (issue 17).
 The unreduced joint descriptor (grey block, then the contrast-weighted m-image blocks; see
 ``vision.features.colour_joint``) is computed once per image with ``colour_weight=1``; the
 m-image blocks are then scaled by each candidate weight (0 is the grey base itself, "m only"
-drops the grey block). Per scene held out (13: 10 MIMO scenes over two encodings are counted
-by scene and encoding, plus the SFU scenes), the weight with the best mean gain in recall at
+drops the grey block). Per scene held out (23 folds: the 10 MIMO scenes in each of the two
+encodings, and the 3 SFU scenes), the weight with the best mean gain in recall at
 1-precision 0.1 over the grey base on the *other* scenes is picked and scored on the held-out
 one; the table gives the mean per set of every weight, the picks, and the held-out gain. No
 PCA here: the basis is trained on other images (``visioncell train-pca``).

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -346,7 +346,7 @@ def sample_at_rate(traj: JointTrajectory, rate_hz: float) -> JointTrajectory:
         return JointTrajectory(t, check_joints(q), z, z)
     cols = [
         np.stack([np.interp(t, traj.t_s, a[:, j]) for j in range(5)], axis=-1)
-        for a in (traj.q, traj.qd, traj.qdd)
+        for a in (traj.q, traj.qd, cast(NDArray[np.float64], traj.qdd))  # set by __post_init__
     ]
     cols[0][0], cols[0][-1] = traj.q[0], traj.q[-1]
     return JointTrajectory(t, check_joints(cols[0]), cols[1], cols[2])

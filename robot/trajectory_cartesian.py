@@ -203,7 +203,7 @@ def plan_cartesian_line(
     steps = np.abs(np.diff(np.vstack([qs, q_d]), axis=0))
     if steps.max() > max_joint_step_rad:
         i, j = np.unravel_index(int(np.argmax(steps)), steps.shape)
-        where = s_d[max(i - 1, 0)]
+        where = s_d[max(int(i) - 1, 0)]
         raise Unreachable(
             f"Cartesian line is not continuous in joint space at {100 * where:.1f} % of the "
             f"path: q{j + 1} jumps by {steps[i, j]:.3f} rad between neighbouring points "

@@ -166,14 +166,14 @@ class OpenCVCamera:
             raise ValueError(f"fps must be positive or None, got {fps!r}")
         if reconnect_attempts < 0:
             raise ValueError(f"reconnect_attempts must be >= 0, got {reconnect_attempts!r}")
-        for pname, val in (
+        for pname, seconds in (
             ("backoff_initial_s", backoff_initial_s),
             ("backoff_max_s", backoff_max_s),
             ("read_timeout_s", read_timeout_s),
             ("open_timeout_s", open_timeout_s),
         ):
-            if not val > 0:
-                raise ValueError(f"{pname} must be positive, got {val!r}")
+            if not seconds > 0:
+                raise ValueError(f"{pname} must be positive, got {seconds!r}")
         self.source = source
         self.width, self.height, self.fps, self.loop = width, height, fps, loop
         self.reconnect_attempts = reconnect_attempts
@@ -356,9 +356,11 @@ class OpenCVCamera:
 def _rgb_from_cv(img: NDArray[np.uint8]) -> NDArray[np.uint8]:
     """OpenCV BGR / BGRA / grey -> RGB uint8 (the conversion at the OpenCV edge)."""
     if img.dtype != np.uint8:
-        img = cv2.convertScaleAbs(img)
+        img = np.asarray(cv2.convertScaleAbs(img), dtype=np.uint8)
     if img.ndim == 2:
-        return cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
-    if img.shape[2] == 4:
-        return cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+        code = cv2.COLOR_GRAY2RGB
+    elif img.shape[2] == 4:
+        code = cv2.COLOR_BGRA2RGB
+    else:
+        code = cv2.COLOR_BGR2RGB
+    return np.asarray(cv2.cvtColor(img, code), dtype=np.uint8)

@@ -84,7 +84,7 @@ def read_rgb(path: str | Path) -> NDArray[np.uint8]:
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if img is None:
         raise CameraError(f"cannot read image {str(path)!r}")
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    return np.asarray(cv2.cvtColor(img, cv2.COLOR_BGR2RGB), dtype=np.uint8)
 
 
 class ImageFolderCamera:

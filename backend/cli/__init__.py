@@ -1,8 +1,8 @@
 """The ``visioncell`` command line, one module per command group: ``serve``
 (:mod:`backend.cli.serve`), ``db`` (:mod:`backend.cli.db`), ``user``
 (:mod:`backend.cli.users`), ``calibrate`` (:mod:`backend.cli.calibrate`), ``train-pca``
-(:mod:`backend.cli.features`), ``emulator`` (:mod:`backend.cli.emulator`) and ``models``
-(:mod:`backend.cli.models`)."""
+(:mod:`backend.cli.features`), ``emulator`` (:mod:`backend.cli.emulator`) ``models``
+(:mod:`backend.cli.models`) and ``inspect`` (:mod:`backend.cli.inspect`)."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from backend.cli.common import err, load_settings, out
 from backend.cli.db import db_app
 from backend.cli.emulator import emulator
 from backend.cli.features import train_pca
+from backend.cli.inspect import register as register_inspect
 from backend.cli.models import register as register_models
 from backend.cli.serve import serve
 from backend.cli.users import user_app
@@ -32,6 +33,7 @@ app.add_typer(user_app, name="user")
 app.add_typer(calibrate_app, name="calibrate")
 app.command("train-pca")(train_pca)
 register_models(app)
+register_inspect(app)
 
 
 @app.command()

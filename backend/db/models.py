@@ -319,6 +319,22 @@ class Inspection(Base):
     object_pose: Mapped[list[Any] | None] = mapped_column(JSON, default=None)
     duration_s: Mapped[float | None] = mapped_column(Float, default=None)
     note: Mapped[str] = mapped_column(Text, default="")
+    #: Name of the recognised model when inspected (kept if the model is deleted later).
+    model_name: Mapped[str | None] = mapped_column(String(64), default=None)
+    #: Recognition policy (``naive``, ``top-only``, ``two-views``, ``best-next``).
+    policy: Mapped[str] = mapped_column(String(16), server_default="two-views", index=True)
+    #: Why the decision is what it is (the failure's cause for ``failed``).
+    reason: Mapped[str] = mapped_column(Text, server_default="")
+    #: Seconds per stage (move, settle, acquire, segment, features, match, decide, pose, pick).
+    durations: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=dict)
+    #: Fused score of every model considered.
+    scores: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=dict)
+    #: Pose details (position, yaw, source of the camera model, belt prediction).
+    pose: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
+    #: Pick and sort outcome (bin, ok, stage, reason) or None when not sorted.
+    pick: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
+    #: Simulator only, for evaluation: catalogue name and true pose (the decision never reads it).
+    truth: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
 
     images: Mapped[list[InspectionImage]] = relationship(
         back_populates="inspection", cascade="all, delete-orphan"

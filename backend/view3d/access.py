@@ -215,13 +215,9 @@ class ViewAccess:
         claims = verify_view_link(link, secret=self._secret, now=now)
         if claims is None:
             return None
-        grant = await self._lookup(claims.token_id, via="link")
+        grant = await self._lookup(claims.token_id, via="link", user_id=claims.user_id)
         if grant is None:
             return None
-        async with self.db.session() as session:
-            row = await session.get(ApiToken, claims.token_id)
-            if row is None or row.user_id != claims.user_id:
-                return None
         # Never more than the link says, never more than the database says.
         return ViewGrant(
             user=grant.user, role=min(grant.role, claims.role), token_id=grant.token_id, via="link"
@@ -259,11 +255,16 @@ class ViewAccess:
             ttl_s=ttl_s,
         )
 
-    async def _lookup(self, token_id: int, *, via: str) -> ViewGrant | None:
+    async def _lookup(
+        self, token_id: int, *, via: str, user_id: int | None = None
+    ) -> ViewGrant | None:
+        """The grant of token row ``token_id`` (owned by ``user_id`` if given), or None."""
         async with self.db.session() as session:
             row = await session.scalar(
                 select(ApiToken).options(selectinload(ApiToken.user)).where(ApiToken.id == token_id)
             )
             if row is None or row.revoked or row.user.disabled:
+                return None
+            if user_id is not None and row.user_id != user_id:
                 return None
             return ViewGrant(user=row.user.name, role=Role[row.user.role], token_id=row.id, via=via)

@@ -202,6 +202,8 @@ class View3D:
                     await task
         if self._calib_frusta is not None:
             self._calib_frusta.close()
+        if getattr(self, "_inspection_scene", None) is not None:
+            self._inspection_scene.close()
         if self.server is not None:
             await asyncio.to_thread(self.server.stop)
             self.server = None
@@ -252,6 +254,13 @@ class View3D:
         # Camera poses of automatic calibration runs (backend.calibration.auto).
         self._calib_frusta = CalibrationFrusta(
             server, self.cell.calibration_views, fov_rad=self._fov_rad, aspect=self._aspect
+        )
+        # The latest inspection and the sorting bins (backend.inspection).
+        from backend.view3d.inspections import InspectionScene
+
+        bins = () if self.sim is None else self.sim.config.layout.bins
+        self._inspection_scene = InspectionScene(
+            server, self.cell.bus, bins, fov_rad=self._fov_rad, aspect=self._aspect
         )
 
     def _build_panel(self, server: viser.ViserServer) -> None:

@@ -162,10 +162,10 @@ def check_pose(pose: Sequence[float] | ArrayLike) -> tuple[float, float, float, 
     if isinstance(pose, np.ndarray):
         pose = pose.tolist()
     try:
-        x, y, z, u, w = pose  # type: ignore[misc]
+        x, y, z, u, w = pose  # type: ignore[misc,str-unpack]
         if any(isinstance(v, bool | np.bool_) for v in (x, y, z, u, w)):
             raise TypeError
-        x, y, z, u, w = float(x), float(y), float(z), float(u), float(w)
+        x, y, z, u, w = float(x), float(y), float(z), float(u), float(w)  # type: ignore[arg-type]
     except (TypeError, ValueError):
         raise ValueError(f"pose must be five numbers (x, y, z, u, w), got {pose!r}") from None
     if not all(abs(v) <= MAX_ABS_POSITION_M for v in (x, y, z)):
@@ -190,7 +190,7 @@ def _unpack_seed(seed: ArrayLike | None, c: ArmConstants) -> tuple[float, ...]:
         vals = seed.tolist() if isinstance(seed, np.ndarray) else list(seed)  # type: ignore[arg-type]
         if len(vals) != 5:
             raise ValueError
-        s = (float(vals[0]), float(vals[1]), float(vals[2]), float(vals[3]), float(vals[4]))
+        s = (float(vals[0]), float(vals[1]), float(vals[2]), float(vals[3]), float(vals[4]))  # type: ignore[arg-type]
     except (TypeError, ValueError):
         raise ValueError(f"seed must be 5 finite joint values (radians), got {seed!r}") from None
     if not all(map(math.isfinite, s)):

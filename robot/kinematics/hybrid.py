@@ -74,12 +74,12 @@ def nominal_model_estimator(
         raise ValueError(f"length_errors_m must hold 5 values, got {length_errors_m!r}")
     if not range_margin_rad >= 0.0:
         raise ValueError(f"range_margin_rad must be >= 0, got {range_margin_rad!r}")
-    lengths = tuple(a + b for a, b in zip(model.link_lengths_m, length_errors_m, strict=True))
+    l1, l2, l3, l4, l5 = (a + b for a, b in zip(model.link_lengths_m, length_errors_m, strict=True))
     limits = model.joint_limits_rad + np.array([-range_margin_rad, range_margin_rad])
     nominal = replace(
         model,
         name=f"{model.name} (nominal lengths)",
-        link_lengths_m=lengths,
+        link_lengths_m=(l1, l2, l3, l4, l5),
         joint_limits_rad=limits,
     )
 

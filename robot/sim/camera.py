@@ -200,7 +200,8 @@ class Lens:
     def maps(self) -> tuple[NDArray[np.int16], NDArray[np.uint16]]:
         """Fixed-point ``cv2.remap`` maps from the ideal canvas to the distorted image."""
         mx, my = self.spec.pinhole.distort_maps(self.K_ideal)
-        return cv2.convertMaps(mx, my, cv2.CV_16SC2)
+        m1, m2 = cv2.convertMaps(mx, my, cv2.CV_16SC2)
+        return np.asarray(m1, dtype=np.int16), np.asarray(m2, dtype=np.uint16)
 
     @cached_property
     def nearest_maps(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
@@ -220,7 +221,7 @@ class Lens:
         out = cv2.remap(
             ideal.astype(np.float32), mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_REPLICATE
         )
-        return out.astype(np.int32)
+        return np.asarray(out).astype(np.int32)
 
     def distort(self, ideal: NDArray[np.uint8]) -> NDArray[np.uint8]:
         """The image the lens records from an ideal render of the canvas."""
@@ -229,7 +230,8 @@ class Lens:
                 f"ideal image must be {self.ideal_height}x{self.ideal_width}, got {ideal.shape[:2]}"
             )
         m1, m2 = self.maps
-        return cv2.remap(ideal, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        out = cv2.remap(ideal, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return np.asarray(out, dtype=np.uint8)
 
 
 class Sensor:
@@ -253,7 +255,11 @@ class Sensor:
     def apply(self, image: NDArray[np.uint8], spec: CameraSpec) -> NDArray[np.uint8]:
         """The recorded image for the ideal exposure ``image`` (uint8, H x W x 3)."""
         scale = spec.gain * spec.exposure_s / spec.reference_exposure_s
-        img = image if abs(scale - 1.0) < 1e-9 else cv2.convertScaleAbs(image, alpha=scale)
+        img = (
+            image
+            if abs(scale - 1.0) < 1e-9
+            else np.asarray(cv2.convertScaleAbs(image, alpha=scale), dtype=np.uint8)
+        )
         if spec.noise_std_dn <= 0:
             return img
         if img.size != self._size:

@@ -517,7 +517,7 @@ def _entries() -> dict[str, CatalogueEntry]:
         out[name] = CatalogueEntry(
             name, "wheel", True, desc, name, functools.partial(build_wheel, design)
         )
-    parts = [
+    parts: list[tuple[str, bool, str, str, Callable[[], ObjectGeometry]]] = [
         (
             "gear-housing",
             True,

@@ -193,8 +193,8 @@ def box(
     ]
     half = np.array([sx, sy, sz])
     verts, norms, uvs, faces = [], [], [], []
-    for f, ((n, r, u), (u0, v0, u1, v1)) in enumerate(zip(frames, tiles, strict=True)):
-        n, r, u = (np.array(a, dtype=np.float64) for a in (n, r, u))
+    for f, (axes, (u0, v0, u1, v1)) in enumerate(zip(frames, tiles, strict=True)):
+        n, r, u = (np.array(a, dtype=np.float64) for a in axes)
         c0 = n * half
         hr, hu = np.abs(r) @ half, np.abs(u) @ half
         corners = [

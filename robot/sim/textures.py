@@ -48,7 +48,7 @@ def _noise(
 ) -> NDArray[np.float32]:
     n = rng.normal(0.0, sigma, size=shape).astype(np.float32)
     if blur > 1:
-        n = cv2.GaussianBlur(n, (0, 0), blur)
+        n = np.asarray(cv2.GaussianBlur(n, (0, 0), blur), dtype=np.float32)
         n *= sigma / max(float(n.std()), 1e-6)
     return n
 
@@ -56,7 +56,7 @@ def _noise(
 def _finish(img_f: NDArray[np.float32], size: tuple[int, int] | None = None) -> Image:
     out = np.clip(img_f, 0, 255).astype(np.uint8)
     if size is not None:
-        out = cv2.resize(out, size, interpolation=cv2.INTER_AREA)
+        out = np.asarray(cv2.resize(out, size, interpolation=cv2.INTER_AREA), dtype=np.uint8)
     return out
 
 

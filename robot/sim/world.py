@@ -266,7 +266,7 @@ class Conveyor:
             self._holding = False
             self._dwell_left = 0.0
         if dwell_s != "keep":
-            self.dwell_s = None if dwell_s is None else float(dwell_s)  # type: ignore[arg-type]
+            self.dwell_s = None if dwell_s is None else float(dwell_s)
         if running is not None:
             self.running = bool(running)
         return self.state

@@ -4,20 +4,17 @@ started with the options ``visioncell serve`` uses."""
 
 from __future__ import annotations
 
-import asyncio
 import json
 import socket
-import threading
-import time
 from collections.abc import Iterator
 
 import httpx
 import pytest
-import uvicorn
 
-from backend.api.limits import MAX_URL_BYTES, uvicorn_options
+from backend.api.limits import MAX_URL_BYTES
 from backend.app import create_app
 from tests.utils.factories import make_settings, make_tokens, migrate
+from tests.utils.servers import run_uvicorn
 
 
 @pytest.fixture(scope="module")
@@ -26,25 +23,8 @@ def server(tmp_path_factory) -> Iterator[tuple[str, dict[str, str]]]:
     settings = make_settings(tmp)
     migrate(settings)
     token = make_tokens(settings)["viewer"]
-    sock = socket.socket()
-    sock.bind(("127.0.0.1", 0))
-    port = sock.getsockname()[1]
-    config = uvicorn.Config(
-        create_app(settings), log_level="warning", lifespan="on", **uvicorn_options()
-    )
-    srv = uvicorn.Server(config)
-    thread = threading.Thread(target=lambda: asyncio.run(srv.serve(sockets=[sock])), daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 30
-    while not srv.started and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert srv.started, "uvicorn did not start"
-    try:
-        yield f"http://127.0.0.1:{port}", {"Authorization": f"Bearer {token}"}
-    finally:
-        srv.should_exit = True
-        thread.join(timeout=15)
-        sock.close()
+    with run_uvicorn(create_app(settings)) as srv:
+        yield srv.base, {"Authorization": f"Bearer {token}"}
 
 
 def _raw(base: str, request: bytes) -> tuple[int, dict[str, str], bytes]:

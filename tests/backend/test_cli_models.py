@@ -90,3 +90,15 @@ def test_bad_input_is_named(tmp_path):
     assert r.returncode == 2 and "viewpoint must be 1, 2 or 3" in r.stderr
     r = _run(["remove", "nobody"], tmp_path)
     assert r.returncode == 2 and "no object model named 'nobody'" in r.stderr
+
+
+def test_teach_names_an_unreachable_cell_and_bad_options(tmp_path):
+    from tests.utils.factories import free_port
+
+    url = f"http://127.0.0.1:{free_port()}"
+    r = _run(["teach", "gear", "--token", "t", "--url", url], tmp_path)
+    assert r.returncode == 2 and f"cannot reach the cell at {url}" in r.stderr
+    r = _run(["teach", "gear", "--token", "t", "--url", url, "--background", "later"], tmp_path)
+    assert r.returncode == 2 and "'later'" in r.stderr
+    r = _run(["teach", "gear", "--token", "t", "--url", url, "--viewpoints", "1,x"], tmp_path)
+    assert r.returncode == 2 and "'1,x'" in r.stderr

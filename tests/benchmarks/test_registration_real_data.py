@@ -87,3 +87,36 @@ def test_real_comparison_counts_ties_and_wins_per_pair():
     c = real_comparison(rows, "color-sift", "sift")
     assert c["sfu-linear8"]["pairs"] == 2 and c["all"]["share_ge"] == 0.5
     assert c["all"]["colour"] == pytest.approx(0.45) and c["all"]["grey"] == pytest.approx(0.45)
+
+
+@needs_sfu
+@pytest.mark.slow
+def test_benchmark_runs_the_real_sets_with_the_grey_base(tmp_path, capsys):
+    import json
+
+    from benchmarks.registration import main
+
+    code = main(
+        [
+            "--quick",
+            "--json",
+            "--no-variants",
+            "--methods",
+            "color-sift",
+            "--sequences",
+            "sfu-linear8",
+            "--plots",
+            str(tmp_path),
+            "--max-features",
+            "300",
+        ]
+    )
+    assert code == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert result["methods"] == ["sift", "color-sift", "color-sift:full"]
+    real = result["real_illumination"]["color-sift"]
+    assert real["sfu-linear8"]["pairs"] == 4 and 0 <= real["all"]["share_ge"] <= 1
+    names = [t["target"] for t in result["targets"]]
+    assert "color-sift >= sift on >= 80 % of all real pairs" in names
+    assert "color-sift extraction <= 2x sift (640x480)" in names
+    assert (tmp_path / "real_illumination.png").stat().st_size > 1000

@@ -109,4 +109,17 @@ def test_the_console_view_arrives_signed_in_and_moves_the_arm(browser, shared_se
         timeout=30_000,
     )
     assert not _close_to(_joints(server, op), ready)
+
+    # Signing out of the console unmounts the page: the embedded view's connection closes.
+    page.click("#logout")
+    page.wait_for_selector("#login-page:not([hidden])")
+    deadline = time.monotonic() + 30
+    while True:
+        status = httpx.get(
+            f"{server.base}/api/status", headers={"Authorization": f"Bearer {op}"}, timeout=10
+        ).json()["view3d"]
+        if status["clients"] == 0:
+            break
+        assert time.monotonic() < deadline, status
+        time.sleep(0.3)
     page.close()

@@ -135,8 +135,8 @@ def refine_charuco_corners(
     if len(idx) < 4:
         return out
     g = gray.astype(np.float32)
-    gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) / 8.0
-    gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    gx = np.asarray(cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), dtype=np.float32) / np.float32(8.0)
+    gy = np.asarray(cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3), dtype=np.float32) / np.float32(8.0)
     X = board.object_points()[idx, :2]
     gap = 0.5 * (board.square_m - board.marker_m)
     for k in range(len(idx)):
@@ -144,7 +144,8 @@ def refine_charuco_corners(
         H, _ = cv2.findHomography(X[near], pts[near], 0)
         if H is None or not np.isfinite(H).all() or abs(np.linalg.det(H)) < 1e-12:
             continue
-        J = _jacobian(H, float(X[k, 0]), float(X[k, 1]))
+        H64 = np.asarray(H, dtype=np.float64)
+        J = _jacobian(H64, float(X[k, 0]), float(X[k, 1]))
         if abs(np.linalg.det(J)) < 1e-9:
             continue
         m_per_px = float(np.abs(np.linalg.inv(J)).sum(axis=1).max())
@@ -154,7 +155,7 @@ def refine_charuco_corners(
         clear_m = gap - MARKER_CLEARANCE_PX * m_per_px
         if clear_m <= 0.0:
             continue
-        p = _locate(gx, gy, pts[k], np.linalg.inv(H), X[k], half, clear_m)
+        p = _locate(gx, gy, pts[k], np.linalg.inv(H64).astype(np.float64), X[k], half, clear_m)
         if p is not None:
             out[k] = p
     return out

@@ -250,7 +250,7 @@ class HandEyeResult:
     @property
     def T_cam_ee(self) -> NDArray[np.float64]:
         """The chapter's ``H_ee^camera`` of eq. 12 (maps flange points into the camera)."""
-        return np.linalg.inv(self.T_ee_cam)
+        return np.linalg.inv(self.T_ee_cam).astype(np.float64)
 
     def _stat(self, attr: str) -> tuple[float, float]:
         v = np.array([getattr(p, attr) for p in self.poses])

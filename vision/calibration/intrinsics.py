@@ -355,10 +355,10 @@ def _solve(
     poses = [pose_from_rvec(r, t) for r, t in zip(rvecs, tvecs, strict=True)]
     return (
         float(rms),
-        np.asarray(K),
-        np.asarray(dist).ravel()[:5],
+        np.asarray(K, dtype=np.float64),
+        np.asarray(dist, dtype=np.float64).ravel()[:5],
         poses,
-        np.asarray(std_in).ravel(),
+        np.asarray(std_in, dtype=np.float64).ravel(),
     )
 
 

@@ -38,7 +38,7 @@ def read_gray(path: str | Path) -> NDArray[np.uint8]:
     img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     if img is None:
         raise ImageError(f"cannot read image {str(path)!r}")
-    return img
+    return np.asarray(img, dtype=np.uint8)
 
 
 def parse_poses(text: str, *, unit_m: float = 1.0, source: str = "poses") -> NDArray[np.float64]:

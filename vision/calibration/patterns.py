@@ -97,7 +97,7 @@ def to_gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
     if img.ndim == 2:
         return img
     if img.ndim == 3 and img.shape[2] == 3:
-        return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+        return np.asarray(cv2.cvtColor(img, cv2.COLOR_RGB2GRAY), dtype=np.uint8)
     raise ImageError(f"image must have shape (H, W) or (H, W, 3), got {img.shape}")
 
 
@@ -166,7 +166,7 @@ def _find_classic(gray: NDArray[np.uint8], board: Chessboard) -> NDArray[np.floa
         return None
     c = np.asarray(c, dtype=np.float32).reshape(-1, 1, 2)
     # Search window: a bit less than half a square, so it never reaches the next corner.
-    half = int(np.clip(0.4 * _corner_spacing(c.reshape(-1, 2), board), 2, 11))
+    half = int(np.clip(0.4 * _corner_spacing(c.reshape(-1, 2).astype(np.float64), board), 2, 11))
     c = cv2.cornerSubPix(gray, c, (half, half), (-1, -1), _SUBPIX_CRITERIA)
     return np.asarray(c, dtype=np.float64).reshape(-1, 2)
 
@@ -181,7 +181,9 @@ def _find_chessboard(
         # Coarse search at reduced size, then the accurate detector at full resolution in a
         # crop around the board (two squares of margin).  INTER_AREA maps full-resolution
         # pixel p to (p + 0.5) * scale - 0.5.
-        small = cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        small = np.asarray(
+            cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA), np.uint8
+        )
         coarse = _find_sb(small, board, cv2.CALIB_CB_NORMALIZE_IMAGE)
         if coarse is None:
             coarse = _find_classic(small, board)
@@ -204,7 +206,9 @@ def _find_chessboard(
     # The sector-based detector misses boards that touch the image border; a replicated
     # border gives it room.
     pad = max(16, int(0.06 * max(hgt, wid)))
-    padded = cv2.copyMakeBorder(gray, pad, pad, pad, pad, cv2.BORDER_REPLICATE)
+    padded = np.asarray(
+        cv2.copyMakeBorder(gray, pad, pad, pad, pad, cv2.BORDER_REPLICATE), np.uint8
+    )
     found = _find_sb(padded, board, acc)
     if found is not None:
         inside = (found >= pad).all(axis=1) & (found[:, 0] < wid + pad) & (found[:, 1] < hgt + pad)

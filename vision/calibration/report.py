@@ -98,7 +98,7 @@ def _hand_eye_bars(ax: Any, r: HandEyeResult) -> None:
     ax.legend(h1 + h2, l1 + l2, fontsize=7, loc="upper left")
 
 
-def _coverage(ax: Any, cov: CoverageMap, title: str) -> None:
+def _coverage(ax: Any, cov: CoverageMap, title: str) -> Any:
     w, h = cov.image_size
     counts = cov.counts
     im = ax.imshow(

@@ -52,7 +52,7 @@ def board_picture(board: Board, *, px_per_square: int = 48) -> tuple[NDArray[np.
     else:
         raise ValueError(f"board must be a Chessboard or a CharucoBoard, got {board!r}")
     picture = cv2.copyMakeBorder(pattern, p, p, p, p, cv2.BORDER_CONSTANT, value=255)
-    return picture, p / board.square_m
+    return np.asarray(picture, dtype=np.uint8), p / board.square_m
 
 
 @dataclass
@@ -141,11 +141,14 @@ class BoardRenderer:
         img = 20.0 + img * (220.0 / 255.0)
         k = int(self.supersample)
         if k > 1:
-            img = cv2.resize(
-                img, (self.camera.width, self.camera.height), interpolation=cv2.INTER_AREA
+            img = np.asarray(
+                cv2.resize(
+                    img, (self.camera.width, self.camera.height), interpolation=cv2.INTER_AREA
+                ),
+                dtype=img.dtype,
             )
         if blur_sigma_px > 0:
-            img = cv2.GaussianBlur(img, (0, 0), float(blur_sigma_px))
+            img = np.asarray(cv2.GaussianBlur(img, (0, 0), float(blur_sigma_px)), img.dtype)
         if noise_std > 0:
             gen = rng if rng is not None else np.random.default_rng(0)
             img = img + gen.normal(0.0, float(noise_std), img.shape).astype(np.float32)

@@ -36,6 +36,8 @@ taken as linear values with ``white_level`` (default 65535) as full scale.
 
 from __future__ import annotations
 
+from typing import Any
+
 import cv2
 import numpy as np
 
@@ -118,7 +120,7 @@ def describe_colour_sift(rgb: np.ndarray, keypoints: list[cv2.KeyPoint]) -> np.n
     (as returned by its detector, with the packed octave), concatenated: (N, 384) float32."""
     if not keypoints:
         return np.zeros((0, 384), np.float32)
-    sift = cv2.SIFT_create()
+    sift = cv2.SIFT_create()  # type: ignore[attr-defined]
     parts = []
     for mu8 in m_images_uint8(m_images(rgb)):
         kk, d = sift.compute(mu8, list(keypoints))
@@ -267,7 +269,7 @@ def colour_features(
     if reduce and basis is None:
         basis = default_basis(kind)
     grey = detection_grey(rgb, white_level=white_level)
-    detect = {"max_features": max_features, "threshold": threshold, "mask": mask}
+    detect: dict[str, Any] = {"max_features": max_features, "threshold": threshold, "mask": mask}
     if base == "sift" and base_options:
         raise ValueError(f"unknown options for color-sift: {', '.join(base_options)}")
     if layout == "joint":
@@ -289,6 +291,7 @@ def colour_features(
         raw_version = _VERSION_RAW.format(base=base)
     if not reduce:
         return Features(kp, raw, method, raw_version, False, grey.shape)
+    assert basis is not None  # set above whenever reduce is true
     if basis.dim_in != raw.shape[1]:
         raise ValueError(
             f"basis {basis.kind!r} reduces {basis.dim_in}-dim vectors, {method} gives "

@@ -37,15 +37,18 @@ def keypoints_to_cv(kp: Keypoints) -> list[cv2.KeyPoint]:
     ]
 
 
-def _create(method: str, max_features: int | None, threshold: float | None):
+def _create(
+    method: str, max_features: int | None, threshold: float | None
+) -> tuple[cv2.Feature2D, bool]:
+    # cv2's stubs do not declare the *_create factories at module level.
     if method == "sift":
         kw = {} if threshold is None else {"contrastThreshold": threshold}
-        return cv2.SIFT_create(nfeatures=max_features or 0, **kw), False
+        return cv2.SIFT_create(nfeatures=max_features or 0, **kw), False  # type: ignore[attr-defined]
     if method == "orb":
-        return cv2.ORB_create(nfeatures=max_features or 1000), True
+        return cv2.ORB_create(nfeatures=max_features or 1000), True  # type: ignore[attr-defined]
     if method == "akaze":
         kw = {} if threshold is None else {"threshold": threshold}
-        return cv2.AKAZE_create(**kw), True
+        return cv2.AKAZE_create(**kw), True  # type: ignore[attr-defined]
     raise ValueError(f"unknown OpenCV method {method!r}")
 
 

@@ -34,7 +34,7 @@ def detect_sift(
     if max_features is not None and max_features < 1:
         raise ValueError(f"max_features must be >= 1, got {max_features!r}")
     kw = {} if threshold is None else {"contrastThreshold": float(threshold)}
-    det = cv2.SIFT_create(nfeatures=max_features or 0, **kw)
+    det = cv2.SIFT_create(nfeatures=max_features or 0, **kw)  # type: ignore[attr-defined]
     m = None if mask is None else (np.asarray(mask) > 0).astype(np.uint8)
     kps = list(det.detect(grey, m))
     if max_features and len(kps) > max_features:
@@ -90,7 +90,7 @@ def sample_patches(
     pyr = img
     for lev in range(int(level.max()) + 1):
         if lev > 0:
-            pyr = cv2.pyrDown(pyr)
+            pyr = np.asarray(cv2.pyrDown(pyr), dtype=pyr.dtype)
         idx = np.nonzero(level == lev)[0]
         if len(idx) == 0:
             continue
@@ -146,4 +146,5 @@ def reduced_sift_features(
     raw = describe_raw(grey, kp)
     if not reduce:
         return Features(kp, raw, kind, raw_version, False, grey.shape[:2])
+    assert basis is not None  # set above whenever reduce is true
     return Features(kp, basis.project(raw), kind, basis.version, False, grey.shape[:2])

@@ -172,6 +172,8 @@ def train_basis(
         "opencv": cv2.__version__,
         **(provenance or {}),
     }
+    if k is None:
+        raise ValueError(f"k must be given for a basis of kind {kind!r} (no standard size)")
     basis = fit_pca(samples, int(k), kind=kind, provenance=record)
     prov = dict(basis.provenance, dim_in=basis.dim_in, k=basis.dim_out)
     prov["explained_variance"] = round(basis.explained_variance, 6)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -49,7 +50,7 @@ class Keypoints:
     def __post_init__(self) -> None:
         n = len(self.xy)
         xy = np.asarray(self.xy, dtype=np.float64).reshape(n, 2)
-        cols = {
+        cols: dict[str, np.ndarray] = {
             "size_px": np.asarray(self.size_px, dtype=np.float64).reshape(-1),
             "angle_rad": np.asarray(self.angle_rad, dtype=np.float64).reshape(-1),
             "response": np.asarray(self.response, dtype=np.float64).reshape(-1),
@@ -150,7 +151,7 @@ class Features:
         """Serialise to a compressed ``.npz`` blob (the database's feature column)."""
         buf = io.BytesIO()
         kp = self.keypoints
-        extra = {} if kp.shape is None else {"shape": kp.shape}
+        extra: dict[str, Any] = {} if kp.shape is None else {"shape": kp.shape}
         np.savez_compressed(
             buf,
             xy=kp.xy,
@@ -185,7 +186,7 @@ class Features:
                     method,
                     version,
                     binary == "1",
-                    tuple(int(v) for v in z["image_shape"]),
+                    (int(z["image_shape"][0]), int(z["image_shape"][1])),
                 )
         except (OSError, KeyError, ValueError) as exc:
             raise ValueError(f"not a serialised Features blob: {exc}") from exc

@@ -32,8 +32,9 @@ FLANN_MIN_PRODUCT = 2_250_000
 MATCH_METHODS = ("auto", "exact", "flann")
 
 # FLANN index parameters (OpenCV's flann enums: 1 = KD-tree forest, 6 = LSH).
-_KDTREE = {"algorithm": 1, "trees": 4}
-_LSH = {"algorithm": 6, "table_number": 12, "key_size": 16, "multi_probe_level": 2}
+_FlannParams = dict[str, bool | int | float | str]
+_KDTREE: _FlannParams = {"algorithm": 1, "trees": 4}
+_LSH: _FlannParams = {"algorithm": 6, "table_number": 12, "key_size": 16, "multi_probe_level": 2}
 _CHECKS = 64
 
 
@@ -147,10 +148,12 @@ def _choose(method: str, n_a: int, n_b: int) -> str:
 
 
 def _knn(query: np.ndarray, train: np.ndarray, binary: bool, search: str, k: int):
+    matcher: cv2.DescriptorMatcher
     if search == "exact":
         matcher = cv2.BFMatcher(cv2.NORM_HAMMING if binary else cv2.NORM_L2)
     else:
-        matcher = cv2.FlannBasedMatcher(_LSH if binary else _KDTREE, {"checks": _CHECKS})
+        search_params: _FlannParams = {"checks": _CHECKS}
+        matcher = cv2.FlannBasedMatcher(_LSH if binary else _KDTREE, search_params)
     return matcher.knnMatch(query, train, k=min(k, len(train)))
 
 

@@ -230,5 +230,5 @@ def sample_remap(field: NDArray[np.float32], xy: NDArray[np.float64]) -> NDArray
     take the nearest border value.  Returns (N, C) float64.
     """
     m = xy.astype(np.float32).reshape(-1, 1, 2)
-    out = cv2.remap(field, m, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return out.reshape(xy.shape[0], -1).astype(np.float64)
+    out = cv2.remap(field, m, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)  # type: ignore[call-overload]
+    return np.asarray(out).reshape(xy.shape[0], -1).astype(np.float64)

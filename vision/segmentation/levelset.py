@@ -220,7 +220,7 @@ class _Data:
 def _blur(a: NDArray[np.float32], sigma: float) -> NDArray[np.float32]:
     """Gaussian blur (std ``sigma``) keeping the channel axis, reflected borders."""
     out = cv2.GaussianBlur(a, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
-    return out.reshape(a.shape)
+    return np.asarray(out, dtype=np.float32).reshape(a.shape)
 
 
 @dataclass
@@ -539,11 +539,11 @@ def chan_vese(
     snaps_wanted = frozenset(check_int(int(s), "snapshot_at", minimum=0) for s in snapshot_at)
 
     masks = [mask0]
-    for lev in levels[1:]:
+    for level_img in levels[1:]:
         masks.append(
             cv2.resize(
                 masks[-1].astype(np.uint8),
-                (lev.shape[1], lev.shape[0]),
+                (level_img.shape[1], level_img.shape[0]),
                 interpolation=cv2.INTER_AREA,
             )
             > 0

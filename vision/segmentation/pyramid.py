@@ -33,7 +33,7 @@ def gaussian_pyramid(image: NDArray[np.float32], levels: int) -> list[NDArray[np
         )
     out = [image]
     for _ in range(levels):
-        out.append(cv2.pyrDown(out[-1], borderType=cv2.BORDER_REFLECT))
+        out.append(np.asarray(cv2.pyrDown(out[-1], borderType=cv2.BORDER_REFLECT), out[-1].dtype))
     return out
 
 

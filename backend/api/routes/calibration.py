@@ -11,7 +11,7 @@ from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
-from fastapi import APIRouter, File, Form, Path, Query, UploadFile, status
+from fastapi import APIRouter, Depends, File, Form, Path, Query, UploadFile, status
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, Field, model_validator
 
@@ -241,6 +241,23 @@ def _joints(text: str | None, n: int) -> list[list[float] | None]:
     return out
 
 
+# -- lookups (404 as a dependency) --------------------------------------------------------
+
+
+async def get_calibration_session(session: SessionDep, session_id: DbId) -> Any:
+    """The calibration session with its samples; :class:`NotFound` (404) otherwise."""
+    return await svc.get_session(session, session_id)
+
+
+async def get_calibration_row(session: SessionDep, calibration_id: DbId) -> Any:
+    """The calibration; :class:`NotFound` (404) otherwise."""
+    return await svc.get_calibration(session, calibration_id)
+
+
+CalibrationSessionDep = Annotated[Any, Depends(get_calibration_session)]
+CalibrationDep = Annotated[Any, Depends(get_calibration_row)]
+
+
 # -- sessions -----------------------------------------------------------------------------
 
 
@@ -292,10 +309,7 @@ def _sample_public(s: Any) -> dict[str, Any]:
     summary="One session with its samples and calibrations",
     response_model=SessionDetailOut,
 )
-async def read_calibration_session(
-    _: ViewerUser, session: SessionDep, session_id: DbId
-) -> dict[str, Any]:
-    row = await svc.get_session(session, session_id)
+async def read_calibration_session(_: ViewerUser, row: CalibrationSessionDep) -> dict[str, Any]:
     cals = sorted(row.calibrations, key=lambda c: c.id, reverse=True)
     return {
         "session": svc.session_summary(row),
@@ -382,11 +396,12 @@ async def create_calibration_samples(
 async def read_calibration_sample_image(
     _: ViewerUser, session: SessionDep, session_id: DbId, index: DbIndex
 ) -> Response:
+    # Looked up here, not by a dependency, so that a bad index is a 422 before any 404.
     row = await svc.get_session(session, session_id)
     for s in row.samples:
         if s.index == index:
             return Response(s.image_png, media_type="image/png")
-    raise NotFound(f"session {session_id} has no sample {index}")
+    raise NotFound(f"session {row.id} has no sample {index}")
 
 
 @router.post(
@@ -487,12 +502,8 @@ async def read_active_calibrations(
 @router.get(
     "/calibrations/{calibration_id}", summary="One calibration", response_model=CalibrationOut
 )
-async def read_calibration(
-    _: ViewerUser, session: SessionDep, calibration_id: DbId
-) -> dict[str, Any]:
-    return {
-        "calibration": svc.calibration_public(await svc.get_calibration(session, calibration_id))
-    }
+async def read_calibration(_: ViewerUser, cal: CalibrationDep) -> dict[str, Any]:
+    return {"calibration": svc.calibration_public(cal)}
 
 
 @router.get(
@@ -500,10 +511,8 @@ async def read_calibration(
     summary="Report: summary and plot links",
     response_model=Open,
 )
-async def read_calibration_report(
-    _: ViewerUser, session: SessionDep, calibration_id: DbId
-) -> dict[str, Any]:
-    return svc.calibration_report(await svc.get_calibration(session, calibration_id))
+async def read_calibration_report(_: ViewerUser, cal: CalibrationDep) -> dict[str, Any]:
+    return svc.calibration_report(cal)
 
 
 @router.get(
@@ -512,12 +521,9 @@ async def read_calibration_report(
     response_class=Response,
     responses={200: {"content": {"image/png": {}}, "description": "The plot"}},
 )
-async def read_calibration_plot(
-    _: ViewerUser, session: SessionDep, calibration_id: DbId, plot: PlotName
-) -> Response:
+async def read_calibration_plot(_: ViewerUser, cal: CalibrationDep, plot: PlotName) -> Response:
     import asyncio
 
-    cal = await svc.get_calibration(session, calibration_id)
     png = await asyncio.to_thread(svc.report_png, cal, plot)
     return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 

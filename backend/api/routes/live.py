@@ -16,6 +16,8 @@ Messages from the server (JSON objects, ``type`` first):
   console can follow jobs from these messages alone, without polling ``/api/jobs``).
 - ``{"type": "camera", "camera": {"name", "ok", "frames", "fps", "error", "retries"}}``: the
   camera's health changed.
+- ``{"type": "inspection", "inspection": {...}}``: an inspection ended (id, decision, model,
+  reason, score, viewpoints, T_base_obj, the cameras of the views, pick);
 - ``{"type": "estop", "active": bool, "conveyors": [names]}``: the cell-wide emergency stop
   was pressed or reset.
 """
@@ -30,6 +32,7 @@ from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
+from backend.inspection.service import InspectionDone
 from backend.api.deps import get_runtime, get_settings
 from backend.api.errors import ApiError
 from backend.auth import authenticate
@@ -51,6 +54,8 @@ def _message(event: Any) -> dict[str, Any] | None:
         return {"type": "camera", "camera": event.as_dict()}
     if isinstance(event, CellStopped):
         return {"type": "estop", "active": event.active, "conveyors": list(event.conveyors)}
+    if isinstance(event, InspectionDone):
+        return {"type": "inspection", "inspection": event.as_dict()}
     return None
 
 
@@ -84,7 +89,9 @@ async def live(ws: WebSocket) -> None:
             return
         user_name, role = user.name, user.role
 
-    sub = cell.bus.subscribe(ArmState, JobState, JobProgress, CameraStatus, CellStopped)
+    sub = cell.bus.subscribe(
+        ArmState, JobState, JobProgress, CameraStatus, CellStopped, InspectionDone
+    )
 
     async def drain_incoming() -> None:
         while True:

@@ -468,8 +468,8 @@ class SerialDriver:
                 task = asyncio.create_task(self._cmd(point(i)))
                 tasks.append(task)
                 pending.add(task)
-            for d in asyncio.as_completed(pending):
-                await d
+            for fut in asyncio.as_completed(pending):
+                await fut
         except CommandSuperseded as exc:
             raise RobotBusy(f"emergency stop during upload: move {mid} was not started") from exc
         except CommandRejected as exc:
@@ -484,7 +484,7 @@ class SerialDriver:
             await asyncio.gather(*tasks, return_exceptions=True)
 
     @staticmethod
-    def _refusal(exc: CommandRejected) -> DriverError:
+    def _refusal(exc: CommandRejected) -> RobotError:
         if exc.nak_code in ("BUSY", "ESTOP"):
             return RobotBusy(str(exc))
         return exc

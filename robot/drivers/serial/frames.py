@@ -178,9 +178,12 @@ class MoveJoints(Command):
     MOTION: ClassVar[bool] = True
 
     def args(self) -> list[str]:
-        if (self.duration_s is None) == (self.speed is None):
+        if self.speed is not None and self.duration_s is None:
+            mode = ["S", fmt(self.speed, 4)]
+        elif self.duration_s is not None and self.speed is None:
+            mode = ["T", fmt(self.duration_s, 4)]
+        else:
             raise ValueError("MOVE needs exactly one of duration_s and speed")
-        mode = ["T", fmt(self.duration_s, 4)] if self.speed is None else ["S", fmt(self.speed, 4)]
         return [str(self.mid), *fmt_vec(self.q), *mode]
 
     @classmethod

@@ -34,6 +34,7 @@ import contextlib
 import logging
 import time
 from collections.abc import Awaitable, Callable
+from typing import Any
 
 from robot.backoff import Backoff
 from robot.drivers.serial.device import SerialDevice
@@ -191,11 +192,12 @@ class LinkSupervisor:
         up = False
         why = "port closed during the handshake"
         try:
-            await asyncio.wait({handshake, link.closed}, return_when=asyncio.FIRST_COMPLETED)
+            ends: set[asyncio.Future[Any]] = {handshake, link.closed}
+            await asyncio.wait(ends, return_when=asyncio.FIRST_COMPLETED)
             if handshake.done() and not handshake.cancelled():
-                exc = handshake.exception()
-                if exc is not None:
-                    why = f"handshake failed: {exc}"
+                error = handshake.exception()
+                if error is not None:
+                    why = f"handshake failed: {error}"
                 else:
                     up = True
                     self.ready.set()

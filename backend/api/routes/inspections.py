@@ -1,0 +1,129 @@
+"""Inspections: one object (a job), continuous operation (start, stop), the stored results.
+
+Reading needs the viewer role; inspecting, running and stopping need the operator role.
+The work is in :mod:`backend.inspection`; handlers only parse, call it and shape the answer.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, Path, Query, status
+from fastapi.responses import Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from backend.api.deps import OperatorUser, RuntimeDep, SessionDep, ViewerUser
+from backend.api.types import DbId, Limit, Offset
+from backend.inspection import results, service
+
+__all__ = ["router"]
+
+router = APIRouter(tags=["inspections"])
+
+Policy = Literal["naive", "top-only", "two-views", "best-next"]
+
+
+class InspectIn(BaseModel):
+    """Options of one inspection (see ``backend.inspection.service.InspectOptions``)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    policy: Policy = "two-views"
+    sort: bool = Field(False, description="Pick and sort into the part's bin")
+    max_views: int = Field(3, ge=1, le=3)
+    wait_s: float = Field(60.0, ge=0.0, le=service.MAX_WAIT_S, allow_inf_nan=False)
+    speed: float | None = Field(None, gt=0.0, le=1.0, allow_inf_nan=False)
+
+    def options(self) -> service.InspectOptions:
+        return service.InspectOptions(**self.model_dump())
+
+
+class RunIn(InspectIn):
+    """Continuous operation: inspect objects until stopped, or ``count`` of them."""
+
+    count: int | None = Field(None, ge=1, le=service.MAX_COUNT)
+
+    def options(self) -> service.InspectOptions:
+        return service.InspectOptions(**self.model_dump(exclude={"count"}))
+
+
+class JobAccepted(BaseModel):
+    job: dict[str, Any]
+
+
+@router.post(
+    "/inspections",
+    response_model=JobAccepted,
+    status_code=status.HTTP_202_ACCEPTED,
+    summary="Inspect the object at the station: a job whose result names the inspection (operator)",
+)
+async def create_inspection(_: OperatorUser, rt: RuntimeDep, body: InspectIn) -> dict[str, Any]:
+    job = await service.start_inspection(rt, body.options())
+    return {"job": job.public()}
+
+
+@router.post(
+    "/inspection/run",
+    response_model=JobAccepted,
+    status_code=status.HTTP_202_ACCEPTED,
+    summary="Start continuous inspection (operator)",
+)
+async def start_run(_: OperatorUser, rt: RuntimeDep, body: RunIn) -> dict[str, Any]:
+    run = service.start_run(rt, body.options(), body.count)
+    return {"job": run.job.public()}
+
+
+@router.post(
+    "/inspection/stop",
+    response_model=JobAccepted,
+    status_code=status.HTTP_202_ACCEPTED,
+    summary="End continuous inspection after the current object (operator)",
+)
+async def stop_run(_: OperatorUser, rt: RuntimeDep) -> dict[str, Any]:
+    run = service.stop_run(rt)
+    return {"job": run.job.public()}
+
+
+@router.get("/inspections", summary="Stored inspections of this cell, newest first")
+async def read_inspections(
+    _: ViewerUser,
+    rt: RuntimeDep,
+    session: SessionDep,
+    limit: Limit = 50,
+    offset: Offset = 0,
+    decision: Literal["recognized", "unknown", "failed"] | None = None,
+    model: Annotated[str | None, Query(min_length=1, max_length=64)] = None,
+    policy: Policy | None = None,
+    since: datetime | None = None,
+    until: datetime | None = None,
+) -> dict[str, Any]:
+    data, total = await results.list_inspections(
+        session, cell_id=rt.cell_id, limit=limit, offset=offset, decision=decision,
+        model=model, policy=policy, since=since, until=until,
+    )  # fmt: skip
+    return {"data": data, "count": total}
+
+
+@router.get("/inspections/{inspection_id}", summary="One inspection")
+async def read_inspection(
+    _: ViewerUser, rt: RuntimeDep, session: SessionDep, inspection_id: DbId
+) -> dict[str, Any]:
+    row = await results.get_inspection(session, inspection_id, rt.cell_id)
+    return results.inspection_public(row)
+
+
+@router.get(
+    "/inspections/{inspection_id}/images/{n}.jpg",
+    response_class=Response,
+    summary="The n-th viewpoint image (0-based) with the contour drawn",
+)
+async def read_inspection_image(
+    _: ViewerUser,
+    rt: RuntimeDep,
+    session: SessionDep,
+    inspection_id: DbId,
+    n: Annotated[int, Path(ge=0, le=9)],
+) -> Response:
+    data = await results.get_image(session, inspection_id, n, rt.cell_id)
+    return Response(data, media_type="image/jpeg")

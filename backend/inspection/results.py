@@ -1,0 +1,197 @@
+"""Inspection results in the database (issue 14, part 6): one row per object, written once.
+
+An :class:`InspectionRecord` is built in memory while the object is inspected and stored
+by :func:`store` in one transaction with its images, at the end (also when the inspection
+fails or is cut short: a complete ``failed`` row with the reason, never a partial one).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import func, select
+from sqlalchemy.ext.asyncio import AsyncSession
+
+from backend.db.models import Decision, Inspection, InspectionImage
+from backend.db.session import Database
+from vision.errors import InvalidInput, NotFound
+
+__all__ = ["InspectionRecord", "ViewRecord", "get_image", "get_inspection", "inspection_public",
+           "list_inspections", "store"]  # fmt: skip
+
+DECISIONS = tuple(d.value for d in Decision)
+
+
+@dataclass(frozen=True)
+class ViewRecord:
+    """One viewpoint's image (JPEG, contour drawn) and every model's score there."""
+
+    viewpoint: int
+    jpeg: bytes
+    scores: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class InspectionRecord:
+    """Everything one inspection stores (module docstring)."""
+
+    started_at: datetime
+    finished_at: datetime
+    decision: str
+    reason: str
+    policy: str
+    model_id: int | None = None
+    model_name: str | None = None
+    score: float | None = None
+    viewpoints: tuple[int, ...] = ()
+    scores: dict[str, float] = field(default_factory=dict)
+    pose: dict[str, Any] | None = None
+    durations: dict[str, float] = field(default_factory=dict)
+    pick: dict[str, Any] | None = None
+    truth: dict[str, Any] | None = None
+    views: tuple[ViewRecord, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.decision not in DECISIONS:
+            raise InvalidInput(f"decision must be one of {DECISIONS}, got {self.decision!r}")
+
+
+async def store(db: Database, cell_id: int, rec: InspectionRecord) -> int:
+    """Write the row and its images in one transaction; returns the inspection id."""
+    async with db.session() as session:
+        row = Inspection(
+            cell_id=cell_id,
+            started_at=rec.started_at,
+            finished_at=rec.finished_at,
+            decision=Decision(rec.decision),
+            model_id=rec.model_id,
+            model_name=rec.model_name,
+            score=rec.score,
+            viewpoints_visited=list(rec.viewpoints),
+            object_pose=None if rec.pose is None else rec.pose.get("T_base_obj"),
+            duration_s=round(sum(rec.durations.values()), 4),
+            note=rec.reason[:2000],
+            policy=rec.policy,
+            reason=rec.reason,
+            durations=rec.durations,
+            scores=rec.scores,
+            pose=rec.pose,
+            pick=rec.pick,
+            truth=rec.truth,
+        )
+        for v in rec.views:
+            row.images.append(
+                InspectionImage(viewpoint=v.viewpoint, image_jpeg=v.jpeg, scores=v.scores)
+            )
+        session.add(row)
+        await session.flush()
+        return int(row.id)
+
+
+def inspection_public(row: Inspection, n_images: int | None = None) -> dict[str, Any]:
+    """The API's form of a row."""
+    n = len(row.images) if n_images is None else n_images
+    return {
+        "id": row.id,
+        "cell_id": row.cell_id,
+        "started_at": row.started_at.isoformat(),
+        "finished_at": None if row.finished_at is None else row.finished_at.isoformat(),
+        "decision": row.decision.value,
+        "reason": row.reason,
+        "policy": row.policy,
+        "model": row.model_name,
+        "model_id": row.model_id,
+        "score": row.score,
+        "scores": row.scores or {},
+        "viewpoints_visited": list(row.viewpoints_visited or []),
+        "pose": row.pose,
+        "durations": row.durations or {},
+        "duration_s": row.duration_s,
+        "pick": row.pick,
+        "truth": row.truth,
+        "images": [f"/api/inspections/{row.id}/images/{k}.jpg" for k in range(n)],
+    }
+
+
+async def list_inspections(
+    session: AsyncSession,
+    *,
+    cell_id: int | None,
+    limit: int,
+    offset: int,
+    decision: str | None = None,
+    model: str | None = None,
+    policy: str | None = None,
+    since: datetime | None = None,
+    until: datetime | None = None,
+) -> tuple[list[dict[str, Any]], int]:
+    """One page of inspections, newest first, with the total matching the filters."""
+    if decision is not None and decision not in DECISIONS:
+        raise InvalidInput(f"decision must be one of {DECISIONS}, got {decision!r}")
+    if since is not None and until is not None and since > until:
+        raise InvalidInput(f"since ({since.isoformat()}) is after until ({until.isoformat()})")
+    conds = []
+    if cell_id is not None:
+        conds.append(Inspection.cell_id == cell_id)
+    if decision is not None:
+        conds.append(Inspection.decision == Decision(decision))
+    if model is not None:
+        conds.append(Inspection.model_name == model)
+    if policy is not None:
+        conds.append(Inspection.policy == policy)
+    if since is not None:
+        conds.append(Inspection.started_at >= since)
+    if until is not None:
+        conds.append(Inspection.started_at <= until)
+    total = int(await session.scalar(select(func.count(Inspection.id)).where(*conds)) or 0)
+    rows = (
+        await session.scalars(
+            select(Inspection)
+            .where(*conds)
+            .order_by(Inspection.id.desc())
+            .limit(limit)
+            .offset(offset)
+        )
+    ).all()
+    counts = dict(
+        (
+            await session.execute(
+                select(InspectionImage.inspection_id, func.count(InspectionImage.id))
+                .where(InspectionImage.inspection_id.in_([r.id for r in rows]))
+                .group_by(InspectionImage.inspection_id)
+            )
+        ).all()
+    )
+    return [inspection_public(r, counts.get(r.id, 0)) for r in rows], total
+
+
+async def get_inspection(
+    session: AsyncSession, inspection_id: int, cell_id: int | None = None
+) -> Inspection:
+    """The row (with its images loaded) or :class:`NotFound`."""
+    from sqlalchemy.orm import selectinload
+
+    q = (
+        select(Inspection)
+        .where(Inspection.id == inspection_id)
+        .options(selectinload(Inspection.images))
+    )
+    if cell_id is not None:
+        q = q.where(Inspection.cell_id == cell_id)
+    row = await session.scalar(q)
+    if row is None:
+        raise NotFound(f"no inspection with id {inspection_id}")
+    return row
+
+
+async def get_image(
+    session: AsyncSession, inspection_id: int, n: int, cell_id: int | None = None
+) -> bytes:
+    """The ``n``-th image (0-based, in the order taken) of an inspection, JPEG."""
+    row = await get_inspection(session, inspection_id, cell_id)
+    images = sorted(row.images, key=lambda im: im.id)
+    if not 0 <= n < len(images):
+        raise NotFound(f"inspection {inspection_id} has {len(images)} images; no image {n}")
+    return images[n].image_jpeg

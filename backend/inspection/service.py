@@ -1,0 +1,659 @@
+"""Inspecting objects at the station (issue 14, parts 3-6): one object, or continuous operation.
+
+One inspection (:func:`inspect_object`):
+
+1. **find**: the top view (viewpoint 1) at the station, planned by
+   :func:`backend.recognition.teach.plan_shots` as teaching plans it, so the empty-belt
+   background grabbed by a teach applies.  Index mode: frames until an object lies still
+   (its region stable between two frames).  Constant speed (chapter 4.1): frames until the
+   moving object's region lies whole in the image near its centre; that frame is the top view;
+2. **segment**: the active contour initialised from the background difference, as teaching
+   does (:func:`backend.recognition.segment.segment_object`);
+3. **recognise**: :func:`vision.recognition.recognise_views` with the live index and the
+   thresholds in force; its ``look`` returns the top view for viewpoint 1 and moves the arm
+   to side viewpoints 2 / 3 planned (:func:`backend.inspection.viewpoints.plan_viewpoints`)
+   from where the top view found the object (predicted along the belt when it moves);
+4. **decide**: ``recognized`` (a model), ``unknown`` (no model passes, or models too alike:
+   ambiguous) or ``failed`` (nothing found, segmentation, a move, e-stop, stop), with the reason;
+5. **pose** (:mod:`backend.inspection.pose`) from the trained top view's homography;
+6. **pick** (``sort`` on): the part's bin, or only the approach pose (``sort`` off);
+7. **store** one row (:mod:`backend.inspection.results`) and publish an
+   :class:`InspectionDone` event.
+
+Durations per stage (seconds of wall time): ``wait`` (for the object), ``move``, ``settle``,
+``acquire``, ``segment``, ``features``+``match`` (recognition, per its timings), ``decide``,
+``pose``, ``pick``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from backend.cell.events import CellEvent
+from backend.db.models import TrainedView, utcnow
+from backend.inspection import results
+from backend.inspection.pose import (
+    ObjectPose,
+    PoseFailed,
+    estimate_pose,
+    plane_points,
+    predict_along_belt,
+)
+from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
+from backend.recognition import thresholds
+from backend.recognition.images import encode_jpeg
+from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
+from backend.recognition.teach import plan_shots
+from robot.errors import Unreachable
+from robot.kinematics import T_base_ee
+from vision.errors import Conflict, InvalidInput, VisionCellError
+from vision.recognition import POLICIES, recognise_views
+from vision.segmentation import iou
+
+__all__ = ["InspectOptions", "InspectionDone", "InspectionRun", "inspect_object", "start_inspection", "start_run"]  # fmt: skip
+
+#: Longest wait for an object at the station, seconds; most objects in one run.
+MAX_WAIT_S = 600.0
+MAX_COUNT = 10_000
+#: Aiming height of the viewpoints (as teaching's default), metres.
+AIM_HEIGHT_M = 0.1
+
+
+@dataclass(frozen=True)
+class InspectionDone(CellEvent):
+    """An inspection ended (WebSocket ``{"type": "inspection", ...}``)."""
+
+    inspection_id: int
+    decision: str
+    model: str | None
+    reason: str
+    score: float | None
+    viewpoints: tuple[int, ...]
+    T_base_obj: tuple[tuple[float, ...], ...] | None
+    T_base_cams: tuple[tuple[tuple[float, ...], ...], ...]
+    pick: dict[str, Any] | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "id": self.inspection_id,
+            "decision": self.decision,
+            "model": self.model,
+            "reason": self.reason,
+            "score": self.score,
+            "viewpoints": list(self.viewpoints),
+            "T_base_obj": None if self.T_base_obj is None else [list(r) for r in self.T_base_obj],
+            "T_base_cams": [[list(r) for r in T] for T in self.T_base_cams],
+            "pick": self.pick,
+        }
+
+
+@dataclass(frozen=True)
+class InspectOptions:
+    """How to inspect.
+
+    Attributes
+    ----------
+    policy : {"naive", "top-only", "two-views", "best-next"}
+    sort : bool
+        Pick and sort into the part's bin (reject bin for unknown / failed); else move to
+        the object's approach pose only.
+    max_views : int
+        1..3.
+    wait_s : float
+        Longest wait for an object at the station, seconds.
+    speed : float, optional
+        Arm speed fraction (default: the cell's).
+    """
+
+    policy: str = "two-views"
+    sort: bool = False
+    max_views: int = 3
+    wait_s: float = 60.0
+    speed: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.policy not in POLICIES:
+            raise InvalidInput(f"policy must be one of {', '.join(POLICIES)}, got {self.policy!r}")
+        if not isinstance(self.sort, bool):
+            raise InvalidInput(f"sort must be true or false, got {self.sort!r}")
+        mv = self.max_views
+        if isinstance(mv, bool) or not isinstance(mv, int) or not 1 <= mv <= 3:
+            raise InvalidInput(f"max_views must be an integer in 1..3, got {mv!r}")
+        w = self.wait_s
+        if isinstance(w, bool) or not (math.isfinite(w) and 0.0 <= w <= MAX_WAIT_S):
+            raise InvalidInput(f"wait_s must be in [0, {MAX_WAIT_S:g}] s, got {w!r}")
+        sp = self.speed
+        if sp is not None and (isinstance(sp, bool) or not (math.isfinite(sp) and 0.0 < sp <= 1.0)):
+            raise InvalidInput(f"speed must be in (0, 1], got {sp!r}")
+
+
+class NoObject(VisionCellError):
+    """No object came to the station in time."""
+
+    code = "no_object"
+    http_status = 409
+
+
+@dataclass
+class _Ctx:
+    """What one inspection needs from the runtime (built by :func:`context`)."""
+
+    rt: Any
+    camera: Any
+    T_ee_cam: NDArray[np.float64]
+    source: str
+    station: NDArray[np.float64]
+    surface_z: float
+
+
+async def context(rt: Any) -> _Ctx:
+    """Camera model and mounting: the cell's active calibrations, else the simulator's
+    nominal camera and mounting, else the drawing's (reported in ``source``)."""
+    from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration, nominal_camera
+    from robot.sim.world import ConveyorSpec
+
+    async with rt.database.session() as session:
+        cal = await active_camera_calibration(session, rt.cell_id)
+    camera, T = cal.camera, cal.T_ee_cam
+    src = []
+    sim = rt.sim
+    if camera is None:
+        if sim is not None:
+            camera, s = sim.config.camera.pinhole, "simulator nominal intrinsics"
+        else:
+            frame = rt.cell.latest_frame()
+            w, h = (640, 480) if frame is None else (frame.width, frame.height)
+            camera, s = nominal_camera(w, h), "nominal intrinsics (uncalibrated)"
+        src.append(s)
+    else:
+        src.append("active intrinsics")
+    if T is None:
+        if sim is not None:
+            T, s = np.asarray(sim.config.camera.T_ee_cam), "simulator nominal mounting"
+        else:
+            T, s = np.asarray(NOMINAL_T_EE_CAM), "drawing's mounting (uncalibrated)"
+        src.append(s)
+    else:
+        src.append("active hand-eye")
+    spec = sim.config.layout.conveyor if sim is not None else ConveyorSpec()
+    return _Ctx(rt, camera, np.asarray(T, dtype=np.float64), ", ".join(src),
+                np.asarray(spec.station_point, dtype=np.float64), float(spec.surface_z_m))  # fmt: skip
+
+
+def _belt(rt: Any) -> tuple[str, float, float]:
+    """(mode, speed m/s, travel m) of the belt: the simulator's conveyor (its encoder)."""
+    if rt.sim is None:
+        return "index", 0.0, 0.0
+    st = rt.sim.conveyor_state
+    moving = st.running and st.mode == "continuous" and st.speed_m_s > 0
+    return ("continuous" if moving else "index"), float(st.speed_m_s), float(st.travel_m)
+
+
+def _truth_near(rt: Any, point: NDArray[np.float64], back_m: float = 0.0) -> dict[str, Any] | None:
+    """Simulator only, for evaluation: the object nearest ``point`` (never read by decisions),
+    moved back ``back_m`` along the belt (its travel since the exposure)."""
+    if rt.sim is None:
+        return None
+    objs = rt.sim.objects()
+    if not objs:
+        return None
+    o = min(
+        objs, key=lambda o: float(np.linalg.norm(o.T_base_obj[:2, 3] - point[:2] + [0, back_m]))
+    )
+    T = o.T_base_obj.copy()
+    T[1, 3] -= back_m
+    return {"id": o.id, "name": o.name, "trainable": o.trainable,
+            "T_base_obj": T.tolist(), "yaw_rad": o.yaw_rad}  # fmt: skip
+
+
+def _draw(rgb: NDArray[np.uint8], mask: NDArray[np.bool_] | None, label: str) -> bytes:
+    img = rgb.copy()
+    if mask is not None and mask.any():
+        cs, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        cv2.drawContours(img, cs, -1, (0, 255, 0), 2)
+    cv2.putText(img, label, (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 0), 2)
+    return encode_jpeg(img)
+
+
+def _add(d: dict[str, float], key: str, v: float) -> None:
+    d[key] = round(d.get(key, 0.0) + float(v), 4)
+
+
+def _look_times(frame: Any, durations: dict[str, float]) -> None:
+    lk = frame.meta.get("look", {})
+    for k in ("move", "settle", "acquire"):
+        _add(durations, k, lk.get(f"{k}_s", 0.0))
+
+
+async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg: NDArray[np.uint8],
+                durations: dict[str, float]) -> tuple[Any, float]:  # fmt: skip
+    """The top-view frame of an object at the station, and the belt travel at exposure."""
+    cell = ctx.rt.cell
+    deadline = time.monotonic() + opts.wait_s
+    last = None
+    t0 = time.monotonic()
+    frame = await cell.look(q_top, speed=opts.speed)
+    _look_times(frame, durations)
+    while True:
+        mode, _, travel = _belt(ctx.rt)
+        try:
+            mask = await asyncio.to_thread(foreground_mask, frame.rgb, bg)
+        except SegmentationFailed:
+            mask = None
+        if mask is not None:
+            h, w = mask.shape
+            ys, xs = np.nonzero(mask)
+            whole = xs.min() > 2 and ys.min() > 2 and xs.max() < w - 3 and ys.max() < h - 3
+            centred = abs(xs.mean() - w / 2) < 0.15 * w and abs(ys.mean() - h / 2) < 0.15 * h
+            if mode == "continuous" and whole and centred:
+                break
+            if mode == "index" and last is not None and iou(mask, last) > 0.97:
+                break
+        last = mask
+        if time.monotonic() >= deadline:
+            raise NoObject(f"no object came to the station within {opts.wait_s:g} s")
+        await asyncio.sleep(0.02 if mode == "continuous" else 0.2)
+        frame = await cell.look(None)
+    _add(
+        durations,
+        "wait",
+        time.monotonic() - t0 - sum(durations.get(k, 0) for k in ("move", "settle", "acquire")),
+    )
+    return frame, travel
+
+
+def _T_cam(q: Any, T_ee_cam: NDArray[np.float64]) -> NDArray[np.float64]:
+    return T_base_ee(np.asarray(q, dtype=np.float64)) @ T_ee_cam
+
+
+def _geometry(name: str | None) -> tuple[float, float, NDArray[np.float64] | None]:
+    """Height, radius and suction point of a model from its drawing (the catalogue entry of
+    the same name in the simulator); (0.1 m, 0.18 m, None) when there is no drawing."""
+    from robot.sim.catalogue import CATALOGUE
+
+    if name is None or name not in CATALOGUE:
+        return AIM_HEIGHT_M, 0.18, None
+    from robot.sim.gripper import suction_point
+
+    b = CATALOGUE[name].geometry().bounds
+    return float(b[1, 2]), float(np.abs(b[:, :2]).max()), suction_point(name)
+
+
+async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None) -> dict[str, Any]:
+    """Inspect the next object at the station and store the result (module docstring).
+
+    Returns the stored inspection's public form.  Cut short (cancel: e-stop or stop), the
+    complete ``failed`` row is stored with the reason before the cancellation goes on.
+    """
+    cell = ctx.rt.cell
+    started = utcnow()
+    durations: dict[str, float] = {}
+    views: list[results.ViewRecord] = []
+    cams: list[NDArray[np.float64]] = []
+    state: dict[str, Any] = {"decision": "failed", "reason": "", "truth": None, "scores": {},
+                             "model": None, "model_id": None, "score": None, "pose": None,
+                             "viewpoints": (), "pick": None}  # fmt: skip
+    report = (lambda f, m: job.report(f, m)) if job is not None else (lambda f, m: None)
+    try:
+        await _inspect_body(ctx, opts, durations, views, cams, state, report)
+    except asyncio.CancelledError:
+        state["decision"] = "failed"
+        state["reason"] = (
+            "emergency stop" if cell.estopped else "stopped"
+        ) + f" during {state.get('stage', 'the inspection')}"
+        await asyncio.shield(_store(ctx, opts, started, durations, views, cams, state))
+        raise
+    except (VisionCellError, ValueError) as exc:
+        state["decision"] = "failed"
+        code = getattr(exc, "code", "error")
+        detail = getattr(exc, "detail", str(exc))
+        state["reason"] = f"{code}: {detail}"
+    return await _store(ctx, opts, started, durations, views, cams, state)
+
+
+async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[str, float],
+                 views: list[results.ViewRecord], cams: list[NDArray[np.float64]],
+                 state: dict[str, Any]) -> dict[str, Any]:  # fmt: skip
+    rec = results.InspectionRecord(
+        started_at=started, finished_at=utcnow(), decision=state["decision"], reason=state["reason"],
+        policy=opts.policy, model_id=state["model_id"], model_name=state["model"],
+        score=state["score"], viewpoints=tuple(state["viewpoints"]), scores=state["scores"],
+        pose=state["pose"], durations=durations, pick=state["pick"], truth=state["truth"],
+        views=tuple(views),
+    )  # fmt: skip
+    iid = await results.store(ctx.rt.database, ctx.rt.cell_id, rec)
+    pose = state["pose"]
+    ev = InspectionDone(
+        iid, rec.decision, rec.model_name, rec.reason, rec.score, rec.viewpoints,
+        None if pose is None else tuple(tuple(r) for r in pose["T_base_obj"]),
+        tuple(tuple(tuple(float(v) for v in r) for r in T) for T in cams), rec.pick,
+    )  # fmt: skip
+    ctx.rt.bus.publish(ev)
+    async with ctx.rt.database.session() as session:
+        row = await results.get_inspection(session, iid)
+        return results.inspection_public(row)
+
+
+async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, float],
+                        views: list[results.ViewRecord], cams: list[NDArray[np.float64]],
+                        state: dict[str, Any], report: Any) -> None:  # fmt: skip
+    rt, cell = ctx.rt, ctx.rt.cell
+    live = rt.live_index
+    if len(live) == 0:
+        raise Conflict("no trained views: teach a model first (POST /api/models/{id}/teach)")
+    from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
+
+    async with rt.database.session() as session:
+        T_plan = (await active_camera_calibration(session, rt.cell_id)).T_ee_cam
+        choice = await thresholds.current_choice(session)
+    T_plan = np.asarray(NOMINAL_T_EE_CAM if T_plan is None else T_plan, dtype=np.float64)
+    top = (await asyncio.to_thread(plan_shots, ctx.station, (1,), T_ee_cam=T_plan,
+                                   object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
+    bg = rt.teach_backgrounds.get(top)
+    if bg is None:
+        raise Conflict(
+            "no empty-belt background of the top view at the station: teach a model first"
+        )
+    state["stage"] = "finding the object"
+    report(0.05, "waiting for an object at the station")
+    frame, travel0 = await _find(ctx, opts, top.q, bg, durations)
+    mode, speed_m_s, _ = _belt(rt)
+    T_cam_top = _T_cam(frame.robot_state.q, ctx.T_ee_cam)
+    state["stage"] = "segmenting"
+    t = time.monotonic()
+    region = await asyncio.to_thread(segment_object, frame.rgb, bg)
+    _add(durations, "segment", time.monotonic() - t)
+    ys, xs = np.nonzero(region.mask)
+    z_mid = ctx.surface_z + AIM_HEIGHT_M / 2
+    found = plane_points(np.array([[xs.mean(), ys.mean()]]), ctx.camera, T_cam_top, z_mid)[0]
+    found[2] = ctx.surface_z
+    state["truth"] = _truth_near(rt, found, _belt(rt)[2] - travel0)
+    frames: dict[int, tuple[Any, NDArray[np.bool_] | None, str]] = {
+        1: (frame, region.mask, region.method)
+    }
+    cams.append(T_cam_top)
+
+    planning: dict[str, Any] = {"s": 0.0, "notes": []}
+
+    async def look(vp: int) -> Any:
+        if vp == 1:
+            return frame.rgb, region.mask.astype(np.uint8)
+        state["stage"] = f"viewpoint {vp}"
+        report(0.3 + 0.2 * len(frames), f"viewpoint {vp}")
+        point = found.copy()
+        if mode == "continuous":
+            point = point + np.array([0.0, _belt(rt)[2] - travel0 + 1.5 * speed_m_s, 0.0])
+        t_plan = time.monotonic()
+        plan = await asyncio.to_thread(plan_viewpoints, point, T_ee_cam=T_plan, views=(VIEW_NAMES[vp - 1],),
+                                       object_height_m=AIM_HEIGHT_M)  # fmt: skip
+        planning["s"] += time.monotonic() - t_plan
+        if plan.views[0].reason:
+            planning["notes"].append(f"viewpoint {vp}: {plan.views[0].reason}")
+        f = await cell.look(plan.views[0].q, speed=opts.speed)
+        _look_times(f, durations)
+        cams.append(_T_cam(f.robot_state.q, ctx.T_ee_cam))
+        frames[vp] = (f, None, "whole image (no empty-belt background for this viewpoint)")
+        return f.rgb
+
+    state["stage"] = "recognition"
+    t = time.monotonic()
+    with live.reading() as index:
+        res = await recognise_views(look, index, policy=opts.policy, max_views=opts.max_views,
+                                    threshold=choice)  # fmt: skip
+    spent = time.monotonic() - t
+    move_like = sum(frames[vp][0].meta.get("look", {}).get(k, 0.0) for vp in frames if vp != 1
+                    for k in ("move_s", "settle_s", "acquire_s"))  # fmt: skip
+    feat = sum(r.retrieval_s for r in res.views)
+    match = sum(r.verification_s for r in res.views)
+    _add(durations, "match", match)
+    _add(durations, "plan", planning["s"])
+    _add(durations, "features", max(0.0, spent - move_like - planning["s"] - feat - match) + feat)
+    t = time.monotonic()
+    state["viewpoints"] = res.viewpoints
+    state["scores"] = {k: round(float(v), 4) for k, v in res.scores.items()}
+    for vp, r in zip(res.viewpoints, res.views, strict=True):
+        f, m, how = frames[vp]
+        label = f"vp{vp} {r.best_model or '-'} {r.score:.2f}"
+        views.append(results.ViewRecord(vp, await asyncio.to_thread(_draw, f.rgb, m, label),
+                                        {"segmentation": how, "decision": r.decision,
+                                         "scores": {k: round(float(s), 4) for k, s in r.scores.items()}}))  # fmt: skip
+    if res.decision == "recognized":
+        state["decision"], state["model"], state["score"] = (
+            "recognized",
+            res.model,
+            float(res.score),
+        )
+        m = live.model_of_name(res.model)
+        state["model_id"] = None if m is None else m.id
+        state["reason"] = f"{res.model} scored {res.score:.2f} over {len(res.viewpoints)} view(s)"
+    else:
+        state["decision"], state["score"] = "unknown", float(res.score)
+        if res.decision == "ambiguous" and len(res.contenders) > 1:
+            state["reason"] = f"ambiguous between {', '.join(res.contenders)}"
+        elif res.decision == "ambiguous":
+            state["reason"] = (f"{res.contenders[0]} not confirmed by the side views "
+                               f"(fused score {res.score:.2f})")  # fmt: skip
+        else:
+            state["reason"] = f"no model passed its threshold (best score {res.score:.2f})"
+    if planning["notes"]:
+        state["reason"] += "; " + "; ".join(planning["notes"])
+    _add(durations, "decide", time.monotonic() - t)
+    # -- pose --------------------------------------------------------------------------
+    t = time.monotonic()
+    pose_err = ""
+    pose: ObjectPose | None = None
+    height, radius, grasp = _geometry(state["model"])
+    if state["decision"] == "recognized":
+        try:
+            pose = await _pose(ctx, res, state["model"], T_cam_top, height)
+        except PoseFailed as exc:
+            pose_err = exc.detail
+    if pose is not None:
+        pub = pose.public()
+        pub["at_exposure"] = pose.T_base_obj.tolist()
+        if mode == "continuous":
+            travel = _belt(rt)[2] - travel0
+            pose = predict_along_belt(pose, travel)
+            pub.update(T_base_obj=pose.T_base_obj.tolist(),
+                       position_m=[float(v) for v in pose.T_base_obj[:3, 3]], predicted_travel_m=travel)  # fmt: skip
+        pub.update(camera_model=ctx.source, belt_mode=mode, z_plane_m=ctx.surface_z + height)
+        state["pose"] = pub
+    elif pose_err:
+        state["reason"] += f"; pose not computed: {pose_err}"
+    _add(durations, "pose", time.monotonic() - t)
+    # -- pick / approach ------------------------------------------------------------------
+    state["stage"] = "pick"
+    t = time.monotonic()
+    state["pick"] = await _pick(ctx, opts, state, pose, height, radius, grasp)
+    _add(durations, "pick", time.monotonic() - t)
+
+
+async def _pose(
+    ctx: _Ctx, res: Any, model: str, T_cam_now: NDArray[np.float64], height: float
+) -> ObjectPose:
+    top = next((r for vp, r in zip(res.viewpoints, res.views, strict=True) if vp == 1), None)
+    cand = (
+        None
+        if top is None
+        else next((c for c in top.candidates if c.model == model and c.H is not None), None)
+    )
+    if cand is None or cand.viewpoint != 1:
+        raise PoseFailed("the top view did not verify the recognised model (no homography)")
+    async with ctx.rt.database.session() as session:
+        view = await session.get(TrainedView, cand.view_id)
+        if view is None or view.joints is None:
+            raise PoseFailed(
+                f"trained view {cand.view_id} has no camera pose (uploaded, not taught)"
+            )
+        joints, yaw, mask_png, shape = (
+            view.joints,
+            view.yaw_rad,
+            view.mask_png,
+            (view.height, view.width),
+        )
+    from backend.recognition.images import mask_from_png
+
+    mask = None if mask_png is None else mask_from_png(mask_png)
+    T_taught = np.eye(4)
+    c, s = math.cos(yaw), math.sin(yaw)
+    T_taught[:2, :2] = [[c, -s], [s, c]]
+    T_taught[:3, 3] = ctx.station
+    return await asyncio.to_thread(
+        estimate_pose, cand.H, camera=ctx.camera, T_base_cam_view=_T_cam(joints, ctx.T_ee_cam),
+        T_base_cam_now=T_cam_now, T_base_obj_taught=T_taught, z_plane_m=ctx.surface_z + height,
+        view_mask=mask, view_shape=shape,
+    )  # fmt: skip
+
+
+def _bin_for(rt: Any, part: str | None) -> Any:
+    if rt.sim is None:
+        return None
+    bins = rt.sim.config.layout.bins
+    for b in bins:
+        if part is not None and part in b.parts:
+            return b
+    return next((b for b in bins if b.reject), None)
+
+
+async def _pick(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: ObjectPose | None,
+                height: float, radius: float, grasp: NDArray[np.float64] | None) -> dict[str, Any]:  # fmt: skip
+    from robot.pick import execute_pick_place, plan_pick_place
+
+    rt, cell = ctx.rt, ctx.rt.cell
+    if pose is None:
+        why = ("the object is not known: its height and grasp point are not known, so it is "
+               "left on the belt" if state["decision"] != "recognized" else "no pose")  # fmt: skip
+        return {"sorted": False, "ok": False, "reason": why}
+    part = None
+    m = rt.live_index.model_of_name(state["model"]) if state["model"] else None
+    if m is not None:
+        part = m.part
+    q0 = np.asarray(cell.driver.state.q, dtype=np.float64)
+    b = _bin_for(rt, part if state["decision"] == "recognized" else None)
+    drop = ctx.station + np.array([0.0, 0.0, 0.3]) if b is None else np.asarray(b.drop_point)
+    try:
+        plan = await asyncio.to_thread(plan_pick_place, q0, pose.T_base_obj, height, drop,
+                                       object_radius_m=radius, grasp_obj=grasp, world=cell.world)  # fmt: skip
+    except Unreachable as exc:
+        return {"sorted": opts.sort, "ok": False, "bin": None if b is None else b.name,
+                "reason": f"cannot pick: {exc}"}  # fmt: skip
+    if not opts.sort:
+        await cell.execute(plan.steps[0].trajectory)
+        return {
+            "sorted": False,
+            "ok": True,
+            "stage": "approach",
+            "reason": "moved to the approach pose",
+        }
+    if b is None:
+        return {"sorted": True, "ok": False, "reason": "no bins in this cell"}
+    with cell._arm("a pick"):  # the job holds the arm; this is its motion
+        out = await execute_pick_place(cell.driver, plan)
+    return {"sorted": True, "ok": out.ok, "bin": b.name, "stage": out.stage, "reason": out.reason}
+
+
+# -- jobs -------------------------------------------------------------------------------------
+@dataclass
+class InspectionRun:
+    """Continuous operation: inspect objects until stopped or ``count`` done."""
+
+    options: InspectOptions
+    count: int | None
+    done: int = 0
+    ids: list[int] = field(default_factory=list)
+    stop_requested: bool = False
+    job: Any = None
+
+
+async def grab_background(rt: Any, *, speed: float | None = None) -> None:
+    """Grab the empty-belt background of the top view at the station (the station must be
+    empty), e.g. after the lights changed; stored with the teaches' backgrounds."""
+    from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
+
+    async with rt.database.session() as session:
+        T = (await active_camera_calibration(session, rt.cell_id)).T_ee_cam
+    T = np.asarray(NOMINAL_T_EE_CAM if T is None else T, dtype=np.float64)
+    ctx = await context(rt)
+    top = (await asyncio.to_thread(plan_shots, ctx.station, (1,), T_ee_cam=T,
+                                   object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
+    frame = await rt.cell.look(top.q, speed=speed)
+    rt.teach_backgrounds.put(top, frame.rgb)
+
+
+def _check_ready(rt: Any) -> None:
+    """409 at once (not in the job): e-stop, arm busy, nothing trained."""
+    rt.cell.check_can_move()
+    rt.jobs.check_arm_free()
+    if len(rt.live_index) == 0:
+        raise Conflict("no trained views: teach a model first (POST /api/models/{id}/teach)")
+
+
+async def start_inspection(rt: Any, opts: InspectOptions) -> Any:
+    """Start a job inspecting the object at the station; returns the job."""
+    _check_ready(rt)
+    ctx = await context(rt)
+
+    async def body(job: Any) -> dict[str, Any]:
+        out = await inspect_object(ctx, opts, job)
+        return {"inspection": out, "inspection_id": out["id"]}
+
+    return rt.jobs.start("inspect", body, motion=True,
+                         params={"policy": opts.policy, "sort": opts.sort, "camera_model": ctx.source})  # fmt: skip
+
+
+def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun:
+    """Start continuous operation (a job); :func:`stop_run` ends it after the current object."""
+    if count is not None and (
+        isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= MAX_COUNT
+    ):
+        raise InvalidInput(f"count must be an integer in 1..{MAX_COUNT} or null, got {count!r}")
+    cur = getattr(rt, "inspection_run", None)
+    if (
+        cur is not None
+        and cur.job is not None
+        and cur.job.task is not None
+        and not cur.job.task.done()
+    ):
+        raise Conflict("an inspection run is already going: stop it first")
+    _check_ready(rt)
+    run = InspectionRun(opts, count)
+
+    async def body(job: Any) -> dict[str, Any]:
+        ctx = await context(rt)
+        decisions: dict[str, int] = {}
+        while not run.stop_requested and (count is None or run.done < count):
+            out = await inspect_object(ctx, opts, None)
+            run.done += 1
+            run.ids.append(out["id"])
+            decisions[out["decision"]] = decisions.get(out["decision"], 0) + 1
+            job.report(0.0 if count is None else run.done / count,
+                       f"{run.done} inspected: {out['decision']} {out['model'] or ''}".strip())  # fmt: skip
+            if rt.sim is not None and _belt(rt)[0] == "index":
+                with contextlib.suppress(Exception):
+                    rt.sim.release_conveyor()
+                await asyncio.sleep(0.3)
+        return {"inspected": run.done, "inspection_ids": run.ids, "decisions": decisions,
+                "stopped": run.stop_requested}  # fmt: skip
+
+    run.job = rt.jobs.start("inspection-run", body, motion=True,
+                            params={"policy": opts.policy, "sort": opts.sort, "count": count})  # fmt: skip
+    rt.inspection_run = run
+    return run
+
+
+def stop_run(rt: Any) -> InspectionRun:
+    """Ask the run to end after the current object (:class:`Conflict` if none is going)."""
+    run = getattr(rt, "inspection_run", None)
+    if run is None or run.job is None or run.job.task is None or run.job.task.done():
+        raise Conflict("no inspection run is going")
+    run.stop_requested = True
+    return run

@@ -1,0 +1,371 @@
+"""Teach and inspect in the simulated cell (issue 14's targets), one process.
+
+The twelve trainable catalogue entries are taught through the services the API calls
+(``backend.recognition.teach``: 3d models, the top view at three camera rolls and both side
+views, each object at the station at yaw 0), then objects (random catalogue entry, the two
+untrained ones mixed in; random yaw, a few mm of lateral and along-belt jitter) are
+inspected with :func:`backend.inspection.service.inspect_object`, what continuous operation
+runs for each object:
+
+* ``index``: the object stopped at the station; each object inspected with ``naive`` (the
+  chapter's Figure 6, the baseline), ``two-views`` and ``best-next`` in turn, so the three
+  policies see the same objects;
+* ``constant``: the belt running at ``--belt-speed``; top view of the moving object, pose
+  predicted forward with the belt travel (``two-views``);
+* ``half light`` and ``colour cast``: index mode, ``two-views``, every light at half
+  intensity / a warm cast (green x0.85, blue x0.6), with the empty-belt background
+  grabbed again under that light (the models were taught under the normal light);
+* ``sort``: index mode, ``two-views``, picked and sorted; a pick counts when the object
+  landed in its part's bin (the reject bin for untrained parts).
+
+Errors are against the simulator's truth of the same relative motion (each model taught at
+yaw 0 at the station, so its frame is the truth's).  Yaw errors only for parts without
+rotational symmetry (not the wheels).  Run::
+
+    .venv/bin/python -m benchmarks.inspection --objects 20 [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import math
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+out = Console()
+err = Console(stderr=True)
+
+SYMMETRIC = {"wheel"}  # parts whose yaw is not defined by their outline
+
+
+def _settings(tmp: Path, time_scale: float) -> Any:
+    from backend.settings import Settings
+
+    return Settings(
+        database_url=f"sqlite+aiosqlite:///{tmp / 'bench.db'}",
+        var_dir=tmp / "var",
+        driver="sim",
+        camera="sim",
+        sim_demo=False,
+        time_scale=time_scale,
+        secret_key="bench-secret-0123456789abcdef",
+        view3d_enabled=False,
+        bootstrap_operator=False,
+    )
+
+
+async def _teach_all(rt: Any, names: list[str], yaws_deg: tuple[float, ...] = (0.0,)) -> float:
+    """Teach every model through the teach service, one round per object yaw (the operator
+    turns the object on the belt between rounds; the first round is at yaw 0)."""
+    from backend.recognition import models as msvc
+    from backend.recognition import teach as tsvc
+    from backend.recognition.index import IndexedModel
+    from robot.sim.catalogue import CATALOGUE
+
+    engine = rt.sim
+    station = engine.config.layout.conveyor.station_s_m
+    engine.configure_conveyor(running=False, mode="index", dwell_s=None)
+    t0 = time.perf_counter()
+    for k, name in enumerate(names):
+        row = await msvc.create_model(
+            rt.database, msvc.ModelFields(name=name, part=CATALOGUE[name].base_of, kind="3d")
+        )
+        rt.live_index.put_model(IndexedModel.of(row))
+        for r, yaw_deg in enumerate(yaws_deg):
+            yaw = math.radians(yaw_deg)
+            engine.clear_objects()
+            first = k == 0 and r == 0
+            if not first:
+                engine.spawn(name, s_m=station, yaw_rad=yaw)
+            job = await tsvc.start_teach(
+                cell=rt.cell,
+                db=rt.database,
+                live=rt.live_index,
+                model_id=row.id,
+                options=tsvc.TeachOptions(
+                    background="grab" if first else "stored", wait_s=60.0, yaw_rad=yaw
+                ),
+                store=rt.teach_backgrounds,
+            )
+            if first:
+                while "waiting for an object" not in job.message and not job.task.done():
+                    await asyncio.sleep(0.1)
+                engine.spawn(name, s_m=station, yaw_rad=yaw)
+            await rt.jobs.wait(job)
+            if job.state.value != "done":
+                raise RuntimeError(f"teaching {name} {job.state.value}: {job.error}")
+        err.print(f"[teach {k + 1}/{len(names)}] {name}: {len(yaws_deg)} rounds")
+    engine.clear_objects()
+    return time.perf_counter() - t0
+
+
+def _errors(row: dict[str, Any], part: str) -> tuple[float | None, float | None]:
+    if row["pose"] is None or row["truth"] is None:
+        return None, None
+    T = np.array(row["pose"]["at_exposure"])
+    Tt = np.array(row["truth"]["T_base_obj"])
+    pos = float(np.linalg.norm(T[:2, 3] - Tt[:2, 3]) * 1e3)
+    if part in SYMMETRIC:
+        return pos, None
+    d = math.atan2(T[1, 0], T[0, 0]) - math.atan2(Tt[1, 0], Tt[0, 0])
+    return pos, abs(math.degrees(math.remainder(d, 2 * math.pi)))
+
+
+def _record(
+    cond: str, policy: str, name: str, row: dict[str, Any], extra: dict[str, Any]
+) -> dict[str, Any]:
+    from robot.sim.catalogue import CATALOGUE
+
+    entry = CATALOGUE[name]
+    pos, yaw = _errors(row, entry.base_of)
+    n = max(1, len(row["viewpoints_visited"]))
+    d = row["durations"]
+    vision = sum(d.get(k, 0.0) for k in ("segment", "features", "match", "decide"))
+    return {
+        "condition": cond,
+        "policy": policy,
+        "name": name,
+        "trainable": entry.trainable,
+        "decision": row["decision"],
+        "model": row["model"],
+        "correct": (row["decision"] == "recognized" and row["model"] == name)
+        if entry.trainable
+        else row["decision"] == "unknown",
+        "views": len(row["viewpoints_visited"]),
+        "pos_err_mm": pos,
+        "yaw_err_deg": yaw,
+        "vision_per_view_s": vision / n,
+        "cycle_s": sum(v for k, v in d.items() if k != "wait"),
+        "stages": {k: v for k, v in d.items()},
+        "reason": row["reason"],
+        **extra,
+    }
+
+
+def _bin_for(engine: Any, name: str) -> str:
+    from robot.sim.catalogue import CATALOGUE
+
+    entry = CATALOGUE[name]
+    for b in engine.config.layout.bins:
+        if (b.reject and not entry.trainable) or (entry.trainable and entry.base_of in b.parts):
+            return b.name
+    raise KeyError(name)
+
+
+async def _run(args: argparse.Namespace) -> dict[str, Any]:
+    from backend.db.migrate import upgrade
+    from backend.inspection import service
+    from backend.runtime import CellRuntime
+    from robot.sim.catalogue import CATALOGUE
+
+    tmp = Path(tempfile.mkdtemp(prefix="bench-inspect-"))
+    settings = _settings(tmp, args.time_scale)
+    await asyncio.to_thread(upgrade, settings.database_url)
+    rng = np.random.default_rng(args.seed)
+    trained = [n for n, e in CATALOGUE.items() if e.trainable]
+    untrained = [n for n, e in CATALOGUE.items() if not e.trainable]
+    rows: list[dict[str, Any]] = []
+    async with CellRuntime(settings, view3d=False) as rt:
+        engine = rt.sim
+        spec = engine.config.layout.conveyor
+        yaws = tuple(360.0 * k / args.teach_yaws for k in range(args.teach_yaws))
+        yaws = tuple(y - 360.0 if y > 180.0 else y for y in yaws)
+        teach_s = await _teach_all(rt, trained, yaws)
+        ctx = await service.context(rt)
+
+        def pick_name() -> str:
+            return str(rng.choice(untrained if rng.uniform() < 0.15 else trained))
+
+        async def index_object(cond: str, policies: tuple[str, ...], sort: bool = False) -> None:
+            name = pick_name()
+            engine.clear_objects()
+            engine.configure_conveyor(running=False, mode="index", dwell_s=None)
+            engine.spawn(
+                name,
+                s_m=spec.station_s_m + float(rng.uniform(-0.004, 0.004)),
+                lateral_m=float(rng.uniform(-0.004, 0.004)),
+                yaw_rad=float(rng.uniform(-math.pi, math.pi)),
+            )
+            for policy in policies:
+                opts = service.InspectOptions(policy=policy, sort=sort, wait_s=20.0)
+                row = await service.inspect_object(ctx, opts)
+                extra: dict[str, Any] = {}
+                if sort:
+                    landed = engine.landings()[-1] if engine.landings() else None
+                    extra = {
+                        "pick_ok": bool(row["pick"] and row["pick"].get("ok")),
+                        "pick_right_bin": landed is not None
+                        and landed.place == _bin_for(engine, name)
+                        and bool(row["pick"] and row["pick"].get("ok")),
+                        "pick_reason": (row["pick"] or {}).get("reason", ""),
+                    }
+                rows.append(_record(cond, policy, name, row, extra))
+                r = rows[-1]
+                err.print(
+                    f"[{cond} {len(rows)}] {policy}: {name} -> {r['decision']} {r['model']} "
+                    f"views={r['views']} pos={r['pos_err_mm']} {r['reason'][:60]}"
+                )
+
+        for _ in range(args.objects):
+            await index_object("index", ("naive", "two-views", "best-next"))
+        # constant belt speed
+        for _ in range(args.objects_constant):
+            name = pick_name()
+            engine.clear_objects()
+            engine.configure_conveyor(running=False, mode="continuous")
+            engine.spawn(
+                name,
+                s_m=spec.station_s_m - 0.15,
+                lateral_m=float(rng.uniform(-0.004, 0.004)),
+                yaw_rad=float(rng.uniform(-math.pi, math.pi)),
+            )
+            engine.configure_conveyor(running=True, speed_m_s=args.belt_speed, mode="continuous")
+            row = await service.inspect_object(
+                ctx, service.InspectOptions(policy="two-views", wait_s=20.0)
+            )
+            engine.configure_conveyor(running=False)
+            rows.append(_record("constant", "two-views", name, row, {}))
+            err.print(
+                f"[constant {len(rows)}] {name} -> {row['decision']} {row['model']} {row['reason'][:60]}"
+            )
+        # lights
+        base = engine._light_base.copy()  # the benchmark changes the lights' colour directly
+        for cond in ("half light", "colour cast"):
+            if cond == "half light":
+                for light in engine.lights():
+                    engine.set_light(light, 0.5)
+            else:
+                for light in engine.lights():
+                    engine.set_light(light, 1.0)
+                engine._light_base[:] = base * np.array([1.0, 0.85, 0.6], dtype=np.float32)
+            engine.clear_objects()
+            await service.grab_background(rt)
+            for _ in range(args.objects_light):
+                await index_object(cond, ("two-views",))
+        engine._light_base[:] = base
+        engine.clear_objects()
+        await service.grab_background(rt)
+        for _ in range(args.objects_sort):
+            await index_object("sort", ("two-views",), sort=True)
+    return {"teach_s": teach_s, "rows": rows, "n_models": len(trained)}
+
+
+def _pct(x: list[bool]) -> float | None:
+    return None if not x else 100.0 * sum(x) / len(x)
+
+
+def _q(x: list[float], q: float) -> float | None:
+    return None if not x else float(np.percentile(x, q))
+
+
+def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One line per (condition, policy)."""
+    out_rows = []
+    keys = sorted({(r["condition"], r["policy"]) for r in rows}, key=lambda k: (k[0] != "index", k))
+    for cond, policy in keys:
+        rs = [r for r in rows if r["condition"] == cond and r["policy"] == policy]
+        tr = [r for r in rs if r["trainable"]]
+        un = [r for r in rs if not r["trainable"]]
+        pos = [r["pos_err_mm"] for r in tr if r["pos_err_mm"] is not None]
+        yaw = [r["yaw_err_deg"] for r in tr if r["yaw_err_deg"] is not None]
+        stages: dict[str, float] = {}
+        for r in rs:
+            for k, v in r["stages"].items():
+                stages[k] = stages.get(k, 0.0) + v / len(rs)
+        out_rows.append(
+            {
+                "condition": cond,
+                "policy": policy,
+                "objects": len(rs),
+                "named_pct": _pct([r["correct"] for r in tr]),
+                "unknown_pct": _pct([r["correct"] for r in un]),
+                "pos_err_mm_p50": _q(pos, 50),
+                "pos_err_mm_max": None if not pos else max(pos),
+                "yaw_err_deg_p50": _q(yaw, 50),
+                "yaw_err_deg_max": None if not yaw else max(yaw),
+                "views_mean": float(np.mean([r["views"] for r in rs])),
+                "vision_per_view_ms_p95": 1e3
+                * (_q([r["vision_per_view_s"] for r in rs], 95) or 0.0),
+                "cycle_s_p50": _q([r["cycle_s"] for r in rs], 50),
+                "cycle_s_p95": _q([r["cycle_s"] for r in rs], 95),
+                "stages_mean_s": {k: round(v, 3) for k, v in stages.items()},
+                "picks_right_bin_pct": _pct(
+                    [r["pick_right_bin"] for r in rs if "pick_right_bin" in r]
+                ),
+            }
+        )
+    return out_rows
+
+
+def _f(v: float | None, fmt: str = "{:.1f}") -> str:
+    return "-" if v is None else fmt.format(v)
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--objects", type=int, default=20, help="index-mode objects (x3 policies)")
+    ap.add_argument("--objects-constant", type=int, default=None)
+    ap.add_argument("--objects-light", type=int, default=None)
+    ap.add_argument("--objects-sort", type=int, default=None)
+    ap.add_argument("--belt-speed", type=float, default=0.05, help="m/s, constant mode")
+    ap.add_argument("--time-scale", type=float, default=20.0)
+    ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument(
+        "--teach-yaws", type=int, default=4, help="teach rounds per model (object yaws)"
+    )
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    if not 1 <= args.objects <= 2000:
+        ap.error(f"--objects must be in 1..2000, got {args.objects}")
+    if not (0.0 < args.belt_speed <= 0.5):
+        ap.error(f"--belt-speed must be in (0, 0.5] m/s, got {args.belt_speed}")
+    if not 1 <= args.teach_yaws <= 12:
+        ap.error(f"--teach-yaws must be in 1..12, got {args.teach_yaws}")
+    if not (1.0 <= args.time_scale <= 100.0):
+        ap.error(f"--time-scale must be in [1, 100], got {args.time_scale}")
+    for k in ("objects_constant", "objects_light", "objects_sort"):
+        v = getattr(args, k)
+        setattr(args, k, max(1, args.objects // 2) if v is None else v)
+        if not 0 <= getattr(args, k) <= 2000:
+            ap.error(f"--{k.replace('_', '-')} must be in 0..2000")
+    t0 = time.perf_counter()
+    res = asyncio.run(_run(args))
+    summary = summarise(res["rows"])
+    table = Table(
+        title=f"Inspection in the simulator ({res['n_models']} models taught in {res['teach_s']:.0f} s)"
+    )
+    for col in ("condition", "policy", "n", "named %", "unknown %", "pos mm p50/max",
+                "yaw deg p50/max", "views", "vision/view ms p95", "cycle s p50/p95", "right bin %"):  # fmt: skip
+        table.add_column(col)
+    for s in summary:
+        table.add_row(
+            s["condition"], s["policy"], str(s["objects"]), _f(s["named_pct"]), _f(s["unknown_pct"]),
+            f"{_f(s['pos_err_mm_p50'], '{:.2f}')}/{_f(s['pos_err_mm_max'], '{:.2f}')}",
+            f"{_f(s['yaw_err_deg_p50'], '{:.2f}')}/{_f(s['yaw_err_deg_max'], '{:.2f}')}",
+            f"{s['views_mean']:.2f}", f"{s['vision_per_view_ms_p95']:.0f}",
+            f"{_f(s['cycle_s_p50'], '{:.2f}')}/{_f(s['cycle_s_p95'], '{:.2f}')}",
+            _f(s["picks_right_bin_pct"]),
+        )  # fmt: skip
+    out.print(table)
+    for s in summary:
+        out.print(f"{s['condition']:>12} {s['policy']:>10} stages (mean s): {s['stages_mean_s']}")
+    wrong = [r for r in res["rows"] if not r["correct"]]
+    for r in wrong[:20]:
+        out.print(
+            f"  wrong: {r['condition']} {r['policy']} {r['name']} -> {r['decision']} {r['model']}: {r['reason']}"
+        )
+    if args.json:
+        print(json.dumps({"summary": summary, "teach_s": res["teach_s"], "wall_s": time.perf_counter() - t0,
+                          "wrong": wrong}, default=str))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,137 @@
+"""End to end in the simulated cell, through the API only: teach two models, run a short
+continuous inspection in index mode, check the stored decisions and poses against the
+simulator's truth; an e-stop during an inspection ends it ``failed`` with the reason."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from backend.app import create_app
+from tests.utils.factories import make_settings, make_tokens, migrate
+
+pytestmark = pytest.mark.slow
+
+
+def _wait(client, headers, job_id, *, until=None, timeout_s=300.0):
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        job = client.get(f"/api/jobs/{job_id}", headers=headers).json()["job"]
+        if job["state"] != "running" or (until is not None and until in job["message"]):
+            return job
+        time.sleep(0.2)
+    raise AssertionError(f"job {job_id} still running after {timeout_s} s: {job['message']}")
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("inspect")
+    settings = make_settings(tmp, driver="sim", camera="sim", sim_demo=False, time_scale=5.0)
+    migrate(settings)
+    tokens = make_tokens(settings)
+    with TestClient(create_app(settings)) as c:
+        yield c, {r: {"Authorization": f"Bearer {t}"} for r, t in tokens.items()}
+
+
+def _teach(client, eng, engine, station):
+    engine.clear_objects()
+    engine.configure_conveyor(running=False, mode="index", dwell_s=None)
+    gear = client.post("/api/models", json={"name": "gear-housing", "kind": "3d"}, headers=eng)
+    wheel = client.post(
+        "/api/models", json={"name": "wheel-steel", "kind": "2d", "part": "wheel"}, headers=eng
+    )
+    r = client.post(
+        f"/api/models/{gear.json()['id']}/teach",
+        json={"background": "grab", "wait_s": 60},
+        headers=eng,
+    )
+    job = _wait(client, eng, r.json()["job"]["id"], until="waiting for an object")
+    engine.spawn("gear-housing", s_m=station, yaw_rad=0.0)
+    assert _wait(client, eng, job["id"])["state"] == "done"
+    engine.clear_objects()
+    engine.spawn("wheel-steel", s_m=station, yaw_rad=0.0)
+    r = client.post(
+        f"/api/models/{wheel.json()['id']}/teach", json={"background": "stored"}, headers=eng
+    )
+    assert _wait(client, eng, r.json()["job"]["id"])["state"] == "done"
+    engine.clear_objects()
+
+
+def test_teach_then_continuous_inspection_matches_truth(cell):
+    client, h = cell
+    eng, op = h["engineer"], h["operator"]
+    engine = client.app.state.runtime.sim
+    station = engine.config.layout.conveyor.station_s_m
+    _teach(client, eng, engine, station)
+
+    # Three objects upstream: both trained ones (turned, a few mm off) and an untrained one.
+    placed = [
+        ("gear-housing", station - 0.25, 0.003, 0.15),
+        ("oil-filter", station - 0.65, -0.002, 0.3),
+        ("wheel-steel", station - 1.05, 0.002, -2.0),
+    ]
+    for name, s, lat, yaw in placed:
+        engine.spawn(name, s_m=s, lateral_m=lat, yaw_rad=yaw)
+    engine.configure_conveyor(running=True, speed_m_s=0.2, mode="index", dwell_s=None)
+    r = client.post(
+        "/api/inspection/run", json={"policy": "two-views", "count": 3, "wait_s": 60}, headers=op
+    )
+    assert r.status_code == 202, r.text
+    # The arm is busy now: a second inspection is refused at once.
+    busy = client.post("/api/inspections", json={}, headers=op)
+    assert busy.status_code == 409, busy.text
+    job = _wait(client, op, r.json()["job"]["id"])
+    engine.configure_conveyor(running=False)
+    assert job["state"] == "done", job
+    assert job["result"]["inspected"] == 3
+
+    page = client.get("/api/inspections?limit=10", headers=h["viewer"]).json()
+    assert page["count"] == 3
+    rows = sorted(page["data"], key=lambda d: d["id"])
+    for row, (name, _s, _lat, _yaw) in zip(rows, placed, strict=True):
+        assert row["truth"]["name"] == name, row
+        if name == "oil-filter":
+            assert row["decision"] == "unknown", row
+            continue
+        assert row["decision"] == "recognized" and row["model"] == name, row
+        assert row["viewpoints_visited"][0] == 1 and row["policy"] == "two-views"
+        assert set(row["durations"]) >= {"move", "segment", "match", "decide"}
+        assert row["pose"] is not None, row["reason"]
+        T = np.array(row["pose"]["T_base_obj"])
+        Tt = np.array(row["truth"]["T_base_obj"])
+        assert np.linalg.norm(T[:2, 3] - Tt[:2, 3]) < 0.004, (name, T[:3, 3], Tt[:3, 3])
+        if name == "gear-housing":  # no rotational symmetry
+            dyaw = math.atan2(T[1, 0], T[0, 0]) - math.atan2(Tt[1, 0], Tt[0, 0])
+            assert abs(math.remainder(dyaw, 2 * math.pi)) < math.radians(2.0)
+        img = client.get(row["images"][0], headers=h["viewer"])
+        assert img.status_code == 200 and img.content[:2] == b"\xff\xd8"
+        one = client.get(f"/api/inspections/{row['id']}", headers=h["viewer"]).json()
+        assert one["decision"] == row["decision"]
+    only = client.get("/api/inspections?decision=unknown", headers=h["viewer"]).json()
+    assert only["count"] == 1
+
+
+def test_estop_during_inspection_ends_it_failed_with_reason(cell):
+    client, h = cell
+    op = h["operator"]
+    engine = client.app.state.runtime.sim
+    engine.clear_objects()
+    engine.configure_conveyor(running=False)
+    before = client.get("/api/inspections", headers=op).json()["count"]
+    r = client.post("/api/inspections", json={"wait_s": 60}, headers=op)
+    assert r.status_code == 202, r.text
+    job_id = r.json()["job"]["id"]
+    _wait(client, op, job_id, until="waiting for an object", timeout_s=60)
+    time.sleep(0.5)
+    assert client.post("/api/robot/estop", headers=op).status_code in (200, 202, 204)
+    job = _wait(client, op, job_id, timeout_s=30)
+    assert job["state"] == "cancelled", job
+    page = client.get("/api/inspections?limit=500", headers=op).json()
+    assert page["count"] == before + 1  # one complete row, nothing partial
+    row = page["data"][0]
+    assert row["decision"] == "failed" and "emergency stop" in row["reason"], row
+    assert client.post("/api/robot/reset", headers=h["engineer"]).status_code in (200, 202, 204)
