@@ -15,6 +15,7 @@ from backend.api import api_router
 from backend.api.deps import install_runtime
 from backend.api.docs import install_docs
 from backend.api.errors import install_error_handlers
+from backend.api.headers import SecurityHeaders, install_cors
 from backend.api.limits import UrlLengthLimit
 from backend.resources import resource_dir
 from backend.runtime import CellRuntime, StartupError
@@ -60,6 +61,8 @@ def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None 
     install_error_handlers(app)
     install_docs(app)
     app.add_middleware(UrlLengthLimit)
+    install_cors(app, settings)
+    app.add_middleware(SecurityHeaders, viser_port=settings.viser_port)
     app.include_router(api_router)
 
     @app.get("/", include_in_schema=False)

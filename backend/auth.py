@@ -11,8 +11,9 @@ import hashlib
 import hmac
 import re
 import secrets
+from datetime import datetime, timedelta
 
-from sqlalchemy import select, update
+from sqlalchemy import or_, select, update
 from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import selectinload
 
@@ -21,18 +22,24 @@ from backend.db.types import utcnow
 from vision.errors import Conflict, InvalidInput
 
 __all__ = [
+    "MAX_EXPIRES_IN_DAYS",
     "TOKEN_PREFIX",
     "UserExists",
     "authenticate",
     "create_user",
     "hash_token",
     "issue_token",
+    "live_token_clause",
     "parse_role",
     "revoke_tokens",
+    "token_expiry",
+    "token_is_live",
     "validate_user_name",
 ]
 
 TOKEN_PREFIX = "vc_"
+#: Longest lifetime a token may be given, days (ten years).
+MAX_EXPIRES_IN_DAYS = 3650
 
 
 class UserExists(Conflict, ValueError):
@@ -69,20 +76,64 @@ def hash_token(token: str, secret: str) -> str:
     return hmac.new(secret.encode(), token.encode(), hashlib.sha256).hexdigest()
 
 
-async def issue_token(session: AsyncSession, user: User, secret: str, *, label: str = "") -> str:
-    """Create a new token for ``user`` and return it (it is not stored in clear)."""
+def token_expiry(expires_in_days: float | None, *, now: datetime | None = None) -> datetime | None:
+    """The expiry instant of a token valid for ``expires_in_days`` days (None: never).
+
+    :class:`InvalidInput` unless ``0 < expires_in_days <= MAX_EXPIRES_IN_DAYS``.
+    """
+    if expires_in_days is None:
+        return None
+    if (
+        isinstance(expires_in_days, bool)
+        or not isinstance(expires_in_days, int | float)
+        or not 0 < expires_in_days <= MAX_EXPIRES_IN_DAYS
+    ):
+        raise InvalidInput(
+            f"expires_in_days must be a number of days in (0, {MAX_EXPIRES_IN_DAYS}], "
+            f"got {expires_in_days!r}"
+        )
+    return (now or utcnow()) + timedelta(days=float(expires_in_days))
+
+
+async def issue_token(
+    session: AsyncSession,
+    user: User,
+    secret: str,
+    *,
+    label: str = "",
+    expires_at: datetime | None = None,
+) -> str:
+    """Create a new token for ``user`` (valid until ``expires_at``, None: no expiry) and
+    return it (it is not stored in clear)."""
     token = TOKEN_PREFIX + secrets.token_urlsafe(32)
     session.add(
         ApiToken(
-            user_id=user.id, token_hash=hash_token(token, secret), prefix=token[:10], label=label
+            user_id=user.id,
+            token_hash=hash_token(token, secret),
+            prefix=token[:10],
+            label=label[:64],
+            expires_at=expires_at,
         )
     )
     await session.flush()
     return token
 
 
+def live_token_clause(now: datetime | None = None):  # type: ignore[no-untyped-def]
+    """SQL condition: the token row is neither revoked nor expired at ``now``."""
+    return ApiToken.revoked.is_(False) & or_(
+        ApiToken.expires_at.is_(None), ApiToken.expires_at > (now or utcnow())
+    )
+
+
 async def create_user(
-    session: AsyncSession, name: str, role: Role, secret: str, *, label: str = "created"
+    session: AsyncSession,
+    name: str,
+    role: Role,
+    secret: str,
+    *,
+    label: str = "created",
+    expires_at: datetime | None = None,
 ) -> tuple[User, str]:
     """Create a user with one token; :class:`InvalidInput` if the name is invalid,
     :class:`UserExists` (a :class:`Conflict`) if it is taken; both are ``ValueError`` too."""
@@ -93,7 +144,7 @@ async def create_user(
     user = User(name=name, role=role.name)
     session.add(user)
     await session.flush()
-    return user, await issue_token(session, user, secret, label=label)
+    return user, await issue_token(session, user, secret, label=label, expires_at=expires_at)
 
 
 async def revoke_tokens(session: AsyncSession, user: User, *, label: str | None = None) -> int:
@@ -106,15 +157,27 @@ async def revoke_tokens(session: AsyncSession, user: User, *, label: str | None 
 
 
 async def authenticate(session: AsyncSession, token: str, secret: str) -> User | None:
-    """The enabled user owning the unrevoked ``token``, or None."""
-    if not token.startswith(TOKEN_PREFIX) or len(token) > 200:
+    """The enabled user owning ``token`` if it is neither revoked nor expired, or None."""
+    if not isinstance(token, str) or not token.startswith(TOKEN_PREFIX) or len(token) > 200:
         return None
     row = await session.scalar(
         select(ApiToken)
         .options(selectinload(ApiToken.user))
-        .where(ApiToken.token_hash == hash_token(token, secret), ApiToken.revoked.is_(False))
+        .where(ApiToken.token_hash == hash_token(token, secret), live_token_clause())
     )
     if row is None or row.user.disabled:
         return None
     row.last_used_at = utcnow()
     return row.user
+
+
+async def token_is_live(session: AsyncSession, token: str, secret: str) -> bool:
+    """True while ``token`` still signs its user in (no write, for periodic re-checks)."""
+    if not isinstance(token, str) or not token.startswith(TOKEN_PREFIX) or len(token) > 200:
+        return False
+    row = await session.scalar(
+        select(ApiToken)
+        .options(selectinload(ApiToken.user))
+        .where(ApiToken.token_hash == hash_token(token, secret), live_token_clause())
+    )
+    return row is not None and not row.user.disabled

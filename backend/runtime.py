@@ -40,6 +40,7 @@ from backend.jobs import JobManager
 from backend.recognition.index import LiveIndex, load_live_index
 from backend.recognition.teach import BackgroundStore
 from backend.settings import Settings
+from backend.throttle import SignInThrottle
 
 if TYPE_CHECKING:
     from backend.view3d import View3D
@@ -124,6 +125,13 @@ class CellRuntime:
         self.teach_backgrounds = BackgroundStore()
         #: The continuous inspection run, if one was started (``backend.inspection.service``).
         self.inspection_run: Any = None
+        #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).
+        self.signin_throttle = SignInThrottle(
+            max_failures=settings.signin_max_failures,
+            window_s=settings.signin_window_s,
+            block_s=settings.signin_block_s,
+            max_clients=settings.signin_max_clients,
+        )
         self._stack: contextlib.AsyncExitStack | None = None
 
     # -- accessors (raise a clear error before start) -----------------------------------------
@@ -227,7 +235,10 @@ class CellRuntime:
             from backend.view3d import View3D, ViewAccess
 
             access = ViewAccess(
-                db, secret=s.secret_key.get_secret_value(), auth_enabled=s.auth_enabled
+                db,
+                secret=s.secret_key.get_secret_value(),
+                auth_enabled=s.auth_enabled,
+                throttle=self.signin_throttle,
             )
             view = View3D(
                 cell, host=s.viser_host, port=s.viser_port, sim=hardware.sim, access=access

@@ -25,6 +25,12 @@ DEV_SECRET = "visioncell-development-secret-change-me"
 CELL_NAME_PATTERN = re.compile(r"^[a-z0-9](?:[a-z0-9_-]{0,38}[a-z0-9])?$")
 
 
+#: An origin (scheme, host, optional port; no path, no wildcard).
+_ORIGIN = re.compile(
+    r"^https?://[A-Za-z0-9.-]{1,253}(?::[0-9]{1,5})?$|^https?://\[[0-9A-Fa-f:.]{2,45}\](?::[0-9]{1,5})?$"
+)
+
+
 def _is_loopback(host: str) -> bool:
     if host == "localhost":
         return True
@@ -102,6 +108,23 @@ class Settings(BaseSettings):
     auth_enabled: bool = Field(
         True, description="Require bearer tokens on the API (only loopback may turn this off)."
     )
+    signin_max_failures: int = Field(
+        5, ge=1, le=1000, description="Failed sign-ins from one address that block it."
+    )
+    signin_window_s: float = Field(
+        60.0, gt=0, le=86400, description="Window over which failed sign-ins are counted, s."
+    )
+    signin_block_s: float = Field(
+        60.0, gt=0, le=86400, description="How long a blocked address gets 429, s."
+    )
+    signin_max_clients: int = Field(
+        10_000, ge=1, le=1_000_000, description="Most client addresses the throttle tracks."
+    )
+    cors_origins: list[str] = Field(
+        default_factory=list,
+        description="Origins allowed to call the API from another site (CORS); empty: none. "
+        "Each is scheme://host[:port], e.g. 'https://hmi.plant.local'.",
+    )
     secret_key: SecretStr = Field(
         SecretStr(DEV_SECRET), description="Pepper for hashing API tokens (HMAC-SHA256)."
     )
@@ -132,6 +155,19 @@ class Settings(BaseSettings):
                 ipaddress.ip_address(v)
             except ValueError as exc:
                 raise ValueError(f"host must be an IP address or 'localhost', got {v!r}") from exc
+        return v
+
+    @field_validator("cors_origins")
+    @classmethod
+    def _valid_origins(cls, v: list[str]) -> list[str]:
+        if len(v) > 32:
+            raise ValueError(f"cors_origins holds at most 32 origins, got {len(v)}")
+        for origin in v:
+            if origin == "*" or not _ORIGIN.match(origin):
+                raise ValueError(
+                    "each of cors_origins must be an origin 'http(s)://host[:port]' without "
+                    f"path or wildcard, got {origin!r}"
+                )
         return v
 
     @field_validator("cell_name")

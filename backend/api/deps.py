@@ -22,6 +22,7 @@ from backend.cell import Cell
 from backend.db.models import Role, User
 from backend.db.session import Database
 from backend.settings import Settings
+from backend.throttle import SignInThrottle, TooManyAttempts
 
 if TYPE_CHECKING:
     from backend.runtime import CellRuntime
@@ -39,6 +40,7 @@ __all__ = [
     "SimDep",
     "View3DDep",
     "ViewerUser",
+    "client_address",
     "get_cell",
     "get_database",
     "get_runtime",
@@ -46,6 +48,7 @@ __all__ = [
     "install_runtime",
     "require_role",
     "runtime_of",
+    "signin_throttle",
 ]
 
 _bearer = HTTPBearer(
@@ -75,6 +78,26 @@ def get_runtime(conn: HTTPConnection) -> CellRuntime:
     if rt is None or not rt.running:
         raise ApiError(503, "unavailable", "the cell is not running")
     return rt
+
+
+def client_address(conn: HTTPConnection) -> str:
+    """The peer address a request or WebSocket came from (the key of the sign-in throttle)."""
+    return conn.client.host if conn.client is not None else "unknown"
+
+
+def signin_throttle(conn: HTTPConnection) -> SignInThrottle:
+    """The running cell's sign-in throttle (503 when the cell is not running)."""
+    return get_runtime(conn).signin_throttle  # type: ignore[no-any-return]
+
+
+def too_many_attempts(exc: TooManyAttempts) -> ApiError:
+    """The 429 answer of a blocked client."""
+    return ApiError(
+        429,
+        "too_many_attempts",
+        str(exc),
+        headers={"Retry-After": str(exc.retry_after_s)},
+    )
 
 
 def get_settings(conn: HTTPConnection) -> Settings:
@@ -122,12 +145,18 @@ def require_role(role: Role) -> Callable[..., Coroutine[Any, Any, User]]:
     """Dependency: the token's user, who must hold at least ``role``."""
 
     async def current_user(
+        conn: HTTPConnection,
         settings: SettingsDep,
         db: DatabaseDep,
         creds: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
     ) -> User:
         if not settings.auth_enabled:
             return User(id=0, name="anonymous", role=Role.engineer.name)
+        throttle, client = signin_throttle(conn), client_address(conn)
+        try:
+            throttle.check(client)  # blocked: refused even with a correct token
+        except TooManyAttempts as exc:
+            raise too_many_attempts(exc) from None
         if creds is None or creds.scheme.lower() != "bearer":
             raise ApiError(
                 401,
@@ -140,10 +169,11 @@ def require_role(role: Role) -> Callable[..., Coroutine[Any, Any, User]]:
                 session, creds.credentials, settings.secret_key.get_secret_value()
             )
         if user is None:
+            throttle.failure(client)
             raise ApiError(
                 401,
                 "unauthorized",
-                "invalid or revoked token",
+                "invalid, expired or revoked token",
                 headers={"WWW-Authenticate": "Bearer"},
             )
         if Role[user.role] < role:

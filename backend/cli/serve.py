@@ -37,6 +37,9 @@ def serve(
     logging.basicConfig(
         level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
+    from backend.logredact import install_redaction
+
+    install_redaction()
     if settings.sqlite_path() is not None:
         settings.var_dir.mkdir(parents=True, exist_ok=True)
     if not no_migrate:
@@ -52,6 +55,7 @@ def serve(
     if settings.bootstrap_operator and settings.auth_enabled:
         token = asyncio.run(bootstrap_operator(settings))
         out.print("  operator token (valid until the next start):")
+        # On purpose, the one place a token is shown: standard output, never a log record.
         print(f"  {token}", flush=True)
     out.print("Press Ctrl-C to stop.")
     sys.stdout.flush()
@@ -91,6 +95,10 @@ async def _serve(settings: Settings) -> None:
             ws_ping_interval=10,
             **uvicorn_options(),  # JSON answers for over-long or malformed requests
         )
+        from backend.logredact import install_redaction
+
+        # uvicorn.Config configured its loggers (their handlers exist now).
+        install_redaction("uvicorn", "uvicorn.error", "uvicorn.access")
         server = _Server(config)
         with _signals(server):
             await server.serve()

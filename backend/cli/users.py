@@ -15,16 +15,22 @@ __all__ = ["bootstrap_operator", "user_app"]
 user_app = typer.Typer(help="Users and API tokens.", no_args_is_help=True)
 
 
-async def _add_user(settings: Settings, name: str, role: str) -> str:
+async def _add_user(
+    settings: Settings, name: str, role: str, expires_in_days: float | None = None
+) -> str:
     from backend import audit
-    from backend.auth import create_user, parse_role
+    from backend.auth import create_user, parse_role, token_expiry
     from backend.db.session import Database
 
     db = Database(settings.database_url)
     try:
         async with db.session() as session:
             user, token = await create_user(
-                session, name, parse_role(role), settings.secret_key.get_secret_value()
+                session,
+                name,
+                parse_role(role),
+                settings.secret_key.get_secret_value(),
+                expires_at=token_expiry(expires_in_days),
             )
             audit.record(
                 session,
@@ -45,18 +51,31 @@ async def _add_user(settings: Settings, name: str, role: str) -> str:
 def user_add(
     name: Annotated[str, typer.Argument(help="User name (letters, digits, _ . @ -)")],
     role: Annotated[str, typer.Option(help="viewer, operator or engineer")] = "operator",
+    expires_in: Annotated[
+        float | None,
+        typer.Option(
+            "--expires-in", help="Days the token is valid (0 < DAYS <= 3650; default: no expiry)"
+        ),
+    ] = None,
 ) -> None:
     """Create a user and print its API token (shown once, alone on the last line)."""
+    from backend.auth import token_expiry
     from backend.db.migrate import upgrade
 
     settings = load_settings()
+    try:
+        expires_at = token_expiry(expires_in)  # validate before touching the database
+    except ValueError as exc:
+        err.print(f"[red]error:[/red] --expires-in: {exc}")
+        raise typer.Exit(2) from None
     upgrade(settings.database_url)
     try:
-        token = asyncio.run(_add_user(settings, name, role))
+        token = asyncio.run(_add_user(settings, name, role, expires_in))
     except ValueError as exc:
         err.print(f"[red]error:[/red] {exc}")
         raise typer.Exit(2) from None
-    out.print(f"created user {name!r} with role {role}; its token (shown once):")
+    until = f", valid until {expires_at:%Y-%m-%d %H:%M} UTC" if expires_at else ""
+    out.print(f"created user {name!r} with role {role}{until}; its token (shown once):")
     print(token)
 
 

@@ -139,6 +139,8 @@ class ApiToken(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     last_used_at: Mapped[datetime | None] = mapped_column(default=None)
     revoked: Mapped[bool] = mapped_column(Boolean, default=False)
+    expires_at: Mapped[datetime | None] = mapped_column(default=None)
+    """After this instant the token signs nobody in (None: no expiry)."""
 
     user: Mapped[User] = relationship(back_populates="tokens")
 

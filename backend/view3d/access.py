@@ -11,8 +11,8 @@ client starts anonymous (scene only).  It gets a :class:`ViewGrant` in one of tw
   opening a connection before it expires (:data:`LINK_TTL_S`).
 
 Either way the grant remembers the API token row it came from, and :meth:`ViewAccess.recheck`
-looks that row up again, so a revoked token, a disabled user or a lowered role removes the
-controls while the page stays open.  Roles are those of the REST API
+looks that row up again, so a revoked or expired token, a disabled user or a lowered role
+removes the controls while the page stays open.  Roles are those of the REST API
 (``viewer < operator < engineer``).
 """
 
@@ -31,6 +31,8 @@ from sqlalchemy.orm import selectinload
 from backend.auth import authenticate, hash_token
 from backend.db.models import ApiToken, Role
 from backend.db.session import Database
+from backend.db.types import utcnow
+from backend.throttle import SignInThrottle
 
 __all__ = [
     "LINK_PATH_PREFIX",
@@ -175,6 +177,10 @@ class ViewAccess:
         The settings' secret key (hashes tokens, signs links).
     auth_enabled : bool
         False: every client gets the engineer role, as the REST API does then.
+    throttle : SignInThrottle, optional
+        Failed sign-ins per client address, shared with the REST API: a bad token typed
+        into a panel counts against the browser's address, and a blocked address gets
+        :class:`~backend.throttle.TooManyAttempts` even for a correct token.
 
     Notes
     -----
@@ -183,10 +189,18 @@ class ViewAccess:
     ``asyncio.run_coroutine_threadsafe``.
     """
 
-    def __init__(self, db: Database, *, secret: str, auth_enabled: bool = True) -> None:
+    def __init__(
+        self,
+        db: Database,
+        *,
+        secret: str,
+        auth_enabled: bool = True,
+        throttle: SignInThrottle | None = None,
+    ) -> None:
         self.db = db
         self._secret = secret
         self.auth_enabled = auth_enabled
+        self.throttle = throttle
 
     def open_grant(self) -> ViewGrant | None:
         """The grant every client gets without signing in (only when auth is disabled)."""
@@ -194,14 +208,24 @@ class ViewAccess:
             return None
         return ViewGrant(user="anonymous", role=Role.engineer, token_id=None, via="open")
 
-    async def from_token(self, token: str) -> ViewGrant | None:
-        """The grant of an API token typed into a panel, or None if it is not valid."""
+    async def from_token(self, token: str, *, client: str | None = None) -> ViewGrant | None:
+        """The grant of an API token typed into a panel, or None if it is not valid.
+
+        With ``client`` (the browser's address) the sign-in is throttled: raises
+        :class:`~backend.throttle.TooManyAttempts` while that address is blocked, and a
+        bad token counts one failure against it.
+        """
+        throttle = self.throttle if client is not None else None
+        if throttle is not None:
+            throttle.check(client)  # type: ignore[arg-type]
         if not isinstance(token, str):
             return None
         token = token.strip()
         async with self.db.session() as session:
             user = await authenticate(session, token, self._secret)
             if user is None:
+                if throttle is not None:
+                    throttle.failure(client)  # type: ignore[arg-type]
                 return None
             row = await session.scalar(
                 select(ApiToken.id).where(ApiToken.token_hash == hash_token(token, self._secret))
@@ -266,5 +290,7 @@ class ViewAccess:
             if row is None or row.revoked or row.user.disabled:
                 return None
             if user_id is not None and row.user_id != user_id:
+                return None
+            if row.expires_at is not None and row.expires_at <= utcnow():
                 return None
             return ViewGrant(user=row.user.name, role=Role[row.user.role], token_id=row.id, via=via)

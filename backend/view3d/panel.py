@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 import viser
 
 from backend.db.models import Role
+from backend.throttle import TooManyAttempts
 from backend.view3d.access import ViewAccess, ViewGrant
 from vision.errors import VisionCellError
 
@@ -69,6 +70,8 @@ class ClientPanel:
         self.client = client
         self.cell = cell
         self.access = access
+        #: The browser's address, the key of the sign-in throttle (set by the view).
+        self.address = "view3d"
         self.loop = loop
         self.sim = sim
         self._lock = threading.RLock()
@@ -244,7 +247,11 @@ class ClientPanel:
             return
 
         async def sign_in() -> None:
-            grant = await access.from_token(token)
+            try:
+                grant = await access.from_token(token, client=self.address)
+            except TooManyAttempts as exc:
+                self.say(f"**Too many failed sign-ins:** try again in {exc.retry_after_s} s.")
+                return
             if grant is None:
                 self.say("**That token is not valid.**")
                 return

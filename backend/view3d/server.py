@@ -64,6 +64,17 @@ def _request_path(server: viser.ViserServer | None, client_id: int) -> str | Non
     return path if isinstance(path, str) else None
 
 
+def _client_address(server: viser.ViserServer | None, client_id: int) -> str | None:
+    """The peer address of a client's websocket (the sign-in throttle's key), or None
+    (same viser internals as :func:`_request_path`)."""
+    ws_server = getattr(server, "_websock_server", None)
+    conn = getattr(ws_server, "_live_connections", {}).get(client_id)
+    remote = getattr(conn, "remote_address", None)
+    if isinstance(remote, tuple) and remote and isinstance(remote[0], str):
+        return remote[0]
+    return None
+
+
 class View3D:
     """Owns the viser server of one cell.
 
@@ -281,6 +292,8 @@ class View3D:
         )
         open_grant = self.access.open_grant() if self.access is not None else None
         panel.apply(open_grant)
+        # Unknown address (viser internals changed): throttle the view's clients as one.
+        panel.address = _client_address(self.server, client.client_id) or "view3d"
         self.panels[client.client_id] = panel
         link = link_from_path(_request_path(self.server, client.client_id))
         access = self.access

@@ -1,13 +1,11 @@
 """audit trail: the audit_log table
 
 Revision ID: 0006
-Revises: 0004
+Revises: 0005
 Create Date: 2026-12-02 00:10:00
 
 Issue 15, part 5: every change of a threshold, object model, trained view, active
 calibration, user or token is recorded with who, when, old and new value and reason.
-``down_revision`` is the head of ``integ`` when this was written (0004); if 0005 lands
-first, re-chain it onto it.
 """
 
 from __future__ import annotations
@@ -18,7 +16,7 @@ from alembic import op
 from backend.db.types import UTCDateTime
 
 revision = "0006"
-down_revision = "0004"
+down_revision = "0005"
 branch_labels = None
 depends_on = None
 

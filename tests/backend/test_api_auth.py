@@ -23,7 +23,7 @@ def test_missing_token_is_401_with_error_body(client):
 def test_wrong_token_is_401(client):
     r = client.get("/api/robot/state", headers=auth("vc_not-a-real-token"))
     assert r.status_code == 401
-    assert r.json() == {"error": "unauthorized", "detail": "invalid or revoked token"}
+    assert r.json() == {"error": "unauthorized", "detail": "invalid, expired or revoked token"}
 
 
 def test_viewer_reads_but_cannot_move(client, headers):

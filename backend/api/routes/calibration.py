@@ -34,8 +34,10 @@ from backend.api.types import (
     bounded_float,
     bounded_int,
 )
+from backend.api.uploads import check_image_size, read_capped
 from backend.db.models import CalibrationKind
 from backend.jobs import Job, JobState
+from backend.recognition.images import MAX_IMAGE_BYTES
 from robot.collision import CollisionWorld
 from vision.calibration import (
     ALL_METHODS,
@@ -198,7 +200,17 @@ def _decode(name: str, data: bytes) -> np.ndarray:
             "unsupported_media_type",
             f"file {name!r} is not an image: upload PNG, JPEG, BMP or TIFF files",
         )
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) if data else None
+    if not data:
+        raise ApiError(415, "unsupported_media_type", f"file {name!r} is empty")
+    try:
+        check_image_size(data, name=name)  # bytes and declared pixels, before decoding
+    except InvalidInput as exc:
+        if exc.http_status == 413:
+            raise
+        raise ApiError(
+            415, "unsupported_media_type", f"file {name!r} does not decode as an image"
+        ) from None
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise ApiError(415, "unsupported_media_type", f"file {name!r} does not decode as an image")
     if img.dtype != np.uint8:
@@ -352,7 +364,7 @@ async def create_calibration_samples(
     decoded = []
     for f in images:
         name = PurePath(f.filename or "image").name
-        decoded.append((name, _decode(name, await f.read())))
+        decoded.append((name, _decode(name, await read_capped(f, MAX_IMAGE_BYTES))))
     T: list[np.ndarray | None] = [None] * len(decoded)
     if poses is not None:
         text = (await poses.read()).decode("utf-8", errors="replace")

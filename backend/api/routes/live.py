@@ -2,7 +2,10 @@
 
 The client sends ``{"token": "..."}`` as its first message (browsers cannot set headers on
 WebSockets, and tokens in URLs end up in logs).  Close codes: 4401 bad or missing token,
-4408 no token within 5 s, 1013 the cell is not running.
+4408 no token within 5 s, 1013 the cell is not running, 4429 too many failed sign-ins from
+this address (the reason says when to retry).  A bad token counts against the client's
+address like a REST sign-in; the token is checked again every :data:`RECHECK_S` seconds
+and the socket is closed with 4401 once it expires or is revoked.
 
 Messages from the server (JSON objects, ``type`` first):
 
@@ -32,17 +35,20 @@ from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
-from backend.api.deps import get_runtime, get_settings
+from backend.api.deps import client_address, get_runtime, get_settings
 from backend.api.errors import ApiError
-from backend.auth import authenticate
+from backend.auth import authenticate, token_is_live
 from backend.cell.events import ArmState, CameraStatus, CellStopped, JobProgress, JobState
 from backend.db.models import Role
 from backend.inspection.service import InspectionDone
+from backend.throttle import TooManyAttempts
 
 router = APIRouter(tags=["live"])
 
 #: Largest rate of ``job`` messages from progress reports, per job, Hz.
 JOB_PROGRESS_HZ = 4.0
+#: How often an open socket's token is checked again (expiry, revocation), seconds.
+RECHECK_S = 5.0
 
 
 def _message(event: Any) -> dict[str, Any] | None:
@@ -77,15 +83,24 @@ async def live(ws: WebSocket) -> None:
     except WebSocketDisconnect:
         return
     user_name, role = "anonymous", Role.engineer.name
+    secret = settings.secret_key.get_secret_value()
+    token = ""
     if settings.auth_enabled:
+        client = client_address(ws)
+        try:
+            rt.signin_throttle.check(client)
+        except TooManyAttempts as exc:
+            await ws.close(code=4429, reason=str(exc))
+            return
         try:
             token = str(json.loads(first).get("token", ""))
         except (ValueError, AttributeError):
             token = ""
         async with rt.database.session() as session:
-            user = await authenticate(session, token, settings.secret_key.get_secret_value())
+            user = await authenticate(session, token, secret)
         if user is None:
-            await ws.close(code=4401, reason="invalid or revoked token")
+            rt.signin_throttle.failure(client)
+            await ws.close(code=4401, reason="invalid, expired or revoked token")
             return
         user_name, role = user.name, user.role
 
@@ -112,8 +127,16 @@ async def live(ws: WebSocket) -> None:
         period = 1.0 / JOB_PROGRESS_HZ
         last_sent: dict[str, float] = {}  # job id -> time of its last progress message
         pending: dict[str, JobProgress] = {}  # job id -> newest progress not sent yet
+        checked_at = time.monotonic()
         while not rx_task.done():
             now = time.monotonic()
+            if settings.auth_enabled and now - checked_at >= RECHECK_S:
+                checked_at = now
+                async with rt.database.session() as session:
+                    live = await token_is_live(session, token, secret)
+                if not live:
+                    await ws.close(code=4401, reason="the token expired or was revoked")
+                    break
             due = [jid for jid, ev in pending.items() if now - last_sent.get(jid, 0.0) >= period]
             for jid in due:
                 last_sent[jid] = now

@@ -19,6 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from backend import audit
 from backend.api.deps import CellDep, DatabaseDep, EngineerUser, RuntimeDep, SessionDep, ViewerUser
+from backend.api.uploads import read_capped
 from backend.recognition import images as im
 from backend.recognition import models as svc
 from backend.recognition import teach as teach_svc
@@ -386,15 +387,6 @@ def _number_list(text: str | None, n: int, what: str, *, lo: float, hi: float) -
     return out
 
 
-async def _read_capped(f: UploadFile, limit: int) -> bytes:
-    data = await f.read(limit + 1)
-    if len(data) > limit:
-        raise im.ImageTooLarge(
-            f"{f.filename!r} has more than {limit} bytes; the limit is {limit} bytes per image"
-        )
-    return data
-
-
 @router.post(
     "/{model_id}/views",
     response_model=ViewList,
@@ -433,12 +425,12 @@ async def create_views(
     inputs = []
     for k, f in enumerate(images):
         name = f.filename or f"image {k}"
-        rgb = im.decode_image(await _read_capped(f, im.MAX_IMAGE_BYTES), name=name)
+        rgb = im.decode_image(await read_capped(f, im.MAX_IMAGE_BYTES), name=name)
         mask = None
         if masks:
             mname = masks[k].filename or f"mask {k}"
             mask = im.decode_mask(
-                await _read_capped(masks[k], im.MAX_IMAGE_BYTES), shape=rgb.shape[:2], name=mname
+                await read_capped(masks[k], im.MAX_IMAGE_BYTES), shape=rgb.shape[:2], name=mname
             )
         inputs.append(
             views_svc.ViewInput(

@@ -12,9 +12,17 @@ from sqlalchemy import func, select
 from backend import audit
 from backend.api.deps import EngineerUser, SessionDep, SettingsDep, ViewerUser
 from backend.api.schemas import Page
-from backend.api.types import Limit, NameStr, Offset
-from backend.auth import create_user, parse_role
+from backend.api.types import DbId, Limit, NameStr, Offset
+from backend.auth import (
+    MAX_EXPIRES_IN_DAYS,
+    create_user,
+    hash_token,
+    issue_token,
+    parse_role,
+    token_expiry,
+)
 from backend.db.models import ApiToken, User
+from backend.db.types import utcnow
 from vision.errors import Conflict, NotFound
 
 router = APIRouter(prefix="/users", tags=["users"])
@@ -29,6 +37,15 @@ class UserCreate(BaseModel):
     role: Literal["viewer", "operator", "engineer"] = Field(
         description="viewer, operator or engineer"
     )
+    expires_in_days: float | None = Field(
+        None,
+        gt=0,
+        le=MAX_EXPIRES_IN_DAYS,
+        allow_inf_nan=False,
+        strict=True,
+        description="Lifetime of the first token, days (omitted: no expiry)",
+    )
+
     reason: str | None = Field(
         None, max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)"
     )
@@ -41,6 +58,36 @@ class UserRoleIn(BaseModel):
     reason: str | None = Field(
         None, max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)"
     )
+
+
+class TokenCreate(BaseModel):
+    label: str = Field("", max_length=64, pattern=r"^[A-Za-z0-9 _.@-]*$", description="A note")
+    expires_in_days: float | None = Field(
+        None,
+        gt=0,
+        le=MAX_EXPIRES_IN_DAYS,
+        allow_inf_nan=False,
+        strict=True,
+        description="Lifetime of the token, days (omitted: no expiry)",
+    )
+
+
+class TokenPublic(BaseModel):
+    """A token as listed: never its secret, only the first characters."""
+
+    id: int
+    prefix: str
+    label: str
+    created_at: datetime
+    last_used_at: datetime | None
+    expires_at: datetime | None
+    revoked: bool
+    expired: bool
+
+
+class TokenCreated(BaseModel):
+    token: str = Field(description="The new token, shown once")
+    info: TokenPublic
 
 
 class UserPublic(BaseModel):
@@ -95,7 +142,11 @@ async def create_user_route(
 ) -> dict[str, Any]:
     # Invalid names raise InvalidInput (422), a taken name UserExists (409).
     user, token = await create_user(
-        session, body.name, parse_role(body.role), settings.secret_key.get_secret_value()
+        session,
+        body.name,
+        parse_role(body.role),
+        settings.secret_key.get_secret_value(),
+        expires_at=token_expiry(body.expires_in_days),
     )
     audit.record(
         session,
@@ -172,3 +223,104 @@ async def update_user_role(
         )
     await session.flush()
     return UserPublic.model_validate(user, from_attributes=True).model_dump(mode="json")
+
+
+def _token_public(row: ApiToken) -> dict[str, Any]:
+    expired = row.expires_at is not None and row.expires_at <= utcnow()
+    return TokenPublic(
+        id=row.id,
+        prefix=row.prefix,
+        label=row.label,
+        created_at=row.created_at,
+        last_used_at=row.last_used_at,
+        expires_at=row.expires_at,
+        revoked=row.revoked,
+        expired=expired,
+    ).model_dump(mode="json")
+
+
+async def _user_named(session: Any, name: str) -> User:
+    user = await session.scalar(select(User).where(User.name == name))
+    if user is None:
+        raise NotFound(f"no user named {name!r}")
+    return user  # type: ignore[no-any-return]
+
+
+@router.get(
+    "/{name}/tokens",
+    summary="A user's tokens (prefix, label, dates, state; never the secret)",
+    response_model=Page[TokenPublic],
+)
+async def read_tokens(
+    _: EngineerUser, session: SessionDep, name: NameStr, limit: Limit = 100, offset: Offset = 0
+) -> dict[str, Any]:
+    user = await _user_named(session, name)
+    where = ApiToken.user_id == user.id
+    total = await session.scalar(select(func.count()).select_from(ApiToken).where(where))
+    rows = (
+        await session.scalars(
+            select(ApiToken).where(where).order_by(ApiToken.id).limit(limit).offset(offset)
+        )
+    ).all()
+    return {"data": [_token_public(r) for r in rows], "count": int(total or 0)}
+
+
+@router.post(
+    "/{name}/tokens",
+    status_code=status.HTTP_201_CREATED,
+    summary="Issue a token for a user, optionally expiring; the answer holds it, shown once",
+    response_model=TokenCreated,
+)
+async def create_token(
+    me: EngineerUser, session: SessionDep, settings: SettingsDep, name: NameStr, body: TokenCreate
+) -> dict[str, Any]:
+    user = await _user_named(session, name)
+    if user.disabled:
+        raise Conflict(f"user {name!r} is disabled")
+    secret = settings.secret_key.get_secret_value()
+    token = await issue_token(
+        session, user, secret, label=body.label, expires_at=token_expiry(body.expires_in_days)
+    )
+    row = await session.scalar(
+        select(ApiToken).where(ApiToken.token_hash == hash_token(token, secret))
+    )
+    assert row is not None
+    audit.record(
+        session,
+        actor=audit.Actor.of(me),
+        kind="token",
+        entity_id=row.id,
+        action="create",
+        old=None,
+        new={"user": name, "label": row.label, "expires_at": _token_public(row)["expires_at"]},
+        reason=None,
+    )
+    return {"token": token, "info": _token_public(row)}
+
+
+@router.delete(
+    "/{name}/tokens/{token_id}",
+    summary="Revoke one token of a user",
+    response_model=TokenPublic,
+)
+async def revoke_token(
+    me: EngineerUser, session: SessionDep, name: NameStr, token_id: DbId
+) -> dict[str, Any]:
+    user = await _user_named(session, name)
+    row = await session.get(ApiToken, token_id)
+    if row is None or row.user_id != user.id:
+        raise NotFound(f"user {name!r} has no token {token_id}")
+    if not row.revoked:
+        row.revoked = True
+        audit.record(
+            session,
+            actor=audit.Actor.of(me),
+            kind="token",
+            entity_id=row.id,
+            action="revoke",
+            old={"user": name, "revoked": False},
+            new={"user": name, "revoked": True},
+            reason=None,
+        )
+    await session.flush()
+    return _token_public(row)
