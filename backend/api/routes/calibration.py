@@ -463,7 +463,9 @@ async def create_calibration_solve(
 
 
 @router.get(
-    "/calibrations", summary="This cell's calibration history, newest first", response_model=Page[Open]
+    "/calibrations",
+    summary="This cell's calibration history, newest first",
+    response_model=Page[Open],
 )
 async def read_calibrations(
     _: ViewerUser,
