@@ -78,7 +78,7 @@ def get_runtime(conn: HTTPConnection) -> CellRuntime:
 
 
 def get_settings(conn: HTTPConnection) -> Settings:
-    return conn.app.state.settings  # type: ignore[no-any-return]
+    return conn.app.state.settings
 
 
 def get_database(conn: HTTPConnection) -> Database:

@@ -192,7 +192,7 @@ def add_model(
 
     try:
         fields = svc.ModelFields(
-            name=name, part=part, sitting_base=base, kind=kind, threshold=threshold
+            name=name, part=part, sitting_base=base, kind=svc.parse_kind(kind), threshold=threshold
         )
     except ValueError as exc:
         raise _fail(str(exc)) from None
@@ -269,7 +269,9 @@ def import_views(
             except NotFound:
                 model_id = None
         if model_id is None:
-            model_id = (await svc.create_model(db, svc.ModelFields(name=name, kind=kind))).id
+            model_id = (
+                await svc.create_model(db, svc.ModelFields(name=name, kind=svc.parse_kind(kind)))
+            ).id
         live = LiveIndex(
             method=settings.recognition_method, max_features=settings.recognition_max_features
         )
