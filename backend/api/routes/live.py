@@ -32,12 +32,12 @@ from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
-from backend.inspection.service import InspectionDone
 from backend.api.deps import get_runtime, get_settings
 from backend.api.errors import ApiError
 from backend.auth import authenticate
 from backend.cell.events import ArmState, CameraStatus, CellStopped, JobProgress, JobState
 from backend.db.models import Role
+from backend.inspection.service import InspectionDone
 
 router = APIRouter(tags=["live"])
 
