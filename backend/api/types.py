@@ -49,6 +49,11 @@ MAX_NAME_LENGTH = 128
 MAX_ABS_JOINT_API_RAD = 2.0 * math.pi
 
 
+def _examples(examples: list[Any] | None) -> dict[str, Any]:
+    # Only set when given: a ``Field(examples=None)`` would count as set when merged.
+    return {} if examples is None else {"examples": examples}
+
+
 def bounded_float(
     lo: float, hi: float, description: str, *, examples: list[Any] | None = None
 ) -> object:
@@ -59,13 +64,13 @@ def bounded_float(
         ge=lo,
         le=hi,
         description=description,
-        examples=examples,
+        **_examples(examples),
     )
 
 
 def bounded_int(lo: int, hi: int, description: str, *, examples: list[Any] | None = None) -> object:
     """A ``Field`` for a strict integer in ``[lo, hi]`` (booleans refused)."""
-    return Field(strict=True, ge=lo, le=hi, description=description, examples=examples)
+    return Field(strict=True, ge=lo, le=hi, description=description, **_examples(examples))
 
 
 DbId = Annotated[int, Path(ge=1, le=MAX_DB_ID, description="Row id, 1 .. 2^63 - 1", examples=[1])]
