@@ -31,6 +31,7 @@ import argparse
 import asyncio
 import json
 import math
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -39,6 +40,8 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 from rich.table import Table
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering, before MuJoCo loads
 
 out = Console()
 err = Console(stderr=True)

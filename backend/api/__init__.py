@@ -3,6 +3,7 @@
 from fastapi import APIRouter
 
 from backend.api.routes import (
+    audit,
     calibration,
     camera,
     cells,
@@ -38,5 +39,6 @@ for _r in (
     sim,
     live,
     view3d,
+    audit,
 ):
     api_router.include_router(_r.router)

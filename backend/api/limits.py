@@ -85,8 +85,47 @@ class UrlLengthLimit:
         await send({"type": "http.response.body", "body": body})
 
 
+#: After a parse-error answer, how long and how much of the rest of the request is read and
+#: dropped before the connection closes (a "lingering close"): closing a socket with unread
+#: data makes the kernel send a reset, which can destroy the answer before the client reads it.
+LINGER_S = 2.0
+LINGER_BYTES = 16 << 20
+
+
 class JsonErrorHttpProtocol(H11Protocol):
-    """Uvicorn's h11 protocol whose parse-error answer is the JSON error body."""
+    """Uvicorn's h11 protocol whose parse-error answer is the JSON error body, followed by a
+    bounded lingering close (:data:`LINGER_S`, :data:`LINGER_BYTES`)."""
+
+    _lingering = False
+    _dropped = 0
+    _linger_timer: Any = None
+
+    def data_received(self, data: bytes) -> None:
+        if self._lingering:
+            self._dropped += len(data)
+            if self._dropped > LINGER_BYTES:
+                self._end_linger()
+            return
+        super().data_received(data)
+
+    def eof_received(self) -> None:
+        if self._lingering:  # the client has sent everything: nothing left to drop
+            self._end_linger()
+            return
+        super().eof_received()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._linger_timer is not None:
+            self._linger_timer.cancel()
+            self._linger_timer = None
+        super().connection_lost(exc)
+
+    def _end_linger(self) -> None:
+        self._lingering = False
+        if self._linger_timer is not None:
+            self._linger_timer.cancel()
+            self._linger_timer = None
+        self.transport.close()
 
     def send_400_response(self, msg: str) -> None:
         body, headers = _json_error(
@@ -101,7 +140,14 @@ class JsonErrorHttpProtocol(H11Protocol):
             content.extend([name, b": ", value, b"\r\n"])
         content.extend([b"connection: close\r\n", b"\r\n", body])
         self.transport.write(b"".join(content))
-        self.transport.close()
+        if not self.transport.can_write_eof():
+            self.transport.close()
+            return
+        # Half-close: the answer and a FIN go out now; what the client still sends is read
+        # and dropped until it stops, LINGER_BYTES have come, or LINGER_S have passed.
+        self.transport.write_eof()
+        self._lingering = True
+        self._linger_timer = self.loop.call_later(LINGER_S, self._end_linger)
 
 
 def uvicorn_options() -> dict[str, Any]:

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from sqlalchemy import func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
+from backend import audit
 from backend.calibration.sessions import (
     NotFound,
     ProgressFn,
@@ -299,7 +300,8 @@ async def solve_session(
 # -- activation and history ---------------------------------------------------------------
 
 
-async def _make_active(session: AsyncSession, cal: Calibration) -> None:
+async def _make_active(session: AsyncSession, cal: Calibration, by: audit.By) -> None:
+    was_active = cal.active
     others = await session.scalars(
         select(Calibration).where(
             Calibration.cell_id == cal.cell_id,
@@ -308,26 +310,43 @@ async def _make_active(session: AsyncSession, cal: Calibration) -> None:
             Calibration.id != cal.id,
         )
     )
-    for o in others:
+    previous = list(others)
+    for o in previous:
         o.active = False
     # Clear the old one first: the partial unique index allows one active row at a time.
     await session.flush()
     cal.active = True
     await session.flush()
+    if was_active and not previous:
+        return  # already the active one: nothing changed, nothing to record
+    where = {"cell_id": cal.cell_id, "kind": cal.kind.value}
+    audit.record(
+        session,
+        actor=by.actor,
+        kind="calibration",
+        entity_id=cal.id,
+        action="activate",
+        old={**where, "active_id": previous[0].id if previous else None},
+        new={**where, "active_id": cal.id, "rms_px": cal.rms_px},
+        reason=by.reason,
+    )
 
 
-async def activate(session: AsyncSession, calibration_id: int) -> Calibration:
+async def activate(
+    session: AsyncSession, calibration_id: int, *, by: audit.By | None = None
+) -> Calibration:
     """Make a calibration the active one of its kind in its cell (the previous one is
     deactivated).  A hand-eye calibration brings the intrinsics it was solved with along:
     ``T_ee_cam`` holds only with them."""
+    by = by or audit.By()
     cal = await get_calibration(session, calibration_id)
     if cal.kind is CalibrationKind.hand_eye:
         intr_id = cal.parameters.get("intrinsics_id")
         if intr_id is not None:
             intr = await session.get(Calibration, int(intr_id))
             if intr is not None:
-                await _make_active(session, intr)
-    await _make_active(session, cal)
+                await _make_active(session, intr, by)
+    await _make_active(session, cal, by)
     return cal
 
 

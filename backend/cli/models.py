@@ -188,6 +188,7 @@ def add_model(
     threshold: Annotated[float | None, typer.Option(help="Own threshold in [0, 1]")] = None,
 ) -> None:
     """Create an object model; prints its id on the last line."""
+    from backend import audit
     from backend.recognition import models as svc
 
     try:
@@ -198,7 +199,7 @@ def add_model(
         raise _fail(str(exc)) from None
 
     async def work(db: Any, _: Any) -> Any:
-        return await svc.create_model(db, fields)
+        return await svc.create_model(db, fields, by=audit.By(audit.CLI))
 
     row = _run(work)
     print(f"created model {row.name!r} ({row.kind.value}, part {row.part!r})")
@@ -208,12 +209,13 @@ def add_model(
 @models_app.command("remove")
 def remove_model(name: Annotated[str, typer.Argument(help="Model name")]) -> None:
     """Delete a model and its trained views."""
+    from backend import audit
     from backend.recognition import models as svc
 
     async def work(db: Any, _: Any) -> int:
         async with db.session() as session:
             row = await svc.get_model_by_name(session, name)
-        await svc.delete_model(db, row.id)
+        await svc.delete_model(db, row.id, by=audit.By(audit.CLI))
         return row.id
 
     model_id = _run(work)
@@ -228,6 +230,7 @@ def import_views(
     replace: Annotated[bool, typer.Option(help="Replace the model's earlier views")] = False,
 ) -> None:
     """Add trained views from a folder of images (teaching without a robot)."""
+    from backend import audit
     from backend.recognition import images as im
     from backend.recognition import models as svc
     from backend.recognition.index import LiveIndex
@@ -270,7 +273,11 @@ def import_views(
                 model_id = None
         if model_id is None:
             model_id = (
-                await svc.create_model(db, svc.ModelFields(name=name, kind=svc.parse_kind(kind)))
+                await svc.create_model(
+                    db,
+                    svc.ModelFields(name=name, kind=svc.parse_kind(kind)),
+                    by=audit.By(audit.CLI),
+                )
             ).id
         live = LiveIndex(
             method=settings.recognition_method, max_features=settings.recognition_max_features
@@ -278,7 +285,12 @@ def import_views(
         rows = []
         for start in range(0, len(inputs), 72):  # MAX_VIEWS_PER_REQUEST per transaction
             rows += await add_views(
-                db, live, model_id, inputs[start : start + 72], replace=replace and start == 0
+                db,
+                live,
+                model_id,
+                inputs[start : start + 72],
+                replace=replace and start == 0,
+                by=audit.By(audit.CLI),
             )
         return model_id, len(rows)
 
@@ -292,6 +304,7 @@ def reextract(
     all_views: Annotated[bool, typer.Option("--all", help="Every view, not only stale")] = False,
 ) -> None:
     """Extract features again from the stored images (after a descriptor version change)."""
+    from backend import audit
     from backend.recognition import models as svc
     from backend.recognition.index import LiveIndex
     from backend.recognition.views import reextract_views
@@ -305,7 +318,9 @@ def reextract(
             method=settings.recognition_method, max_features=settings.recognition_max_features
         )
         await live.load(db)
-        return await reextract_views(db, live, model_id=model_id, only_stale=not all_views)
+        return await reextract_views(
+            db, live, model_id=model_id, only_stale=not all_views, by=audit.By(audit.CLI)
+        )
 
     print(f"re-extracted {_run(work)} views")
 

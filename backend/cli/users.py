@@ -16,14 +16,25 @@ user_app = typer.Typer(help="Users and API tokens.", no_args_is_help=True)
 
 
 async def _add_user(settings: Settings, name: str, role: str) -> str:
+    from backend import audit
     from backend.auth import create_user, parse_role
     from backend.db.session import Database
 
     db = Database(settings.database_url)
     try:
         async with db.session() as session:
-            _, token = await create_user(
+            user, token = await create_user(
                 session, name, parse_role(role), settings.secret_key.get_secret_value()
+            )
+            audit.record(
+                session,
+                actor=audit.CLI,
+                kind="user",
+                entity_id=user.id,
+                action="create",
+                old=None,
+                new={"name": user.name, "role": user.role, "token_label": "created"},
+                reason=None,
             )
         return token
     finally:
@@ -53,8 +64,9 @@ async def bootstrap_operator(settings: Settings) -> str:
     """A fresh start-up token for the built-in 'operator' user (the previous one is revoked)."""
     from sqlalchemy import select
 
+    from backend import audit
     from backend.auth import create_user, issue_token, revoke_tokens
-    from backend.db.models import Role, User
+    from backend.db.models import ApiToken, Role, User
     from backend.db.session import Database
 
     secret = settings.secret_key.get_secret_value()
@@ -62,13 +74,27 @@ async def bootstrap_operator(settings: Settings) -> str:
     try:
         async with db.session() as session:
             user = await session.scalar(select(User).where(User.name == "operator"))
+            revoked = 0
             if user is None:
-                _, token = await create_user(
+                user, token = await create_user(
                     session, "operator", Role.operator, secret, label="startup"
                 )
             else:
-                await revoke_tokens(session, user, label="startup")
+                revoked = await revoke_tokens(session, user, label="startup")
                 token = await issue_token(session, user, secret, label="startup")
+            token_id = await session.scalar(
+                select(ApiToken.id).where(ApiToken.user_id == user.id).order_by(ApiToken.id.desc())
+            )
+            audit.record(
+                session,
+                actor=audit.SYSTEM,
+                kind="token",
+                entity_id=int(token_id),
+                action="issue",
+                old=None,
+                new={"user": user.name, "role": user.role, "label": "startup", "revoked": revoked},
+                reason="start-up token of the built-in operator",
+            )
         return token
     finally:
         await db.dispose()

@@ -33,6 +33,7 @@ from backend.db.types import UTCDateTime, utcnow
 
 __all__ = [
     "ApiToken",
+    "AuditEntry",
     "Base",
     "Calibration",
     "CalibrationKind",
@@ -370,4 +371,33 @@ class RecognitionSettings(Base):
 
     __table_args__ = (
         CheckConstraint("global_threshold >= 0 AND global_threshold <= 1", name="threshold_range"),
+    )
+
+
+class AuditEntry(Base):
+    """One recorded change (the audit trail): who, when, what, old and new value, why.
+
+    Written by :func:`backend.audit.record` in the transaction of the change itself; no API
+    edits or deletes these rows.
+    """
+
+    __tablename__ = "audit_log"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    at: Mapped[datetime] = mapped_column(default=utcnow, index=True)
+    #: User name, or ``cli`` / ``system`` for command-line and automatic changes.
+    actor: Mapped[str] = mapped_column(String(64), index=True)
+    actor_role: Mapped[str] = mapped_column(String(16))
+    kind: Mapped[str] = mapped_column(String(16))
+    entity_id: Mapped[str] = mapped_column(String(64))
+    action: Mapped[str] = mapped_column(String(32))
+    old: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
+    new: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
+    reason: Mapped[str] = mapped_column(Text, default="")
+
+    __table_args__ = (
+        Index("ix_audit_log_kind_entity", "kind", "entity_id"),
+        CheckConstraint(
+            "kind IN ('threshold', 'model', 'view', 'calibration', 'user', 'token')", name="kind"
+        ),
     )

@@ -235,7 +235,7 @@ def _look_times(frame: Any, durations: dict[str, float]) -> None:
 
 
 async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg: NDArray[np.uint8],
-                durations: dict[str, float]) -> tuple[Any, float]:  # fmt: skip
+                durations: dict[str, float], clear_first: bool = False) -> tuple[Any, float]:  # fmt: skip
     """The top-view frame of an object at the station, and the belt travel at exposure."""
     cell = ctx.rt.cell
     deadline = time.monotonic() + opts.wait_s
@@ -243,6 +243,17 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
     t0 = time.monotonic()
     frame = await cell.look(q_top, speed=opts.speed)
     _look_times(frame, durations)
+    while clear_first:  # a run: the previous object must have left the station first
+        try:
+            await asyncio.to_thread(foreground_mask, frame.rgb, bg)
+        except SegmentationFailed:
+            break
+        if time.monotonic() >= deadline:
+            raise NoObject(
+                f"the previous object did not leave the station within {opts.wait_s:g} s"
+            )
+        await asyncio.sleep(0.1)
+        frame = await cell.look(None)
     while True:
         mode, _, travel = _belt(ctx.rt)
         try:
@@ -288,8 +299,12 @@ def _geometry(name: str | None) -> tuple[float, float, NDArray[np.float64] | Non
     return float(b[1, 2]), float(np.abs(b[:, :2]).max()), suction_point(name)
 
 
-async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None) -> dict[str, Any]:
+async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
+                         clear_first: bool = False) -> dict[str, Any]:  # fmt: skip
     """Inspect the next object at the station and store the result (module docstring).
+
+    ``clear_first`` (continuous operation, index mode): wait until the station is empty
+    before looking for the next object, so an object that stays is not inspected twice.
 
     Returns the stored inspection's public form.  Cut short (cancel: e-stop or stop), the
     complete ``failed`` row is stored with the reason before the cancellation goes on.
@@ -304,7 +319,7 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None) -> di
                              "viewpoints": (), "pick": None}  # fmt: skip
     report = (lambda f, m: job.report(f, m)) if job is not None else (lambda f, m: None)
     try:
-        await _inspect_body(ctx, opts, durations, views, cams, state, report)
+        await _inspect_body(ctx, opts, durations, views, cams, state, report, clear_first)
     except asyncio.CancelledError:
         state["decision"] = "failed"
         state["reason"] = (
@@ -345,7 +360,7 @@ async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[
 
 async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, float],
                         views: list[results.ViewRecord], cams: list[NDArray[np.float64]],
-                        state: dict[str, Any], report: Any) -> None:  # fmt: skip
+                        state: dict[str, Any], report: Any, clear_first: bool) -> None:  # fmt: skip
     rt, cell = ctx.rt, ctx.rt.cell
     live = rt.live_index
     if len(live) == 0:
@@ -365,7 +380,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
         )
     state["stage"] = "finding the object"
     report(0.05, "waiting for an object at the station")
-    frame, travel0 = await _find(ctx, opts, top.q, bg, durations)
+    frame, travel0 = await _find(ctx, opts, top.q, bg, durations, clear_first)
     mode, speed_m_s, _ = _belt(rt)
     T_cam_top = _T_cam(frame.robot_state.q, ctx.T_ee_cam)
     state["stage"] = "segmenting"
@@ -631,13 +646,14 @@ def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun
         ctx = await context(rt)
         decisions: dict[str, int] = {}
         while not run.stop_requested and (count is None or run.done < count):
-            out = await inspect_object(ctx, opts, None)
+            index_mode = _belt(rt)[0] == "index"
+            out = await inspect_object(ctx, opts, None, clear_first=run.done > 0 and index_mode)
             run.done += 1
             run.ids.append(out["id"])
             decisions[out["decision"]] = decisions.get(out["decision"], 0) + 1
             job.report(0.0 if count is None else run.done / count,
                        f"{run.done} inspected: {out['decision']} {out['model'] or ''}".strip())  # fmt: skip
-            if rt.sim is not None and _belt(rt)[0] == "index":
+            if rt.sim is not None and rt.sim.conveyor_state.running:
                 with contextlib.suppress(Exception):
                     rt.sim.release_conveyor()
                 await asyncio.sleep(0.3)

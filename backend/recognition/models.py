@@ -20,6 +20,7 @@ from sqlalchemy import delete, func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.ext.asyncio import AsyncSession
 
+from backend import audit
 from backend.db.models import ObjectKind, ObjectModel, TrainedView
 from backend.db.session import Database
 from vision.errors import Conflict, InvalidInput, NotFound
@@ -47,6 +48,48 @@ NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}$")
 #: Most models one database holds (a plant's catalogue; the index stays in memory).
 MAX_MODELS = 10_000
 _FIELDS = ("name", "part", "sitting_base", "kind", "threshold", "description")
+
+
+def _audit_value(row: ObjectModel) -> dict[str, Any]:
+    """The fields of a model as the audit trail stores them."""
+    return {k: getattr(row, k) for k in _FIELDS}
+
+
+def _record(
+    session: AsyncSession,
+    by: audit.By | None,
+    row: ObjectModel,
+    action: str,
+    old: ObjectModel | None,
+    new: ObjectModel | None,
+) -> None:
+    """The audit row of a model change, and a threshold row if its threshold changed."""
+    by = by or audit.By()
+    before = None if old is None else _audit_value(old)
+    after = None if new is None else _audit_value(new)
+    audit.record(
+        session,
+        actor=by.actor,
+        kind="model",
+        entity_id=row.id,
+        action=action,
+        old=before,
+        new=after,
+        reason=by.reason,
+    )
+    t_old = None if before is None else before["threshold"]
+    t_new = None if after is None else after["threshold"]
+    if t_old != t_new and new is not None:
+        audit.record(
+            session,
+            actor=by.actor,
+            kind="threshold",
+            entity_id=row.id,
+            action="set" if t_new is not None else "clear",
+            old={"model": row.name, "threshold": t_old},
+            new={"model": row.name, "threshold": t_new},
+            reason=by.reason,
+        )
 
 
 def check_name(value: object, what: str) -> str:
@@ -178,7 +221,9 @@ async def _check_free_name(session: AsyncSession, name: str, *, not_id: int | No
         raise Conflict(f"an object model named {name!r} exists already (id {other})")
 
 
-async def create_model(db: Database, fields: ModelFields) -> ObjectModel:
+async def create_model(
+    db: Database, fields: ModelFields, *, by: audit.By | None = None
+) -> ObjectModel:
     """Insert a model; ``part`` defaults to the name, ``sitting_base`` to ``"default"``."""
     if fields.name is None or fields.kind is None:
         raise InvalidInput("a new model needs a name and a kind ('2d' or '3d')")
@@ -198,13 +243,14 @@ async def create_model(db: Database, fields: ModelFields) -> ObjectModel:
             )
             session.add(row)
             await session.flush()
+            _record(session, by, row, "create", None, row)
     except IntegrityError as exc:  # a concurrent insert of the same name
         raise Conflict(f"an object model named {fields.name!r} exists already") from exc
     return row
 
 
 async def update_model(
-    db: Database, model_id: int, fields: ModelFields
+    db: Database, model_id: int, fields: ModelFields, *, by: audit.By | None = None
 ) -> tuple[ObjectModel, ObjectModel]:
     """Apply the given fields; return the row before (detached copy) and after."""
     try:
@@ -230,15 +276,17 @@ async def update_model(
             if fields.threshold_given:
                 row.threshold = fields.threshold
             await session.flush()
+            _record(session, by, row, "update", before, row)
     except IntegrityError as exc:
         raise Conflict(f"an object model named {fields.name!r} exists already") from exc
     return before, row
 
 
-async def delete_model(db: Database, model_id: int) -> ObjectModel:
+async def delete_model(db: Database, model_id: int, *, by: audit.By | None = None) -> ObjectModel:
     """Delete a model and its trained views (inspections keep their rows, model unset)."""
     async with db.session() as session:
         row = await get_model(session, model_id)
+        _record(session, by, row, "delete", row, None)
         # Bulk deletes: the views' images are never loaded just to be removed.
         await session.execute(delete(TrainedView).where(TrainedView.model_id == model_id))
         await session.execute(delete(ObjectModel).where(ObjectModel.id == model_id))

@@ -34,6 +34,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from backend import audit
 from backend.db.session import Database
 from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
 from backend.recognition import thresholds
@@ -232,6 +233,7 @@ async def run_teach(
     T_ee_cam: NDArray[np.float64],
     store: BackgroundStore,
     world: CollisionWorld | None = None,
+    by: audit.By | None = None,
 ) -> dict[str, Any]:
     """The teach job's body (module docstring); runs holding the arm.
 
@@ -330,7 +332,7 @@ async def run_teach(
         )
         done += 1
     job.report(done / steps, "storing the views")
-    rows = await add_views(db, live, model_id, inputs, replace=options.replace)
+    rows = await add_views(db, live, model_id, inputs, replace=options.replace, by=by)
     job.report(1.0, "choosing the threshold")
     outcome = await thresholds.recompute(db, live)
     return {
@@ -351,6 +353,7 @@ async def start_teach(
     options: TeachOptions,
     store: BackgroundStore,
     point: NDArray[np.float64] | None = None,
+    by: audit.By | None = None,
 ) -> Any:
     """Check what can be checked at once (the model exists, the arm is free), then start
     the teach as a motion job; returns the job.
@@ -386,6 +389,7 @@ async def start_teach(
             point=p,
             T_ee_cam=T,
             store=store,
+            by=by,
         )
 
     params = {

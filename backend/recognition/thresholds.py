@@ -21,6 +21,7 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.ext.asyncio import AsyncSession
 
+from backend import audit
 from backend.db.models import ObjectModel, RecognitionSettings
 from backend.db.session import Database
 from backend.recognition.index import LiveIndex
@@ -36,6 +37,7 @@ __all__ = [
     "current_choice",
     "latest_settings",
     "recompute",
+    "settings_audit_value",
 ]
 
 #: Global threshold before anything was chosen.
@@ -78,6 +80,14 @@ async def latest_settings(session: AsyncSession) -> RecognitionSettings | None:
     return await session.scalar(
         select(RecognitionSettings).order_by(RecognitionSettings.id.desc()).limit(1)
     )
+
+
+def settings_audit_value(row: RecognitionSettings) -> dict[str, Any]:
+    """A settings row as the audit trail stores it (without the score distributions)."""
+    out: dict[str, Any] = {"global_threshold": row.global_threshold, "chosen_by": row.chosen_by}
+    if row.chosen_by == "auto":
+        out["per_model"] = dict(row.detail.get("per_model", {}))
+    return out
 
 
 def confusable_pairs(
@@ -221,5 +231,19 @@ async def recompute(
                 chosen_by="auto",
                 detail=_detail(choice, n_views),
             )
+        )
+        audit.record(
+            session,
+            actor=audit.SYSTEM,
+            kind="threshold",
+            entity_id="global",
+            action="auto",
+            old=None if row is None else settings_audit_value(row),
+            new={
+                "global_threshold": float(choice.threshold),
+                "chosen_by": "auto",
+                "per_model": {k: float(v) for k, v in choice.per_model.items()},
+            },
+            reason=choice.rule[: audit.MAX_REASON_LENGTH],
         )
     return ThresholdOutcome(True, choice.threshold, choice.threshold, choice.rule, confusable)

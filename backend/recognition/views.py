@@ -18,6 +18,7 @@ from sqlalchemy import delete, func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import defer
 
+from backend import audit
 from backend.db.models import ObjectModel, TrainedView
 from backend.db.session import Database
 from backend.recognition import images as im
@@ -192,6 +193,22 @@ async def view_image(
     return row.image_png, "image/png"
 
 
+def _audit_value(row: TrainedView, model_name: str) -> dict[str, Any]:
+    """The fields of a view as the audit trail stores them (no image data)."""
+    return {
+        "model_id": row.model_id,
+        "model": model_name,
+        "viewpoint": row.viewpoint,
+        "source": row.source,
+        "width": row.width,
+        "height": row.height,
+        "keypoints": row.keypoint_count,
+        "descriptor": {"kind": row.descriptor_kind, "version": row.descriptor_version},
+        "yaw_rad": row.yaw_rad,
+        "roll_rad": row.roll_rad,
+    }
+
+
 def _prepare(
     live: LiveIndex, views: Sequence[ViewInput]
 ) -> list[tuple[Features, bytes, bytes | None, bytes]]:
@@ -222,6 +239,7 @@ async def add_views(
     views: Sequence[ViewInput],
     *,
     replace: bool = False,
+    by: audit.By | None = None,
 ) -> list[TrainedView]:
     """Store ``views`` of a model (all or none) and add them to the live index; with
     ``replace``, the model's earlier views are deleted in the same transaction."""
@@ -242,6 +260,7 @@ async def add_views(
     try:
         async with db.session() as session:
             row_model = await get_model(session, model_id)  # still there, and locked in
+            by = by or audit.By()
             old: list[int] = []
             if replace:
                 old = list(
@@ -249,6 +268,17 @@ async def add_views(
                         select(TrainedView.id).where(TrainedView.model_id == model_id)
                     )
                 )
+                for vid in old:
+                    audit.record(
+                        session,
+                        actor=by.actor,
+                        kind="view",
+                        entity_id=vid,
+                        action="delete",
+                        old={"model_id": model_id, "model": row_model.name, "replaced": True},
+                        new=None,
+                        reason=by.reason,
+                    )
                 await session.execute(delete(TrainedView).where(TrainedView.model_id == model_id))
             rows = []
             for v, (feats, png, mask_png, thumb) in zip(views, prepared, strict=True):
@@ -273,6 +303,17 @@ async def add_views(
                 session.add(row)
                 rows.append(row)
             await session.flush()
+            for row in rows:
+                audit.record(
+                    session,
+                    actor=by.actor,
+                    kind="view",
+                    entity_id=row.id,
+                    action="add",
+                    old=None,
+                    new=_audit_value(row, row_model.name),
+                    reason=by.reason,
+                )
             for row, (feats, *_rest) in zip(rows, prepared, strict=True):
                 live.add_view(model, row.id, row.viewpoint, feats)
                 added.append(row.id)
@@ -285,19 +326,39 @@ async def add_views(
     return rows
 
 
-async def delete_view(db: Database, live: LiveIndex, model_id: int, view_id: int) -> None:
+async def delete_view(
+    db: Database, live: LiveIndex, model_id: int, view_id: int, *, by: audit.By | None = None
+) -> None:
     """Delete one view from the database and the live index."""
+    by = by or audit.By()
     async with db.session() as session:
         row = await get_view(session, model_id, view_id)
+        model = await get_model(session, model_id)
+        audit.record(
+            session,
+            actor=by.actor,
+            kind="view",
+            entity_id=row.id,
+            action="delete",
+            old=_audit_value(row, model.name),
+            new=None,
+            reason=by.reason,
+        )
         await session.delete(row)
     live.remove_view(view_id)
 
 
 async def reextract_views(
-    db: Database, live: LiveIndex, *, model_id: int | None = None, only_stale: bool = True
+    db: Database,
+    live: LiveIndex,
+    *,
+    model_id: int | None = None,
+    only_stale: bool = True,
+    by: audit.By | None = None,
 ) -> int:
     """Extract features again from the stored images (and masks) of stale views (or of
     every view with ``only_stale=False``), store them and index them; return the count."""
+    by = by or audit.By()
     async with db.session() as session:
         q = select(TrainedView.id).order_by(TrainedView.id)
         if model_id is not None:
@@ -318,11 +379,22 @@ async def reextract_views(
             feats = await asyncio.to_thread(live.extract, rgb, mask)
             if len(feats) < MIN_FEATURES:
                 raise InvalidInput(f"view {vid}: only {len(feats)} features on re-extraction")
+            before = _audit_value(row, model.name)
             row.features = feats.to_bytes()
             row.descriptor_kind = feats.method
             row.descriptor_version = live.version
             row.keypoint_count = len(feats)
             await session.flush()
+            audit.record(
+                session,
+                actor=by.actor,
+                kind="view",
+                entity_id=vid,
+                action="reextract",
+                old=before,
+                new=_audit_value(row, model.name),
+                reason=by.reason,
+            )
             live.remove_view(vid)
             live.add_view(model, vid, row.viewpoint, feats)
         done += 1

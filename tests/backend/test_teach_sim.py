@@ -111,6 +111,16 @@ def test_teach_two_models_and_recognise_them(cell):
     assert settings["chosen_by"] == "auto"
     assert 0.0 <= settings["global_threshold"] <= 1.0
     assert "confusable_from_top" in res
+    # The audit trail: every taught view by the engineer who started the teach, and the
+    # automatic threshold by the system with its rule as the reason.
+    trail = client.get("/api/audit?kind=view&limit=500", headers=eng).json()
+    assert trail["count"] == 8
+    assert {(e["actor_role"], e["action"], e["new"]["source"]) for e in trail["data"]} == {
+        ("engineer", "add", "teach")
+    }
+    (auto,) = client.get("/api/audit?kind=threshold&actor=system", headers=eng).json()["data"]
+    assert auto["action"] == "auto" and auto["reason"]
+    assert auto["new"]["global_threshold"] == settings["global_threshold"]
 
     listed = client.get("/api/models", headers=eng).json()["data"]
     assert {m["name"]: m["indexed_views"] for m in listed} == {"gear-housing": 5, "wheel-steel": 3}

@@ -9,6 +9,7 @@ import { $, el, setText } from "./dom.js";
 import { Live } from "./live.js";
 import cellPage from "./pages/cell.js";
 import calibrationPage from "./pages/calibration.js";
+import auditPage from "./pages/audit.js";
 
 const TOKEN_KEY = "visioncell-token";
 const RANKS = { viewer: 1, operator: 2, engineer: 3 };
@@ -17,7 +18,7 @@ const RANKS = { viewer: 1, operator: 2, engineer: 3 };
 export const rank = (role) => RANKS[role] || 0;
 
 /** The pages, in menu order. */
-export const PAGES = [cellPage, calibrationPage];
+export const PAGES = [cellPage, calibrationPage, auditPage];
 
 const live = new Live();
 let user = null;

@@ -15,6 +15,7 @@ from fastapi import APIRouter, Depends, File, Form, Path, Query, UploadFile, sta
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, Field, model_validator
 
+from backend import audit
 from backend import calibration as svc
 from backend.api.deps import CellDep, DatabaseDep, EngineerUser, SessionDep, SimDep, ViewerUser
 from backend.api.errors import ApiError, error_body
@@ -533,11 +534,17 @@ async def read_calibration_plot(_: ViewerUser, cal: CalibrationDep, plot: PlotNa
     response_model=CalibrationOut,
 )
 async def update_calibration_activate(
-    _: EngineerUser, session: SessionDep, cell: CellDep, calibration_id: DbId
+    user: EngineerUser,
+    session: SessionDep,
+    cell: CellDep,
+    calibration_id: DbId,
+    reason: Annotated[
+        str | None, Query(max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)")
+    ] = None,
 ) -> dict[str, Any]:
     row = await svc.get_calibration(session, calibration_id)
     svc.check_own("calibration", row.id, row.cell_id, await svc.cell_id_of(session, cell.name))
-    cal = await svc.activate(session, calibration_id)
+    cal = await svc.activate(session, calibration_id, by=audit.By(audit.Actor.of(user), reason))
     return {"calibration": svc.calibration_public(cal)}
 
 

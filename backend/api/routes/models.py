@@ -17,6 +17,7 @@ from fastapi import APIRouter, Depends, File, Form, Path, Query, UploadFile, sta
 from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
 
+from backend import audit
 from backend.api.deps import CellDep, DatabaseDep, EngineerUser, RuntimeDep, SessionDep, ViewerUser
 from backend.recognition import images as im
 from backend.recognition import models as svc
@@ -34,6 +35,17 @@ DB_ID_MAX = 2**31 - 1
 ModelId = Annotated[int, Path(ge=1, le=DB_ID_MAX, description="Object model id")]
 ViewId = Annotated[int, Path(ge=1, le=DB_ID_MAX, description="Trained view id")]
 Name = Annotated[str, Field(min_length=1, max_length=64, pattern=svc.NAME_PATTERN.pattern)]
+#: Why a change is made (kept in the audit trail).
+Reason = Annotated[
+    str | None, Field(max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)")
+]
+ReasonQuery = Annotated[
+    str | None, Query(max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)")
+]
+
+
+def _by(user: Any, reason: str | None) -> audit.By:
+    return audit.By(audit.Actor.of(user), reason)
 
 
 def get_live_index(runtime: RuntimeDep) -> LiveIndex:
@@ -57,6 +69,7 @@ class ModelCreate(BaseModel):
         None, ge=0.0, le=1.0, allow_inf_nan=False, description="Own score threshold"
     )
     description: str = Field("", max_length=2000)
+    reason: Reason = None
 
 
 class ModelUpdate(BaseModel):
@@ -70,6 +83,7 @@ class ModelUpdate(BaseModel):
     kind: Literal["2d", "3d"] | None = None
     threshold: float | None = Field(None, ge=0.0, le=1.0, allow_inf_nan=False)
     description: str | None = Field(None, max_length=2000)
+    reason: Reason = None
 
 
 class ModelPublic(BaseModel):
@@ -157,10 +171,10 @@ async def read_models(
     summary="Create an object model (engineer)",
 )
 async def create_model(
-    _: EngineerUser, db: DatabaseDep, live: LiveIndexDep, body: ModelCreate
+    user: EngineerUser, db: DatabaseDep, live: LiveIndexDep, body: ModelCreate
 ) -> dict[str, Any]:
-    fields = svc.ModelFields(**body.model_dump())
-    row = await svc.create_model(db, fields)
+    fields = svc.ModelFields(**body.model_dump(exclude={"reason"}))
+    row = await svc.create_model(db, fields, by=_by(user, body.reason))
     live.put_model(IndexedModel.of(row))
     return _model_out(row, {}, live)
 
@@ -176,21 +190,21 @@ async def read_model(
 
 @router.patch("/{model_id}", response_model=ModelPublic, summary="Change a model (engineer)")
 async def update_model(
-    _: EngineerUser,
+    user: EngineerUser,
     db: DatabaseDep,
     session: SessionDep,
     live: LiveIndexDep,
     model_id: ModelId,
     body: ModelUpdate,
 ) -> dict[str, Any]:
-    given = body.model_fields_set
+    given = body.model_fields_set - {"reason"}
     for key in ("name", "part", "sitting_base", "kind", "description"):
         if key in given and getattr(body, key) is None:
             raise InvalidInput(f"{key} may not be null (leave it out to keep it)")
     fields = svc.ModelFields(
         **{k: getattr(body, k) for k in given}, threshold_given="threshold" in given
     )
-    _before, row = await svc.update_model(db, model_id, fields)
+    _before, row = await svc.update_model(db, model_id, fields, by=_by(user, body.reason))
     live.put_model(IndexedModel.of(row))
     counts = await svc.view_counts(session, [row.id])
     return _model_out(row, counts[row.id], live)
@@ -202,9 +216,13 @@ async def update_model(
     summary="Delete a model and its trained views (engineer)",
 )
 async def delete_model(
-    _: EngineerUser, db: DatabaseDep, live: LiveIndexDep, model_id: ModelId
+    user: EngineerUser,
+    db: DatabaseDep,
+    live: LiveIndexDep,
+    model_id: ModelId,
+    reason: ReasonQuery = None,
 ) -> Response:
-    await svc.delete_model(db, model_id)
+    await svc.delete_model(db, model_id, by=_by(user, reason))
     live.drop_model(model_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
@@ -236,6 +254,7 @@ class TeachIn(BaseModel):
     point: list[float] | None = Field(
         None, min_length=3, max_length=3, description="Station point x, y, z in metres"
     )
+    reason: Reason = None
 
 
 class JobAccepted(BaseModel):
@@ -254,7 +273,7 @@ def get_backgrounds(runtime: RuntimeDep) -> teach_svc.BackgroundStore:
     summary="Teach the model with the arm: a job (engineer)",
 )
 async def teach_model(
-    _: EngineerUser,
+    user: EngineerUser,
     db: DatabaseDep,
     live: LiveIndexDep,
     cell: CellDep,
@@ -282,6 +301,7 @@ async def teach_model(
         options=options,
         store=store,
         point=None if body.point is None else np.asarray(body.point, dtype=np.float64),
+        by=_by(user, body.reason),
     )
     return {"job": job.public()}
 
@@ -332,9 +352,14 @@ async def read_view_image(
     summary="Delete a trained view (engineer)",
 )
 async def delete_view(
-    _: EngineerUser, db: DatabaseDep, live: LiveIndexDep, model_id: ModelId, view_id: ViewId
+    user: EngineerUser,
+    db: DatabaseDep,
+    live: LiveIndexDep,
+    model_id: ModelId,
+    view_id: ViewId,
+    reason: ReasonQuery = None,
 ) -> Response:
-    await views_svc.delete_view(db, live, model_id, view_id)
+    await views_svc.delete_view(db, live, model_id, view_id, by=_by(user, reason))
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
@@ -377,7 +402,7 @@ async def _read_capped(f: UploadFile, limit: int) -> bytes:
     summary="Upload trained views: images with their viewpoint, optional masks (engineer)",
 )
 async def create_views(
-    _: EngineerUser,
+    user: EngineerUser,
     db: DatabaseDep,
     live: LiveIndexDep,
     model_id: ModelId,
@@ -390,6 +415,9 @@ async def create_views(
     ] = None,
     yaws: Annotated[
         str | None, Form(description="Object yaw per image, radians (number or JSON list)")
+    ] = None,
+    reason: Annotated[
+        str | None, Form(max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)")
     ] = None,
 ) -> dict[str, Any]:
     n = len(images)
@@ -417,5 +445,5 @@ async def create_views(
                 rgb, int(vps[k]), mask, yaw_rad=float(yaw[k]), source="upload", name=name
             )
         )
-    rows = await views_svc.add_views(db, live, model_id, inputs)
+    rows = await views_svc.add_views(db, live, model_id, inputs, by=_by(user, reason))
     return {"data": [_view_out(r, live) for r in rows], "count": len(rows)}

@@ -8,9 +8,11 @@ from fastapi import APIRouter
 from pydantic import BaseModel, Field
 from sqlalchemy import select
 
+from backend import audit
 from backend.api.deps import EngineerUser, SessionDep, ViewerUser
 from backend.api.types import bounded_float
 from backend.db.models import RecognitionSettings
+from backend.recognition.thresholds import settings_audit_value
 
 router = APIRouter(prefix="/recognition", tags=["recognition"])
 
@@ -22,6 +24,9 @@ class RecognitionSettingsIn(BaseModel):
         float, bounded_float(0.0, 1.0, "Score above which a model is reported")
     ]
     note: str = Field("", max_length=500)
+    reason: str | None = Field(
+        None, max_length=audit.MAX_REASON_LENGTH, description="Why (kept in the audit trail)"
+    )
 
 
 class RecognitionSettingsOut(BaseModel):
@@ -71,6 +76,7 @@ async def read_recognition_settings(_: ViewerUser, session: SessionDep) -> dict[
 async def update_recognition_settings(
     user: EngineerUser, session: SessionDep, body: RecognitionSettingsIn
 ) -> dict[str, Any]:
+    before = await latest_settings(session)
     row = RecognitionSettings(
         global_threshold=body.global_threshold,
         chosen_by="manual",
@@ -78,4 +84,14 @@ async def update_recognition_settings(
     )
     session.add(row)
     await session.flush()
+    audit.record(
+        session,
+        actor=audit.Actor.of(user),
+        kind="threshold",
+        entity_id="global",
+        action="set",
+        old=None if before is None else settings_audit_value(before),
+        new=settings_audit_value(row),
+        reason=body.reason or body.note or None,
+    )
     return _public(row)

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, status
+from fastapi import APIRouter, Query, status
 from pydantic import BaseModel, Field
 from sqlalchemy import func, select
 
+from backend import audit
 from backend.api.deps import EngineerUser, SessionDep, SettingsDep, ViewerUser
 from backend.api.schemas import Page
 from backend.api.types import Limit, NameStr, Offset
@@ -27,6 +28,18 @@ class UserCreate(BaseModel):
     )
     role: Literal["viewer", "operator", "engineer"] = Field(
         description="viewer, operator or engineer"
+    )
+    reason: str | None = Field(
+        None, max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)"
+    )
+
+
+class UserRoleIn(BaseModel):
+    role: Literal["viewer", "operator", "engineer"] = Field(
+        description="viewer, operator or engineer"
+    )
+    reason: str | None = Field(
+        None, max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)"
     )
 
 
@@ -78,11 +91,21 @@ async def read_users(
     response_model=UserCreated,
 )
 async def create_user_route(
-    _: EngineerUser, session: SessionDep, settings: SettingsDep, body: UserCreate
+    me: EngineerUser, session: SessionDep, settings: SettingsDep, body: UserCreate
 ) -> dict[str, Any]:
     # Invalid names raise InvalidInput (422), a taken name UserExists (409).
     user, token = await create_user(
         session, body.name, parse_role(body.role), settings.secret_key.get_secret_value()
+    )
+    audit.record(
+        session,
+        actor=audit.Actor.of(me),
+        kind="user",
+        entity_id=user.id,
+        action="create",
+        old=None,
+        new={"name": user.name, "role": user.role, "token_label": "created"},
+        reason=body.reason,
     )
     return {
         "user": UserPublic.model_validate(user, from_attributes=True).model_dump(mode="json"),
@@ -93,7 +116,14 @@ async def create_user_route(
 @router.delete(
     "/{name}", summary="Disable a user and revoke their tokens", response_model=UserDisabled
 )
-async def delete_user(me: EngineerUser, session: SessionDep, name: NameStr) -> dict[str, Any]:
+async def delete_user(
+    me: EngineerUser,
+    session: SessionDep,
+    name: NameStr,
+    reason: Annotated[
+        str | None, Query(max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)")
+    ] = None,
+) -> dict[str, Any]:
     user = await session.scalar(select(User).where(User.name == name))
     if user is None:
         raise NotFound(f"no user named {name!r}")
@@ -105,4 +135,40 @@ async def delete_user(me: EngineerUser, session: SessionDep, name: NameStr) -> d
     )
     for tok in (await session.scalars(select(ApiToken).where(ApiToken.user_id == user.id))).all():
         tok.revoked = True
+    audit.record(
+        session,
+        actor=audit.Actor.of(me),
+        kind="user",
+        entity_id=user.id,
+        action="disable",
+        old={"name": name, "disabled": False},
+        new={"name": name, "disabled": True, "tokens_revoked": int(n or 0)},
+        reason=reason,
+    )
     return {"name": name, "disabled": True, "tokens_revoked": int(n or 0)}
+
+
+@router.patch("/{name}", summary="Change a user's role (engineer)", response_model=UserPublic)
+async def update_user_role(
+    me: EngineerUser, session: SessionDep, name: NameStr, body: UserRoleIn
+) -> dict[str, Any]:
+    user = await session.scalar(select(User).where(User.name == name))
+    if user is None:
+        raise NotFound(f"no user named {name!r}")
+    if user.name == me.name and body.role != user.role:
+        raise Conflict("you cannot change your own role")
+    old_role = user.role
+    user.role = parse_role(body.role).name
+    if old_role != user.role:
+        audit.record(
+            session,
+            actor=audit.Actor.of(me),
+            kind="user",
+            entity_id=user.id,
+            action="role",
+            old={"name": name, "role": old_role},
+            new={"name": name, "role": user.role},
+            reason=body.reason,
+        )
+    await session.flush()
+    return UserPublic.model_validate(user, from_attributes=True).model_dump(mode="json")

@@ -1,0 +1,66 @@
+"""The audit trail, read only (engineer role): no endpoint creates, edits or deletes rows."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, Query
+from pydantic import BaseModel
+
+from backend import audit
+from backend.api.deps import EngineerUser, SessionDep
+from backend.api.schemas import Page
+from backend.api.types import Limit, Offset
+
+router = APIRouter(prefix="/audit", tags=["audit"])
+
+Kind = Literal["threshold", "model", "view", "calibration", "user", "token"]
+
+
+class AuditPublic(BaseModel):
+    id: int
+    at: datetime
+    actor: str
+    actor_role: str
+    kind: str
+    entity_id: str
+    action: str
+    old: dict[str, Any] | None
+    new: dict[str, Any] | None
+    reason: str
+
+
+@router.get(
+    "", summary="The audit trail, newest first (engineer)", response_model=Page[AuditPublic]
+)
+async def read_audit(
+    _: EngineerUser,
+    session: SessionDep,
+    kind: Annotated[Kind | None, Query(description="What was changed")] = None,
+    entity_id: Annotated[
+        str | None, Query(min_length=1, max_length=64, description="The changed row's id")
+    ] = None,
+    actor: Annotated[
+        str | None, Query(min_length=1, max_length=64, description="User name, cli or system")
+    ] = None,
+    since: Annotated[
+        datetime | None, Query(description="From this time on (ISO 8601 with zone), inclusive")
+    ] = None,
+    until: Annotated[
+        datetime | None, Query(description="Before this time (ISO 8601 with zone), exclusive")
+    ] = None,
+    limit: Limit = 100,
+    offset: Offset = 0,
+) -> dict[str, Any]:
+    rows, total = await audit.query(
+        session,
+        kind=kind,
+        entity_id=entity_id,
+        actor=actor,
+        since=since,
+        until=until,
+        limit=limit,
+        offset=offset,
+    )
+    return {"data": [audit.entry_public(r) for r in rows], "count": total}
