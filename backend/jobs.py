@@ -16,6 +16,7 @@ Every start, progress report and end is published on the cell's event bus
 from __future__ import annotations
 
 import asyncio
+import builtins
 import contextlib
 import contextvars
 import enum
@@ -273,11 +274,11 @@ class JobManager:
         """The job with this id, if still remembered."""
         return self._jobs.get(job_id)
 
-    def list(self) -> list[Job]:
+    def list(self) -> builtins.list[Job]:
         """Jobs, newest first."""
         return list(reversed(self._jobs.values()))
 
-    def running(self, *, motion: bool | None = None) -> list[Job]:
+    def running(self, *, motion: bool | None = None) -> builtins.list[Job]:
         """Running jobs (only motion or non-motion ones if ``motion`` is given)."""
         return [
             j

@@ -101,7 +101,7 @@ def too_many_attempts(exc: TooManyAttempts) -> ApiError:
 
 
 def get_settings(conn: HTTPConnection) -> Settings:
-    return conn.app.state.settings  # type: ignore[no-any-return]
+    return conn.app.state.settings
 
 
 def get_database(conn: HTTPConnection) -> Database:

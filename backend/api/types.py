@@ -10,7 +10,7 @@ overflow inside the database driver.
 from __future__ import annotations
 
 import math
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import Path, Query
 from pydantic import BeforeValidator, Field
@@ -49,14 +49,28 @@ MAX_NAME_LENGTH = 128
 MAX_ABS_JOINT_API_RAD = 2.0 * math.pi
 
 
-def bounded_float(lo: float, hi: float, description: str, **kw: object) -> object:
+def _examples(examples: list[Any] | None) -> dict[str, Any]:
+    # Only set when given: a ``Field(examples=None)`` would count as set when merged.
+    return {} if examples is None else {"examples": examples}
+
+
+def bounded_float(
+    lo: float, hi: float, description: str, *, examples: list[Any] | None = None
+) -> object:
     """A ``Field`` for a strict, finite float in ``[lo, hi]``."""
-    return Field(strict=True, allow_inf_nan=False, ge=lo, le=hi, description=description, **kw)
+    return Field(
+        strict=True,
+        allow_inf_nan=False,
+        ge=lo,
+        le=hi,
+        description=description,
+        **_examples(examples),
+    )
 
 
-def bounded_int(lo: int, hi: int, description: str, **kw: object) -> object:
+def bounded_int(lo: int, hi: int, description: str, *, examples: list[Any] | None = None) -> object:
     """A ``Field`` for a strict integer in ``[lo, hi]`` (booleans refused)."""
-    return Field(strict=True, ge=lo, le=hi, description=description, **kw)
+    return Field(strict=True, ge=lo, le=hi, description=description, **_examples(examples))
 
 
 DbId = Annotated[int, Path(ge=1, le=MAX_DB_ID, description="Row id, 1 .. 2^63 - 1", examples=[1])]

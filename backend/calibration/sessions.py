@@ -95,6 +95,11 @@ def _png(image: NDArray[np.uint8]) -> bytes:
     return buf.tobytes()
 
 
+def _detect_and_png(image: NDArray[np.uint8], board: Board) -> tuple[Detection, bytes]:
+    """The board's detection in ``image`` and the image as PNG (one worker-thread call)."""
+    return detect_pattern(image, board), _png(image)
+
+
 def png_size(data: bytes) -> tuple[int, int]:
     """``(width, height)`` from a PNG's header."""
     if len(data) < 24 or data[:8] != b"\x89PNG\r\n\x1a\n":
@@ -229,11 +234,11 @@ async def add_samples(
                 f"images of one session must have one size: the session holds {w}x{h}, "
                 f"{samples[0].name!r} is {first[1]}x{first[0]}"
             )
+    if start is None:  # COALESCE(..., -1) always gives a row
+        raise RuntimeError("the sample-index query returned no value")
     rows = []
     for k, s in enumerate(samples):
-        det, png = await asyncio.to_thread(
-            lambda img=s.image: (detect_pattern(img, board), _png(img))
-        )
+        det, png = await asyncio.to_thread(_detect_and_png, s.image, board)
         reason = f"{det.n_points} corners ({det.method} detector)" if det.found else det.reason
         row = CalibrationSample(
             session_id=cal_session.id,
@@ -241,7 +246,7 @@ async def add_samples(
             name=s.name[:255],
             image_png=png,
             joints=None if s.joints is None else [float(v) for v in s.joints],
-            T_base_ee=None if poses[k] is None else poses[k].tolist(),
+            T_base_ee=None if (pose := poses[k]) is None else pose.tolist(),
             corners=_corners_json(det),
             accepted=det.found,
             reason=reason,

@@ -151,7 +151,10 @@ async def _run(
             return await auto.run_auto_calibration(job, cell, db, run)
 
         job = cell.jobs.start("auto_calibrate", body, motion=True)
-        while not job.task.done():
+        task = job.task
+        if task is None:  # JobManager.start always creates the task
+            raise RuntimeError("the auto-calibration job has no task")
+        while not task.done():
             if progress is not None:
                 progress(job.progress, job.message)
             await asyncio.sleep(0.1)

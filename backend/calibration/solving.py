@@ -350,7 +350,7 @@ async def activate(
     return cal
 
 
-def _history_filter(q, *, cell_id, kind, session_id):  # type: ignore[no-untyped-def]
+def _history_filter(q, *, cell_id, kind, session_id):
     if cell_id is not None:
         q = q.where(Calibration.cell_id == cell_id)
     if kind is not None:

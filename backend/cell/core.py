@@ -167,7 +167,8 @@ class Cell(CellMotion):
         values = [float(v) for v in np.asarray(pose, dtype=np.float64).ravel()]
         if len(values) != 5:
             raise ValueError(f"pose must be (x, y, z, u, w), got {values}")
-        target = Pose(*values, roll=roll)
+        x, y, z, u, w = values
+        target = Pose(x, y, z, u, w, roll=roll)
         traj = self.plan_move(target, speed=speed, path=path)  # type: ignore[arg-type]
         s = self.speed if speed is None else float(speed)
         params: dict[str, Any] = {"pose": values, "roll": roll, "speed": s, "path": path}

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import typer
 from pydantic import ValidationError
 from rich.console import Console
@@ -17,7 +19,9 @@ err = Console(stderr=True)
 def load_settings(**overrides: object) -> Settings:
     """Settings from the environment plus command-line overrides; exits with the reason if invalid."""
     try:
-        return Settings(**{k: v for k, v in overrides.items() if v is not None})
+        # Settings validates every value (a bad one is reported below), so any type goes in.
+        given: dict[str, Any] = {k: v for k, v in overrides.items() if v is not None}
+        return Settings(**given)
     except ValidationError as exc:
         for e in exc.errors():
             where = ".".join(str(p) for p in e["loc"]) or "settings"

@@ -193,7 +193,7 @@ def add_model(
 
     try:
         fields = svc.ModelFields(
-            name=name, part=part, sitting_base=base, kind=kind, threshold=threshold
+            name=name, part=part, sitting_base=base, kind=svc.parse_kind(kind), threshold=threshold
         )
     except ValueError as exc:
         raise _fail(str(exc)) from None
@@ -274,7 +274,9 @@ def import_views(
         if model_id is None:
             model_id = (
                 await svc.create_model(
-                    db, svc.ModelFields(name=name, kind=kind), by=audit.By(audit.CLI)
+                    db,
+                    svc.ModelFields(name=name, kind=svc.parse_kind(kind)),
+                    by=audit.By(audit.CLI),
                 )
             ).id
         live = LiveIndex(

@@ -73,7 +73,7 @@ def head_revision() -> str | None:
     return ScriptDirectory.from_config(alembic_config("sqlite+aiosqlite://")).get_current_head()
 
 
-async def current_revision(engine) -> str | None:  # type: ignore[no-untyped-def]
+async def current_revision(engine) -> str | None:
     """The revision the database is at (None if never migrated)."""
     async with engine.connect() as conn:
         return await conn.run_sync(lambda c: MigrationContext.configure(c).get_current_revision())

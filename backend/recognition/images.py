@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from typing import cast
 
 import cv2
 import numpy as np
@@ -185,10 +186,16 @@ def decode_image(
             f"its header says {head.width} x {head.height}"
         )
     if img.ndim == 2:
-        return cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
+        return _convert_u8(img, cv2.COLOR_GRAY2RGB)
     if img.shape[2] == 4:
-        return cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+        return _convert_u8(img, cv2.COLOR_BGRA2RGB)
+    return _convert_u8(img, cv2.COLOR_BGR2RGB)
+
+
+def _convert_u8(img: np.ndarray, code: int) -> NDArray[np.uint8]:
+    """``cv2.cvtColor`` of an image the caller knows is uint8 (``cv2.imdecode`` output):
+    uint8 out, which the OpenCV stubs cannot express (they return any array)."""
+    return cast(NDArray[np.uint8], cv2.cvtColor(img, code))
 
 
 def decode_mask(data: bytes, *, shape: tuple[int, int], name: str = "mask") -> NDArray[np.bool_]:
@@ -233,7 +240,7 @@ def rgb_from_png(data: bytes) -> NDArray[np.uint8]:
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
     if img is None:
         raise ValueError("the stored image does not decode as PNG")
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    return _convert_u8(img, cv2.COLOR_BGR2RGB)
 
 
 def encode_jpeg(rgb: NDArray[np.uint8], *, quality: int = 85) -> bytes:
@@ -259,5 +266,9 @@ def thumbnail(
         cv2.drawContours(img, contours, -1, (0, 220, 0), width)
     scale = size_px / max(img.shape[:2])
     if scale < 1.0:
-        img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        # uint8 in, uint8 out (the OpenCV stubs only say "array").
+        img = cast(
+            NDArray[np.uint8],
+            cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA),
+        )
     return encode_jpeg(img, quality=80)

@@ -37,6 +37,7 @@ __all__ = [
     "get_model_by_name",
     "list_models",
     "model_public",
+    "parse_kind",
     "update_model",
     "view_counts",
 ]
@@ -113,6 +114,18 @@ def check_threshold(value: object) -> float | None:
     return v
 
 
+def parse_kind(value: object) -> ObjectKind:
+    """``value`` as an :class:`ObjectKind` (``"2d"`` or ``"3d"``); :class:`InvalidInput` if not."""
+    if isinstance(value, ObjectKind):
+        return value
+    if isinstance(value, str):
+        try:
+            return ObjectKind(value)
+        except ValueError:
+            pass
+    raise InvalidInput(f"kind must be '2d' or '3d', got {value!r}")
+
+
 @dataclass(frozen=True)
 class ModelFields:
     """Validated fields of a model (``None`` = not given, for updates)."""
@@ -132,10 +145,7 @@ class ModelFields:
             if value is not None:
                 check_name(value, what)
         if self.kind is not None and not isinstance(self.kind, ObjectKind):
-            try:
-                object.__setattr__(self, "kind", ObjectKind(self.kind))
-            except ValueError:
-                raise InvalidInput(f"kind must be '2d' or '3d', got {self.kind!r}") from None
+            object.__setattr__(self, "kind", parse_kind(self.kind))
         object.__setattr__(self, "threshold", check_threshold(self.threshold))
         if self.description is not None and (
             not isinstance(self.description, str) or len(self.description) > 2000

@@ -174,15 +174,15 @@ async def current_choice(session: AsyncSession) -> ThresholdChoice:
         choice = choice_from_detail(row.global_threshold, row.detail)
     else:
         choice = choice_from_detail(row.global_threshold, {"rule": row.chosen_by})
-    overrides = dict(
-        (
-            await session.execute(
-                select(ObjectModel.name, ObjectModel.threshold).where(
-                    ObjectModel.threshold.is_not(None)
-                )
+    rows = (
+        await session.execute(
+            select(ObjectModel.name, ObjectModel.threshold).where(
+                ObjectModel.threshold.is_not(None)
             )
-        ).all()
-    )
+        )
+    ).all()
+    # The query already drops NULL thresholds; the check narrows the type.
+    overrides = {name: t for name, t in rows if t is not None}
     if not overrides:
         return choice
     from dataclasses import replace

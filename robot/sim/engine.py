@@ -136,6 +136,10 @@ class SimEngine:
         Simulated seconds per wall-clock second for the physics thread.
     """
 
+    # The part on the suction cup (set by ``_init_gripper``), declared here because
+    # methods above ``_init_gripper`` assign it too.
+    _held: _Held | None
+
     def __init__(
         self,
         config: SimConfig | None = None,
@@ -698,7 +702,7 @@ class SimEngine:
             m.body_inertia[self._payload_body].copy(),
         )
         self._suction = False
-        self._held: _Held | None = None
+        self._held = None
         self._landings: list[Landing] = []
 
     def _T_base_cup_locked(self) -> NDArray[np.float64]:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = [
     "TRANSFERS",
@@ -41,7 +42,7 @@ TRANSFERS = ("linear", "srgb")
 _MAX_WHITE = 65535.0
 
 
-def srgb_decode(v: np.ndarray) -> np.ndarray:
+def srgb_decode(v: ArrayLike) -> np.ndarray:
     """sRGB-encoded values in [0, 1] to linear light in [0, 1] (IEC 61966-2-1)."""
     v = np.asarray(v, dtype=np.float32)
     return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4).astype(np.float32)
@@ -133,7 +134,7 @@ def noise_floor(lin: np.ndarray, step: float, k: float) -> float:
 def clipped_weight(lin: np.ndarray, saturation: float) -> np.ndarray:
     """Weight (H, W) float32: 0 where any channel reaches ``saturation`` (relative) or
     touches such a pixel (3x3 dilation), 1 elsewhere."""
-    sat = (lin >= np.float32(saturation)).any(axis=2).astype(np.uint8)
+    sat: np.ndarray = np.asarray((lin >= np.float32(saturation)).any(axis=2), dtype=np.uint8)
     if sat.any():
         sat = cv2.dilate(sat, np.ones((3, 3), np.uint8))
     return (1.0 - sat).astype(np.float32)

@@ -165,7 +165,7 @@ def _sift_detect_describe(
     if max_features is not None and max_features < 1:
         raise ValueError(f"max_features must be >= 1, got {max_features!r}")
     kw = {} if threshold is None else {"contrastThreshold": float(threshold)}
-    det = cv2.SIFT_create(nfeatures=max_features or 0, **kw)
+    det = cv2.SIFT_create(nfeatures=max_features or 0, **kw)  # type: ignore[attr-defined]  # missing from the OpenCV stubs
     m = None if mask is None else (np.asarray(mask) > 0).astype(np.uint8)
     kps, desc = det.detectAndCompute(grey, m)
     kps = list(kps)
@@ -179,7 +179,7 @@ def _sift_detect_describe(
 
 
 def _m_descriptors_sift(m: np.ndarray, kps: list[cv2.KeyPoint]) -> np.ndarray:
-    sift = cv2.SIFT_create()
+    sift = cv2.SIFT_create()  # type: ignore[attr-defined]  # missing from the OpenCV stubs
     kk = _octave_at_least_zero(kps)
     parts = []
     for mu8 in _m_images_uint8(m):

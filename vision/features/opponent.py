@@ -72,7 +72,7 @@ def opponent_sift_features(
         return Features(
             kp, np.zeros((0, 384), np.float32), "opponent-sift", OPPONENT_VERSION, False, grey.shape
         )
-    sift = cv2.SIFT_create()
+    sift = cv2.SIFT_create()  # type: ignore[attr-defined]  # missing from the OpenCV stubs
     parts = []
     for ch in channels:
         got, d = sift.compute(ch, list(cvk))

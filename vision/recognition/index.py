@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable
+from typing import Literal, overload
 
 import numpy as np
 
@@ -53,6 +54,10 @@ ADAPT_STEPS = 2
 _DEFAULT_DETECTOR_THRESHOLD = {"sift": 0.04, "akaze": 0.001}
 
 
+@overload
+def _check_name(value: object, name: str, *, optional: Literal[False] = False) -> str: ...
+@overload
+def _check_name(value: object, name: str, *, optional: bool) -> str | None: ...
 def _check_name(value: object, name: str, *, optional: bool = False) -> str | None:
     if value is None and optional:
         return None

@@ -71,7 +71,8 @@ class Searcher:
         self.binary = first.binary
         desc = np.ascontiguousarray(np.concatenate([v.features.descriptors for v in views]))
         self.n_descriptors = len(desc)
-        self._index = cv2.flann_Index(desc, _LSH if self.binary else _KDTREE)
+        # cv2.flann_Index is missing from the OpenCV stubs.
+        self._index = cv2.flann_Index(desc, _LSH if self.binary else _KDTREE)  # type: ignore[attr-defined]
 
     def position(self, view_id: int) -> int:
         """Position of a view id in :attr:`views` (``-1`` if it is not there)."""

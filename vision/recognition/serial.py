@@ -75,7 +75,7 @@ def dump(index: ViewIndex) -> bytes:
         ),
     }
     buf = io.BytesIO()
-    np.savez_compressed(buf, **arrays)
+    np.savez_compressed(buf, allow_pickle=False, **arrays)
     return buf.getvalue()
 
 

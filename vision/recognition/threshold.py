@@ -52,8 +52,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Set as AbstractSet
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from vision.features import Features
 from vision.recognition.choice import ThresholdChoice, roc_curve
@@ -81,7 +83,7 @@ def _check_scores(x: object, name: str, *, allow_empty: bool = False) -> np.ndar
     return a
 
 
-def conformal_threshold(impostor: Sequence[float], target_far: float) -> tuple[float, float | None]:
+def conformal_threshold(impostor: ArrayLike, target_far: float) -> tuple[float, float | None]:
     """Smallest order statistic of ``impostor`` whose finite-sample FAR bound is met.
 
     Returns ``(threshold, bound)`` with ``bound = 1 - k / (n + 1) <= target_far``; when
@@ -97,7 +99,7 @@ def conformal_threshold(impostor: Sequence[float], target_far: float) -> tuple[f
     return float(i[k - 1]), 1.0 - k / (n + 1)
 
 
-def youden_threshold(genuine: Sequence[float], impostor: Sequence[float]) -> float:
+def youden_threshold(genuine: ArrayLike, impostor: ArrayLike) -> float:
     """Threshold maximising Youden's J = TPR - FAR (ties: the highest such threshold)."""
     g = _check_scores(genuine, "genuine")
     i = _check_scores(impostor, "impostor")
@@ -253,7 +255,9 @@ def choose_threshold(
 
     distinct: list[float] = []
 
-    def add_impostor(scores: dict[str, float], vp: int, twin: set[str] = frozenset()) -> None:
+    def add_impostor(
+        scores: dict[str, float], vp: int, twin: AbstractSet[str] = frozenset()
+    ) -> None:
         impostor.append(max(scores.values(), default=0.0))
         distinct.append(max((s for m, s in scores.items() if m not in twin), default=0.0))
         impostor_vps.append(vp)

@@ -8,6 +8,7 @@ imports the other.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, overload
 
 import numpy as np
 
@@ -44,6 +45,10 @@ class TrainedView:
     features: Features
 
 
+@overload
+def check_viewpoint(viewpoint: object, *, allow_none: Literal[False] = False) -> int: ...
+@overload
+def check_viewpoint(viewpoint: object, *, allow_none: bool) -> int | None: ...
 def check_viewpoint(viewpoint: object, *, allow_none: bool = False) -> int | None:
     """Validate a viewpoint number (1, 2 or 3; ``None`` = every viewpoint where allowed)."""
     if viewpoint is None and allow_none:

@@ -273,7 +273,7 @@ async def recognise_views(
     if top.decision == "unknown":
         # Nothing certain from the top; models above the candidate bar are worth a side view.
         # The top view could not rank them, so the margin does not prune here.
-        cand = at(1).candidate if choice is not None else bar("", 1)
+        cand = choice.at(1).candidate if choice is not None else bar("", 1)
         contenders = tuple(
             m for m in sorted(top.scores, key=lambda m: (-top.scores[m], m)) if top.scores[m] > cand
         )[:MAX_CONTENDERS]
@@ -282,6 +282,8 @@ async def recognise_views(
         skip_top = True
     if policy == "best-next" and top.decision == "recognized":
         assert choice is not None
+        if top.model is None:  # recognise() names the model of every "recognized" decision
+            raise RuntimeError("the top view was recognised without a model")
         alike = _top_confusers(choice, top.model, float(confusion_limit))
         if not alike:
             return single(top)

@@ -205,7 +205,7 @@ async def update_model(
     fields = svc.ModelFields(
         **{k: getattr(body, k) for k in given}, threshold_given="threshold" in given
     )
-    _, row = await svc.update_model(db, model_id, fields, by=_by(user, body.reason))
+    _before, row = await svc.update_model(db, model_id, fields, by=_by(user, body.reason))
     live.put_model(IndexedModel.of(row))
     counts = await svc.view_counts(session, [row.id])
     return _model_out(row, counts[row.id], live)

@@ -88,8 +88,10 @@ async def create_move(
 ) -> JSONResponse:
     if body.pose is not None:
         job = cell.move_pose(body.pose.as_tuple(), roll=body.roll, speed=body.speed, path=body.path)
-    else:
+    elif body.joints is not None:
         job = cell.move_joints(body.joints, speed=body.speed)
+    else:  # MoveIn's validator already refuses this
+        raise ValueError("give exactly one of 'joints' and 'pose'")
     return await _answer(cell, job, wait)
 
 
