@@ -104,7 +104,7 @@ def _value(value: dict[str, Any] | None) -> dict[str, Any] | None:
     size = len(json.dumps(clean))
     if size > MAX_VALUE_BYTES:
         return {"truncated": True, "bytes": size, "keys": sorted(clean)[:50]}
-    return clean  # type: ignore[no-any-return]
+    return clean
 
 
 def check_reason(reason: str | None) -> str:

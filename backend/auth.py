@@ -119,7 +119,7 @@ async def issue_token(
     return token
 
 
-def live_token_clause(now: datetime | None = None):  # type: ignore[no-untyped-def]
+def live_token_clause(now: datetime | None = None):  # noqa: ANN201 (a SQLAlchemy clause)
     """SQL condition: the token row is neither revoked nor expired at ``now``."""
     return ApiToken.revoked.is_(False) & or_(
         ApiToken.expires_at.is_(None), ApiToken.expires_at > (now or utcnow())

@@ -87,7 +87,7 @@ def client_address(conn: HTTPConnection) -> str:
 
 def signin_throttle(conn: HTTPConnection) -> SignInThrottle:
     """The running cell's sign-in throttle (503 when the cell is not running)."""
-    return get_runtime(conn).signin_throttle  # type: ignore[no-any-return]
+    return get_runtime(conn).signin_throttle
 
 
 def too_many_attempts(exc: TooManyAttempts) -> ApiError:

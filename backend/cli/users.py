@@ -104,6 +104,8 @@ async def bootstrap_operator(settings: Settings) -> str:
             token_id = await session.scalar(
                 select(ApiToken.id).where(ApiToken.user_id == user.id).order_by(ApiToken.id.desc())
             )
+            if token_id is None:
+                raise RuntimeError(f"the start-up token of {user.name!r} was not stored")
             audit.record(
                 session,
                 actor=audit.SYSTEM,

@@ -162,8 +162,10 @@ def estimate_pose(
     if len(src) < 4:
         raise PoseFailed(f"only {len(src)} points inside the trained view's mask")
     dst = cv2.perspectiveTransform(src.reshape(-1, 1, 2), Hm).reshape(-1, 2)
-    a = plane_points(src, camera, T_base_cam_view, z_plane_m)[:, :2]
-    b = plane_points(dst, camera, T_base_cam_now, z_plane_m)[:, :2]
+    src_px: np.ndarray = np.asarray(src, dtype=np.float64)
+    dst_px: np.ndarray = np.asarray(dst, dtype=np.float64)
+    a = plane_points(src_px, camera, T_base_cam_view, z_plane_m)[:, :2]
+    b = plane_points(dst_px, camera, T_base_cam_now, z_plane_m)[:, :2]
     ca, cb = a.mean(axis=0), b.mean(axis=0)
     M = (b - cb).T @ (a - ca)
     U, _, Vt = np.linalg.svd(M)

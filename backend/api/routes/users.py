@@ -243,7 +243,7 @@ async def _user_named(session: Any, name: str) -> User:
     user = await session.scalar(select(User).where(User.name == name))
     if user is None:
         raise NotFound(f"no user named {name!r}")
-    return user  # type: ignore[no-any-return]
+    return user
 
 
 @router.get(
