@@ -12,6 +12,7 @@ import hmac
 import re
 import secrets
 from datetime import datetime, timedelta
+from typing import Any
 
 from sqlalchemy import or_, select, update
 from sqlalchemy.ext.asyncio import AsyncSession
@@ -119,7 +120,7 @@ async def issue_token(
     return token
 
 
-def live_token_clause(now: datetime | None = None):  # noqa: ANN201 (a SQLAlchemy clause)
+def live_token_clause(now: datetime | None = None) -> Any:
     """SQL condition: the token row is neither revoked nor expired at ``now``."""
     return ApiToken.revoked.is_(False) & or_(
         ApiToken.expires_at.is_(None), ApiToken.expires_at > (now or utcnow())
