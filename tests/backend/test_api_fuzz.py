@@ -49,7 +49,10 @@ OPERATIONS = _operations()
 @pytest.fixture(scope="module")
 def fuzz_server(tmp_path_factory) -> Iterator[tuple[RunningServer, dict[str, str]]]:
     tmp = tmp_path_factory.mktemp("fuzz")
-    settings = make_settings(tmp, time_scale=100.0, camera_fps=2.0, camera_idle_fps=0.5)
+    # The 3D view runs too, so that its link route is fuzzed against a real view.
+    settings = make_settings(
+        tmp, time_scale=100.0, camera_fps=2.0, camera_idle_fps=0.5, view3d_enabled=True
+    )
     migrate(settings)
     token = make_tokens(settings)["engineer"]
     with run_uvicorn(create_app(settings)) as srv:
