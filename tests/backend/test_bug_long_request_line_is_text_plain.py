@@ -4,6 +4,7 @@ started with the options ``visioncell serve`` uses."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import socket
 from collections.abc import Iterator
@@ -31,7 +32,9 @@ def _raw(base: str, request: bytes) -> tuple[int, dict[str, str], bytes]:
     """Send raw bytes (any length) and read the whole answer."""
     host, port = base.removeprefix("http://").split(":")
     with socket.create_connection((host, int(port)), timeout=20) as s:
-        s.sendall(request)
+        # The server may answer and close before it has read everything we send.
+        with contextlib.suppress(BrokenPipeError, ConnectionResetError):
+            s.sendall(request)
         chunks = []
         while True:
             try:
@@ -65,7 +68,7 @@ def test_long_url_is_a_json_414(server, n):
     assert answer["error"] == "uri_too_long" and str(MAX_URL_BYTES) in answer["detail"]
 
 
-@pytest.mark.parametrize("n", [1_000_000, 4_000_000])
+@pytest.mark.parametrize("n", [1_000_000, 2_000_000])
 def test_huge_request_line_is_json_whatever_refuses_it(server, n):
     base, _ = server
     status, headers, body = _raw(
