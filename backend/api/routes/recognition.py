@@ -6,17 +6,18 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter
 from pydantic import BaseModel, Field
-from sqlalchemy import select
 
 from backend import audit
 from backend.api.deps import EngineerUser, SessionDep, ViewerUser
 from backend.api.types import bounded_float
 from backend.db.models import RecognitionSettings
-from backend.recognition.thresholds import settings_audit_value
+from backend.recognition.thresholds import (
+    DEFAULT_THRESHOLD,
+    latest_settings,
+    settings_audit_value,
+)
 
 router = APIRouter(prefix="/recognition", tags=["recognition"])
-
-DEFAULT_THRESHOLD = 0.5
 
 
 class RecognitionSettingsIn(BaseModel):
@@ -50,13 +51,6 @@ def _public(row: RecognitionSettings | None) -> dict[str, Any]:
         "detail": row.detail,
         "created_at": row.created_at.isoformat(),
     }
-
-
-async def latest_settings(session: Any) -> RecognitionSettings | None:
-    """The settings row in force (the newest)."""
-    return await session.scalar(
-        select(RecognitionSettings).order_by(RecognitionSettings.id.desc()).limit(1)
-    )
 
 
 @router.get(
