@@ -17,6 +17,7 @@ from backend.api.docs import install_docs
 from backend.api.errors import install_error_handlers
 from backend.api.headers import SecurityHeaders, install_cors
 from backend.api.limits import UrlLengthLimit
+from backend.api.replay import install_replay
 from backend.resources import resource_dir
 from backend.runtime import CellRuntime, StartupError
 from backend.settings import Settings
@@ -73,5 +74,6 @@ def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None 
     async def console() -> RedirectResponse:
         return RedirectResponse("/")
 
+    install_replay(app)
     app.mount("/static", StaticFiles(directory=WEB_DIR), name="static")
     return app

@@ -67,3 +67,39 @@ export function showBlob(img, blob) {
 export function releaseBlob(img) {
   if (img && img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
 }
+
+let lazyObserver = null;
+
+/**
+ * An `<img loading="lazy">` for an API image: the bearer-token request (which the browser's
+ * own lazy loading cannot make) starts only when the image comes near the viewport.
+ * `fetchBlob(url)` is the caller's authenticated fetch.
+ */
+export function lazyImage(url, fetchBlob, { alt = "", className = "" } = {}) {
+  const img = el("img", { alt, className, loading: "lazy", decoding: "async", dataset: { src: url } });
+  if (!lazyObserver) {
+    lazyObserver = new IntersectionObserver((entries) => {
+      for (const e of entries) {
+        if (!e.isIntersecting) continue;
+        lazyObserver.unobserve(e.target);
+        const node = e.target;
+        node._fetch(node.dataset.src).then((blob) => {
+          if (node.isConnected) showBlob(node, blob);
+          node.dataset.loaded = "1";
+        }).catch(() => { node.classList.add("broken"); node.dataset.loaded = "0"; });
+      }
+    }, { rootMargin: "200px" });
+  }
+  img._fetch = fetchBlob;
+  lazyObserver.observe(img);
+  return img;
+}
+
+/** Free the object URLs of every image under `root` (on unmount or before a re-render). */
+export function releaseImages(root) {
+  if (!root) return;
+  for (const img of root.querySelectorAll("img")) {
+    if (lazyObserver) lazyObserver.unobserve(img);
+    releaseBlob(img);
+  }
+}

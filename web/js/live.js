@@ -2,6 +2,8 @@
 //
 // Events: "open" and "close" (link up/down), "hello" (detail: {user, role, driver}),
 // "state" (detail: {state, speed}), "job" (detail: the job, on start, progress and end),
+// "inspection" (detail: an ended inspection's id, decision, model, score, viewpoints, ...),
+// "camera" (detail: the camera's health), "estop" (detail: {active, conveyors}),
 // "unauthorized" (the server closed with 4401: the token is no longer valid).
 
 const MIN_DELAY_MS = 500;
@@ -58,6 +60,9 @@ export class Live extends EventTarget {
         this._emit("hello", msg);
       } else if (msg.type === "state") this._emit("state", msg);
       else if (msg.type === "job" && msg.job) this._emit("job", msg.job);
+      else if (msg.type === "inspection" && msg.inspection) this._emit("inspection", msg.inspection);
+      else if (msg.type === "camera" && msg.camera) this._emit("camera", msg.camera);
+      else if (msg.type === "estop") this._emit("estop", msg);
     };
     ws.onclose = (ev) => {
       const was = this.connected;

@@ -1,7 +1,7 @@
 // VisionCell console: sign-in, the page registry and the hash router (Back/Forward work).
 //
 // Each page module exports a default object {id, title, minRole, mount(root, ctx), unmount()};
-// the router mounts the page named by the URL hash (#cell, #calibration) into #page-root and
+// the router mounts the page named by the URL hash (#cell, #inspection, #models, #reports, #calibration, #audit) into #page-root and
 // unmounts the previous one, which stops its timers and streams.
 
 import { api, ApiError, setToken } from "./api.js";
@@ -10,6 +10,9 @@ import { Live } from "./live.js";
 import cellPage from "./pages/cell.js";
 import calibrationPage from "./pages/calibration.js";
 import auditPage from "./pages/audit.js";
+import modelsPage from "./pages/models.js";
+import inspectionPage from "./pages/inspection.js";
+import reportsPage from "./pages/reports.js";
 
 const TOKEN_KEY = "visioncell-token";
 const RANKS = { viewer: 1, operator: 2, engineer: 3 };
@@ -18,7 +21,7 @@ const RANKS = { viewer: 1, operator: 2, engineer: 3 };
 export const rank = (role) => RANKS[role] || 0;
 
 /** The pages, in menu order. */
-export const PAGES = [cellPage, calibrationPage, auditPage];
+export const PAGES = [cellPage, inspectionPage, modelsPage, reportsPage, calibrationPage, auditPage];
 
 const live = new Live();
 let user = null;

@@ -179,7 +179,9 @@ ObjectId = Annotated[int, Path(ge=1, le=MAX_DB_ID, description="Object id, 1 .. 
     response_model=ConveyorOut,
 )
 async def read_conveyor(_: EngineerUser, sim: SimDep) -> dict[str, Any]:
-    return {"conveyor": sim.conveyor_state.as_dict()}
+    # station_s_m: where along the belt the station is (the console places objects there).
+    station = float(sim.config.layout.conveyor.station_s_m)
+    return {"conveyor": {**sim.conveyor_state.as_dict(), "station_s_m": station}}
 
 
 @router.post(

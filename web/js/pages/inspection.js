@@ -1,0 +1,249 @@
+// The Inspection page: inspect once, start and stop continuous operation (operator), with
+// the policy and sort switches; the live result (the last image with its contour and label,
+// every model's score as bars, the viewpoints visited); a filmstrip of the last results
+// (images load lazily); counters per shift and the throughput over the last minute.
+//
+// Counters: the shift start is kept in this browser (localStorage, per cell), the counts are
+// the server's (GET /api/inspections?since=<shift start>&decision=...): a reload or a second
+// console shows the same numbers, and "New shift" needs no server state or role.
+
+import { api, fetchBlob } from "../api.js";
+import { $, applyRoles, el, lazyImage, releaseImages, setText } from "../dom.js";
+import { bars } from "../charts.js";
+
+const FILMSTRIP = 16;
+const REFRESH_MS = 5000;
+const SHIFT_KEY = "visioncell-shift-start";
+const DECISIONS = ["recognized", "unknown", "failed"];
+
+let root = null;
+let ctx = null;
+let listeners = [];
+let timer = null;
+let threshold = null;
+let shownId = null;
+let generation = 0;
+let runJob = null;
+
+const q = (sel) => (root ? $(sel, root) : null);
+
+function listen(target, type, fn) {
+  target.addEventListener(type, fn);
+  listeners.push(() => target.removeEventListener(type, fn));
+}
+
+/** The shift start (ISO, UTC) of this console, set to now the first time. */
+export function shiftStart() {
+  let v = localStorage.getItem(SHIFT_KEY);
+  if (!v || !Number.isFinite(Date.parse(v))) {
+    v = new Date().toISOString();
+    localStorage.setItem(SHIFT_KEY, v);
+  }
+  return v;
+}
+
+function options() {
+  const body = { policy: q("#insp-policy").value, sort: q("#insp-sort").checked, max_views: Number(q("#insp-max-views").value) };
+  return body;
+}
+
+async function command(method, path, body) {
+  setText(q("#insp-message"), "");
+  try { return await api(method, path, body); }
+  catch (e) { setText(q("#insp-message"), e.message); return null; }
+}
+
+async function inspectOnce() {
+  const r = await command("POST", "/inspections", { ...options(), wait_s: 60 });
+  if (r) setText(q("#insp-run-state"), `inspection job ${r.job.id} started`);
+}
+
+async function startRun() {
+  const countText = q("#insp-count").value.trim();
+  const body = { ...options(), wait_s: 300 };
+  if (countText) {
+    const n = Number(countText);
+    if (!Number.isInteger(n) || n < 1 || n > 100000) { setText(q("#insp-message"), `count must be a whole number 1..100000 or empty, got ${countText}`); return; }
+    body.count = n;
+  }
+  const r = await command("POST", "/inspection/run", body);
+  if (r) onJob(r.job);
+}
+
+async function stopRun() {
+  const r = await command("POST", "/inspection/stop");
+  if (r) setText(q("#insp-run-state"), "stopping after the current object…");
+}
+
+function onJob(job) {
+  if (!root) return;
+  if (job.kind === "inspection-run") {
+    runJob = job.state === "running" ? job : null;
+    q("#insp-stop").disabled = !runJob;
+    q("#insp-run").disabled = !!runJob;
+    setText(q("#insp-run-state"), job.state === "running"
+      ? `running (${job.params && job.params.policy}): ${job.message || "starting"}`
+      : `run ${job.state}${job.result ? `: ${job.result.inspected} inspected` : ""}${job.error ? ` (${job.error.detail})` : ""}`);
+  } else if (job.kind === "inspect") {
+    setText(q("#insp-run-state"), job.state === "running" ? `inspecting: ${job.message || ""}`
+      : `inspection ${job.state}${job.error ? ` (${job.error.detail})` : ""}`);
+  }
+}
+
+// -- the live result ---------------------------------------------------------------------------
+function decisionText(r) {
+  return r.decision === "recognized" ? `${r.model} (${(r.score ?? 0).toFixed(3)})` : r.decision;
+}
+
+async function showInspection(id) {
+  const gen = generation;
+  let r;
+  try { r = await api("GET", `/inspections/${id}`); } catch (e) { setText(q("#insp-message"), e.message); return; }
+  if (gen !== generation || !root) return;
+  shownId = r.id;
+  const title = q("#live-label");
+  title.className = `decision decision-${r.decision}`;
+  setText(title, `#${r.id} ${decisionText(r)}`);
+  setText(q("#live-reason"), r.reason);
+  const pics = q("#live-images");
+  releaseImages(pics);
+  pics.replaceChildren(...r.images.map((url, k) => el("figure", {},
+    lazyImage(url, fetchBlob, { alt: `inspection ${r.id} view ${k}`, className: "live-image" }),
+    el("figcaption", { className: "small" }, `viewpoint ${r.viewpoints_visited[k] ?? "?"}`))));
+  if (!r.images.length) pics.append(el("p", { className: "small" }, "No image kept for this inspection."));
+  setText(q("#live-viewpoints"), `Viewpoints visited: ${r.viewpoints_visited.join(" → ") || "none"} · policy ${r.policy}`
+    + ` · ${r.duration_s === null ? "" : `${r.duration_s.toFixed(2)} s`}`);
+  const items = Object.entries(r.scores).sort((a, b) => b[1] - a[1])
+    .map(([m, s]) => ({ label: m, value: s, color: m === r.model ? "#15803d" : "#9ca3af" }));
+  bars(q("#live-scores"), items, { max: 1, mark: threshold });
+  const pose = r.pose && r.pose.T_base_obj;
+  setText(q("#live-pose"), pose
+    ? `pose: x ${(pose[0][3] * 1000).toFixed(1)} mm, y ${(pose[1][3] * 1000).toFixed(1)} mm, yaw ${(Math.atan2(pose[1][0], pose[0][0]) * 180 / Math.PI).toFixed(1)}°`
+    : "");
+  for (const f of root.querySelectorAll("#filmstrip figure")) f.classList.toggle("selected", Number(f.dataset.id) === r.id);
+}
+
+// -- the filmstrip, counters, throughput -------------------------------------------------------
+async function loadFilmstrip() {
+  const gen = generation;
+  let page;
+  try { page = await api("GET", `/inspections?limit=${FILMSTRIP}`); } catch (e) { setText(q("#insp-message"), e.message); return; }
+  if (gen !== generation || !root) return;
+  const strip = q("#filmstrip");
+  const have = new Map([...strip.children].map((f) => [Number(f.dataset.id), f]));
+  const frames = page.data.map((r) => have.get(r.id) || el("figure", {
+    className: `frame decision-${r.decision}`, dataset: { id: Number(r.id), decision: r.decision },
+    on: { click: () => showInspection(r.id) },
+  },
+  r.images.length ? lazyImage(r.images[0], fetchBlob, { alt: `inspection ${r.id}` }) : el("div", { className: "noimage" }, "no image"),
+  el("figcaption", {}, `#${r.id} ${decisionText(r)}`)));
+  for (const [id, f] of have) if (!page.data.some((r) => r.id === id)) releaseImages(f);
+  strip.replaceChildren(...frames);
+  if (!page.count) strip.append(el("p", { className: "small" }, "No inspections yet."));
+  if (shownId === null && page.data.length) showInspection(page.data[0].id);
+}
+
+async function countSince(since, decision) {
+  const p = new URLSearchParams({ since, limit: "1" });
+  if (decision) p.set("decision", decision);
+  return (await api("GET", `/inspections?${p}`)).count;
+}
+
+async function loadCounters() {
+  const gen = generation;
+  const since = shiftStart();
+  const minuteAgo = new Date(Date.now() - 60_000).toISOString();
+  try {
+    const [rec, unk, fail, minute] = await Promise.all([...DECISIONS.map((d) => countSince(since, d)), countSince(minuteAgo)]);
+    if (gen !== generation || !root) return;
+    setText(q("#count-recognized"), rec);
+    setText(q("#count-unknown"), unk);
+    setText(q("#count-failed"), fail);
+    const total = rec + unk + fail;
+    setText(q("#count-yield"), total ? `${((rec / total) * 100).toFixed(1)} %` : "-");
+    setText(q("#throughput"), `${minute} /min`);
+    setText(q("#shift-since"), `since ${new Date(since).toLocaleString()}`);
+  } catch (e) { if (root) setText(q("#insp-message"), e.message); }
+}
+
+function newShift() {
+  localStorage.setItem(SHIFT_KEY, new Date().toISOString());
+  loadCounters();
+}
+
+async function refresh() {
+  await Promise.all([loadFilmstrip(), loadCounters()]);
+}
+
+function build() {
+  const controls = el("div", { className: "card insp-controls" },
+    el("h2", {}, "Operation"),
+    el("div", { className: "row" },
+      el("label", { className: "inline" }, "Policy ", el("select", { id: "insp-policy" },
+        ...["two-views", "best-next", "top-only", "naive"].map((p) => el("option", { value: p }, p)))),
+      el("label", { className: "inline" }, "Max views ", el("select", { id: "insp-max-views" },
+        ...[3, 2, 1].map((v) => el("option", { value: v }, String(v))))),
+      el("label", { className: "inline" }, el("input", { id: "insp-sort", type: "checkbox" }), " sort into bins")),
+    el("div", { className: "row", dataset: { minRole: "operator" } },
+      el("button", { id: "insp-once", type: "button", on: { click: inspectOnce } }, "Inspect once"),
+      el("button", { id: "insp-run", type: "button", className: "go", on: { click: startRun } }, "Start"),
+      el("button", { id: "insp-stop", type: "button", disabled: "", on: { click: stopRun } }, "Stop"),
+      el("label", { className: "inline" }, "count ", el("input", { id: "insp-count", type: "number", min: 1, max: 100000, placeholder: "∞", size: 5 }))),
+    el("p", { id: "insp-run-state", className: "small", role: "status" }),
+    el("div", { className: "counters" },
+      el("div", { className: "counter ok" }, el("span", { id: "count-recognized" }, "-"), el("small", {}, "recognized")),
+      el("div", { className: "counter unknown" }, el("span", { id: "count-unknown" }, "-"), el("small", {}, "unknown")),
+      el("div", { className: "counter failed" }, el("span", { id: "count-failed" }, "-"), el("small", {}, "failed")),
+      el("div", { className: "counter" }, el("span", { id: "count-yield" }, "-"), el("small", {}, "yield")),
+      el("div", { className: "counter" }, el("span", { id: "throughput" }, "-"), el("small", {}, "last minute"))),
+    el("p", { className: "small" }, el("span", { id: "shift-since" }), " ",
+      el("button", { id: "new-shift", type: "button", className: "small-button", on: { click: newShift } }, "New shift")),
+    el("p", { id: "insp-message", className: "error", role: "status" }));
+  const live = el("div", { className: "card insp-live" },
+    el("h2", {}, "Last result ", el("span", { id: "live-label", className: "decision" }, "-")),
+    el("p", { id: "live-reason", className: "small" }),
+    el("div", { id: "live-images", className: "live-images" }),
+    el("p", { id: "live-viewpoints", className: "small" }),
+    el("p", { id: "live-pose", className: "small" }),
+    el("h3", {}, "Scores"),
+    el("canvas", { id: "live-scores", className: "chart bars" }));
+  const strip = el("div", { className: "card insp-strip" }, el("h2", {}, "Recent results"), el("div", { id: "filmstrip", className: "filmstrip" }));
+  return el("section", { id: "inspection-page", className: "page" }, el("div", { className: "insp-grid" }, controls, live, strip));
+}
+
+export default {
+  id: "inspection",
+  title: "Inspection",
+  minRole: "viewer",
+
+  mount(target, context) {
+    root = target;
+    ctx = context;
+    generation++;
+    shownId = null;
+    root.append(build());
+    applyRoles(root, ctx.role, ctx.rank);
+    listen(ctx.live, "job", (ev) => onJob(ev.detail));
+    listen(ctx.live, "inspection", (ev) => { showInspection(ev.detail.id); refresh(); });
+    listen(ctx.live, "open", (ev) => { if (ev.detail.reconnected) refresh(); });
+    api("GET", "/recognition/settings").then((s) => { threshold = s.global_threshold; }).catch(() => {});
+    api("GET", "/jobs").then((jobs) => {
+      const run = jobs.data.find((j) => j.kind === "inspection-run" && j.state === "running");
+      if (run) onJob(run);
+    }).catch(() => {});
+    refresh();
+    timer = setInterval(() => { if (document.visibilityState === "visible") loadCounters(); }, REFRESH_MS);
+  },
+
+  unmount() {
+    generation++;
+    listeners.forEach((off) => off());
+    listeners = [];
+    clearInterval(timer);
+    timer = null;
+    if (root) releaseImages(root);
+    root = null;
+    ctx = null;
+    runJob = null;
+  },
+};
