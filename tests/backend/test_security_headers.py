@@ -88,3 +88,14 @@ def test_cors_allows_a_configured_origin_only(tmp_path):
 def test_cors_origins_are_validated(tmp_path, origins):
     with pytest.raises(ValueError, match="cors_origins"):
         make_settings(tmp_path, cors_origins=origins)
+
+
+def test_replay_page_is_the_viser_client_with_its_own_policy(client):
+    r = client.get("/replay/")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
+    csp = r.headers["content-security-policy"]
+    # Its inline bootstrap and WebAssembly are allowed; nothing from another origin.
+    assert "'unsafe-inline'" in csp and "'wasm-unsafe-eval'" in csp
+    assert "https:" not in csp and "http:" not in csp and "*" not in csp
+    assert "frame-ancestors 'self'" in csp
+    assert client.get("/", headers={}).headers["content-security-policy"].count("wasm") == 0

@@ -37,6 +37,9 @@ def test_back_and_forward_move_between_pages_and_unmount_stops_polling(browser, 
     )
     assert page.eval_on_selector_all("#nav-pages a", "as => as.map(a => a.textContent)") == [
         "Cell",
+        "Inspection",
+        "Models",
+        "Reports",
         "Calibration",
     ]
 

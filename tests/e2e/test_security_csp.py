@@ -55,3 +55,23 @@ def test_docs_load_without_csp_violation(browser, server, path):
         assert _violations(page, console) == [], console
     finally:
         context.close()
+
+
+@pytest.mark.parametrize("page_id", ["inspection", "models", "reports"])
+def test_operation_pages_load_without_csp_violation(browser, server, page_id):
+    token = server.token(f"csp-{page_id}", "engineer")
+    context = browser.new_context()
+    context.add_init_script(_LISTEN)
+    page = context.new_page()
+    console: list[str] = []
+    page.on("console", lambda m: console.append(m.text))
+    try:
+        page.goto(f"{server.base}/#{page_id}")
+        page.fill("#token", token)
+        page.click("#login")
+        page.wait_for_selector(f"#{page_id}-page")
+        page.wait_for_load_state("networkidle")
+        page.wait_for_timeout(1000)
+        assert _violations(page, console) == [], console
+    finally:
+        context.close()

@@ -338,7 +338,7 @@ function build() {
       el("thead", {}, el("tr", {}, ...["Name", "Kind", "Part", "Views", "Threshold"].map((h) => el("th", {}, h)))),
       el("tbody")),
     engineer(el("form", { id: "new-model-form", className: "row", on: { submit: createModel } },
-      el("input", { id: "new-model-name", type: "text", placeholder: "new model name", required: "", maxlength: 64, pattern: "[A-Za-z0-9][A-Za-z0-9_.\\-]*" }),
+      el("input", { id: "new-model-name", type: "text", placeholder: "new model name", required: "", maxlength: 64 }),
       el("select", { id: "new-model-kind" }, el("option", { value: "2d" }, "2d"), el("option", { value: "3d" }, "3d")),
       el("input", { id: "new-model-part", type: "text", placeholder: "part (default: name)", maxlength: 64 }),
       el("button", { id: "new-model", type: "submit", className: "small-button" }, "Create"))),
