@@ -99,6 +99,7 @@ def test_teach_inspect_report_export(browser, sim_server):
     page.wait_for_function(
         "() => document.querySelector('#teach-message').textContent.includes('station cleared')"
     )
+    page.select_option("#teach-rolls", "one")  # one top view: the shortest teach
     page.click("#teach-start")
     page.wait_for_selector("#teach-place.attention", timeout=120_000)  # waits for the object
     page.select_option("#place-name", MODEL)

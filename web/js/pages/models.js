@@ -202,6 +202,7 @@ async function startTeach(ev) {
     background: q("#teach-background").value,
     replace: q("#teach-replace").checked,
     wait_s: 120,
+    ...(q("#teach-rolls").value === "one" ? { top_rolls_rad: [0] } : {}),
     reason: "taught in the console",
   };
   const r = await call("#teach-message", "POST", `/models/${selected.id}/teach`, body);
@@ -234,6 +235,7 @@ function onTeachJob(job) {
     say("#teach-message", job.error ? job.error.detail : `the teach ended ${job.state}`);
     return;
   }
+  say("#teach-message", "");
   const res = job.result || {};
   const shots = res.shots || [];
   const out = q("#teach-result");
@@ -266,7 +268,7 @@ function startCamera() {
   const tick = async () => {
     camTimer = null;
     if (!root || document.visibilityState !== "visible") { camTimer = setTimeout(tick, CAMERA_PERIOD_MS); return; }
-    try { showBlob(img, await fetchBlob("/api/camera/frame.jpg")); setText(q("#teach-camera-status"), ""); }
+    try { showBlob(img, await fetchBlob("/api/camera/frame.jpg")); img.hidden = false; setText(q("#teach-camera-status"), ""); }
     catch (e) { setText(q("#teach-camera-status"), e.detail || "unavailable"); }
     if (root && camTimer === null && teachJob !== null) camTimer = setTimeout(tick, CAMERA_PERIOD_MS);
   };
@@ -370,7 +372,9 @@ function build() {
         "Start teaching ", el("span", { id: "teach-kind", className: "small" }), ": ",
         el("select", { id: "teach-background" }, el("option", { value: "grab" }, "grab the empty background first"),
           el("option", { value: "stored" }, "stored backgrounds (object already there)")),
-        el("label", {}, el("input", { id: "teach-replace", type: "checkbox" }), " replace the earlier views"),
+        el("select", { id: "teach-rolls", title: "Camera rolls of the top view" },
+          el("option", { value: "all" }, "all top rolls"), el("option", { value: "one" }, "one top roll (quick)")),
+        el("label", { className: "inline" }, el("input", { id: "teach-replace", type: "checkbox" }), " replace the earlier views"),
         el("button", { id: "teach-start", type: "submit", className: "small-button" }, "Start teaching"))),
       el("li", { id: "teach-place" }, "Place the object when the job waits for it. ",
         el("span", { id: "hand-place", className: "small" }, "(by hand at the station)"),
@@ -380,7 +384,7 @@ function build() {
           el("button", { id: "place-object", type: "button", className: "small-button", on: { click: placeObject } }, "Place at the station"))),
       el("li", {}, "Watch the views arrive; the threshold is chosen again at the end.")),
     el("div", { className: "teach-live" },
-      el("div", {}, el("img", { id: "teach-camera", alt: "Live camera while teaching" }),
+      el("div", {}, el("img", { id: "teach-camera", alt: "Live camera while teaching", hidden: true }),
         el("p", { id: "teach-camera-status", className: "small" })),
       el("div", {}, el("p", { id: "teach-state", className: "small" }),
         el("progress", { id: "teach-progress", max: 1, value: 0, hidden: true }),
