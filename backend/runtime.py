@@ -88,6 +88,12 @@ async def ensure_cell_row(db: Database, name: str, *, description: str = "") -> 
     raise StartupError(f"cannot create or read the cell row {name!r}")
 
 
+async def _cancel(task: asyncio.Task[None]) -> None:
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await task
+
+
 class CellRuntime:
     """The running system of one cell (see the module docstring).
 
@@ -210,6 +216,11 @@ class CellRuntime:
         self._database = db
         self.cell_id = await ensure_cell_row(db, s.cell_name)
         self._live_index = await load_live_index(db, s)
+        if s.image_max_age_days is not None or s.image_max_bytes is not None:
+            from backend.reports import prune_loop
+
+            pruning = asyncio.get_running_loop().create_task(prune_loop(db, s), name="image-prune")
+            stack.push_async_callback(_cancel, pruning)
 
         hardware = await asyncio.to_thread(make_hardware, s)
         if hardware.sim is not None:

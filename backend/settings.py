@@ -146,6 +146,23 @@ class Settings(BaseSettings):
     recognition_max_features: int = Field(
         1000, ge=50, le=4000, description="Strongest keypoints kept per trained view."
     )
+    image_retention: Literal["all", "failures"] = Field(
+        "all",
+        description="Inspection images (and 3D scene recordings) kept: of every inspection, or "
+        "of unknown and failed ones only.",
+    )
+    image_max_age_days: int | None = Field(
+        None, ge=1, le=3650, description="Prune images older than this many days (None: never)."
+    )
+    image_max_bytes: int | None = Field(
+        None,
+        ge=1_000_000,
+        le=2**50,
+        description="Prune the oldest inspections' images beyond this many bytes (None: no cap).",
+    )
+    image_prune_interval_s: float = Field(
+        3600.0, ge=10.0, le=7 * 86400.0, description="Period of the automatic prune, s."
+    )
 
     @field_validator("http_host", "viser_host")
     @classmethod

@@ -14,6 +14,7 @@ from backend.api.routes import (
     live,
     models,
     recognition,
+    reports,
     robot,
     sim,
     users,
@@ -40,5 +41,6 @@ for _r in (
     live,
     view3d,
     audit,
+    reports,
 ):
     api_router.include_router(_r.router)

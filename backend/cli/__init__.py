@@ -2,7 +2,7 @@
 (:mod:`backend.cli.serve`), ``db`` (:mod:`backend.cli.db`), ``user``
 (:mod:`backend.cli.users`), ``calibrate`` (:mod:`backend.cli.calibrate`), ``train-pca``
 (:mod:`backend.cli.features`), ``emulator`` (:mod:`backend.cli.emulator`) ``models``
-(:mod:`backend.cli.models`) and ``inspect`` (:mod:`backend.cli.inspect`)."""
+(:mod:`backend.cli.models`) ``inspect`` (:mod:`backend.cli.inspect`) and ``report`` (:mod:`backend.cli.report`)."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from backend.cli.emulator import emulator
 from backend.cli.features import train_pca
 from backend.cli.inspect import register as register_inspect
 from backend.cli.models import register as register_models
+from backend.cli.report import register as register_report
 from backend.cli.serve import serve
 from backend.cli.users import user_app
 
@@ -34,6 +35,7 @@ app.add_typer(calibrate_app, name="calibrate")
 app.command("train-pca")(train_pca)
 register_models(app)
 register_inspect(app)
+register_report(app)
 
 
 @app.command()

@@ -43,6 +43,7 @@ __all__ = [
     "Decision",
     "Inspection",
     "InspectionImage",
+    "InspectionScene",
     "ObjectKind",
     "ObjectModel",
     "RecognitionSettings",
@@ -358,6 +359,21 @@ class InspectionImage(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
     inspection: Mapped[Inspection] = relationship(back_populates="images")
+
+
+class InspectionScene(Base):
+    """The 3D scene recorded during an inspection (viser's scene serializer, ``.viser`` bytes)."""
+
+    __tablename__ = "inspection_scenes"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    inspection_id: Mapped[int] = mapped_column(
+        ForeignKey("inspections.id", ondelete="CASCADE"), unique=True
+    )
+    scene: Mapped[bytes] = mapped_column(LargeBinary)
+    #: ``len(scene)``, kept so that the storage used is a sum over a small column.
+    size_bytes: Mapped[int] = mapped_column(Integer)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
 class RecognitionSettings(Base):

@@ -14,7 +14,7 @@ from typing import Any
 from sqlalchemy import func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
-from backend.db.models import Decision, Inspection, InspectionImage
+from backend.db.models import Decision, Inspection, InspectionImage, InspectionScene
 from backend.db.session import Database
 from vision.errors import InvalidInput, NotFound
 
@@ -58,8 +58,14 @@ class InspectionRecord:
             raise InvalidInput(f"decision must be one of {DECISIONS}, got {self.decision!r}")
 
 
-async def store(db: Database, cell_id: int, rec: InspectionRecord) -> int:
-    """Write the row and its images in one transaction; returns the inspection id."""
+async def store(db: Database, cell_id: int, rec: InspectionRecord, *, retention: str = "all",
+                scene: bytes | None = None) -> int:  # fmt: skip
+    """Write the row, its images and its 3D scene recording in one transaction (all or
+    nothing); returns the inspection id.  ``retention`` (``Settings.image_retention``) says
+    whether this decision keeps its images and scene (:func:`backend.reports.keeps_images`)."""
+    from backend.reports.retention import keeps_images
+
+    keep = keeps_images(retention, rec.decision)
     async with db.session() as session:
         row = Inspection(
             cell_id=cell_id,
@@ -81,12 +87,15 @@ async def store(db: Database, cell_id: int, rec: InspectionRecord) -> int:
             pick=rec.pick,
             truth=rec.truth,
         )
-        for v in rec.views:
+        for v in rec.views if keep else ():
             row.images.append(
                 InspectionImage(viewpoint=v.viewpoint, image_jpeg=v.jpeg, scores=v.scores)
             )
         session.add(row)
         await session.flush()
+        if keep and scene:
+            session.add(InspectionScene(inspection_id=row.id, scene=scene, size_bytes=len(scene)))
+            await session.flush()
         return int(row.id)
 
 

@@ -53,6 +53,7 @@ from backend.recognition import thresholds
 from backend.recognition.images import encode_jpeg
 from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
 from backend.recognition.teach import plan_shots
+from backend.reports.scenes import SceneRecorder
 from robot.errors import Unreachable
 from robot.kinematics import T_base_ee
 from vision.errors import Conflict, InvalidInput, VisionCellError
@@ -317,6 +318,8 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
     state: dict[str, Any] = {"decision": "failed", "reason": "", "truth": None, "scores": {},
                              "model": None, "model_id": None, "score": None, "pose": None,
                              "viewpoints": (), "pick": None}  # fmt: skip
+    view = getattr(ctx.rt, "view3d", None)
+    state["scene"] = SceneRecorder(getattr(view, "server", None))
     report = (lambda f, m: job.report(f, m)) if job is not None else (lambda f, m: None)
     try:
         await _inspect_body(ctx, opts, durations, views, cams, state, report, clear_first)
@@ -345,7 +348,9 @@ async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[
         pose=state["pose"], durations=durations, pick=state["pick"], truth=state["truth"],
         views=tuple(views),
     )  # fmt: skip
-    iid = await results.store(ctx.rt.database, ctx.rt.cell_id, rec)
+    scene = await state["scene"].finish() if state.get("scene") is not None else None
+    iid = await results.store(ctx.rt.database, ctx.rt.cell_id, rec,
+                              retention=ctx.rt.settings.image_retention, scene=scene)  # fmt: skip
     pose = state["pose"]
     ev = InspectionDone(
         iid, rec.decision, rec.model_name, rec.reason, rec.score, rec.viewpoints,
