@@ -23,7 +23,7 @@ from rich.table import Table
 
 ROOT = Path(__file__).resolve().parent.parent
 TEST = "tests/e2e/test_console_operation.py"
-PAGES = ("models", "inspection", "reports")
+PAGES = ("models", "inspection", "reports", "reports-detail")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -48,7 +48,7 @@ def _shot(page, name: str) -> None:
 
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
-    img = Image.open(io.BytesIO(page.screenshot(full_page=False)))
+    img = Image.open(io.BytesIO(page.screenshot(timeout=90_000)))
     img.convert("RGB").quantize(colors=128).save(out / f"{name}.png", optimize=True)
 
 
@@ -113,6 +113,12 @@ def test_teach_inspect_report_export(browser, sim_server):
         "() => [...document.querySelectorAll('#views-grid img')].some(i => i.naturalWidth > 0)"
     )
     assert page.text_content("#models-table tbody").count(MODEL) == 1
+    # One top view and one model: no automatic threshold yet; the engineer sets the model's.
+    page.fill("#model-threshold", "0.25")
+    page.click("#model-threshold-save")
+    page.wait_for_function(
+        "() => document.querySelector('#models-table tbody').textContent.includes('0.250')"
+    )
     _shot(page, "models")
 
     # -- Inspection: once (the taught object is still there), then a run of one ------------
@@ -150,15 +156,24 @@ def test_teach_inspect_report_export(browser, sim_server):
         "#rep-table tbody tr[data-id]", "rs => rs.map(r => r.dataset.id)")]  # fmt: skip
     assert sorted(ids) == [r[0] for r in rows]
     assert page.text_content("#rep-recognized") == "1"
+    _shot(page, "reports")
     page.click(f'#rep-table tr[data-id="{rows[0][0]}"]')
     page.wait_for_selector("#rep-detail:not([hidden])")
     assert f"#{rows[0][0]}" in page.text_content("#rep-detail-title")
     page.wait_for_function(
         "() => [...document.querySelectorAll('#rep-detail-views img')].some(i => i.naturalWidth > 0)"
     )
-    page.wait_for_function("() => document.querySelector('#rep-replay-status').textContent !== ''")
+    # The scene recorded during the inspection, played back by the viser client.
+    page.wait_for_function(
+        "() => document.querySelector('#rep-replay-status').textContent.includes('recorded')",
+        timeout=30_000,
+    )
+    assert page.get_attribute("#rep-replay", "src").startswith("/replay/?playbackPath=blob%3A")
     assert page.locator("#rep-detail-durations tbody tr").count() >= 3
-    _shot(page, "reports")
+    if os.environ.get("VISIONCELL_SCREENSHOTS"):
+        page.evaluate("document.querySelector('#rep-replay').scrollIntoView()")
+        page.wait_for_timeout(4000)  # the replay draws its first frames
+        _shot(page, "reports-detail")
     with page.expect_download() as dl:
         page.click("#rep-export")
     text = Path(dl.value.path()).read_text()
