@@ -52,7 +52,13 @@ def main(argv: list[str] | None = None) -> int:
         if not path.is_file():
             err.print(f"[red]missing {path}[/red]")
             return 1
-        rows.append({"page": name, "file": str(path.relative_to(ROOT)), "kB": round(path.stat().st_size / 1024, 1)})
+        rows.append(
+            {
+                "page": name,
+                "file": str(path.relative_to(ROOT)),
+                "kB": round(path.stat().st_size / 1024, 1),
+            }
+        )
     table = Table(title=f"Console screenshots (1280x800), test run {took:.0f} s")
     for col in ("page", "file", "kB"):
         table.add_column(col)

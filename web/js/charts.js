@@ -33,8 +33,9 @@ function empty(g, w, h, text) {
 const fmt = (v) => (Math.abs(v) >= 100 ? v.toFixed(0) : Math.abs(v) >= 10 ? v.toFixed(1) : v.toFixed(2));
 
 /**
- * Horizontal bars: `items` = [{label, value, color?}], values in [0, max].  `mark` draws a
- * vertical line (a threshold) at that value.
+ * Horizontal bars: `items` = [{label, value, color?, mark?}], values in [0, max].  `mark`
+ * draws a vertical line (a threshold) at that value across all bars; an item's own `mark`
+ * draws a tick on its bar only (its own threshold).
  */
 export function bars(canvas, items, { max = 1, mark = null, unit = "" } = {}) {
   const rowH = 22;
@@ -57,6 +58,10 @@ export function bars(canvas, items, { max = 1, mark = null, unit = "" } = {}) {
     g.fillStyle = INK;
     g.textAlign = "left";
     g.fillText(`${fmt(it.value)}${unit}`, w - right + 6, y + rowH / 2 - 2);
+    if (it.mark !== undefined && it.mark !== null && Number.isFinite(it.mark)) {
+      g.fillStyle = "#c81e1e";
+      g.fillRect(x(it.mark) - 1.5, y, 3, rowH - 4);
+    }
   });
   if (mark !== null && Number.isFinite(mark)) {
     g.strokeStyle = "#c81e1e";

@@ -20,7 +20,8 @@ let root = null;
 let ctx = null;
 let listeners = [];
 let timer = null;
-let threshold = null;
+let threshold = null;      // the global threshold
+let perModel = {};         // model name -> the threshold that applies to it
 let shownId = null;
 let generation = 0;
 let runJob = null;
@@ -114,8 +115,8 @@ async function showInspection(id) {
   setText(q("#live-viewpoints"), `Viewpoints visited: ${r.viewpoints_visited.join(" → ") || "none"} · policy ${r.policy}`
     + ` · ${r.duration_s === null ? "" : `${r.duration_s.toFixed(2)} s`}`);
   const items = Object.entries(r.scores).sort((a, b) => b[1] - a[1])
-    .map(([m, s]) => ({ label: m, value: s, color: m === r.model ? "#15803d" : "#9ca3af" }));
-  bars(q("#live-scores"), items, { max: 1, mark: threshold });
+    .map(([m, s]) => ({ label: m, value: s, color: m === r.model ? "#15803d" : "#9ca3af", mark: perModel[m] ?? threshold }));
+  bars(q("#live-scores"), items, { max: 1 });
   const pose = r.pose && r.pose.T_base_obj;
   setText(q("#live-pose"), pose
     ? `pose: x ${(pose[0][3] * 1000).toFixed(1)} mm, y ${(pose[1][3] * 1000).toFixed(1)} mm, yaw ${(Math.atan2(pose[1][0], pose[0][0]) * 180 / Math.PI).toFixed(1)}°`
@@ -141,6 +142,17 @@ async function loadFilmstrip() {
   strip.replaceChildren(...frames);
   if (!page.count) strip.append(el("p", { className: "small" }, "No inspections yet."));
   if (shownId === null && page.data.length) showInspection(page.data[0].id);
+}
+
+/** The threshold of each model: its own, else the automatic per-model one, else the global. */
+async function loadThresholds() {
+  try {
+    const [s, models] = await Promise.all([api("GET", "/recognition/settings"), api("GET", "/models?limit=1000")]);
+    threshold = s.global_threshold;
+    const auto = (s.chosen_by === "auto" && s.detail && s.detail.per_model) || {};
+    perModel = Object.fromEntries(models.data.map((m) => [m.name, m.threshold ?? auto[m.name] ?? s.global_threshold]));
+    setText(q("#live-threshold-note"), "ticks: the threshold of each model");
+  } catch (e) { /* the bars show without ticks */ }
 }
 
 async function countSince(since, decision) {
@@ -205,7 +217,7 @@ function build() {
     el("div", { id: "live-images", className: "live-images" }),
     el("p", { id: "live-viewpoints", className: "small" }),
     el("p", { id: "live-pose", className: "small" }),
-    el("h3", {}, "Scores"),
+    el("h3", {}, "Scores ", el("span", { id: "live-threshold-note", className: "small" })),
     el("canvas", { id: "live-scores", className: "chart bars" }));
   const strip = el("div", { className: "card insp-strip" }, el("h2", {}, "Recent results"), el("div", { id: "filmstrip", className: "filmstrip" }));
   return el("section", { id: "inspection-page", className: "page" }, el("div", { className: "insp-grid" }, controls, live, strip));
@@ -226,7 +238,7 @@ export default {
     listen(ctx.live, "job", (ev) => onJob(ev.detail));
     listen(ctx.live, "inspection", (ev) => { showInspection(ev.detail.id); refresh(); });
     listen(ctx.live, "open", (ev) => { if (ev.detail.reconnected) refresh(); });
-    api("GET", "/recognition/settings").then((s) => { threshold = s.global_threshold; }).catch(() => {});
+    loadThresholds();
     api("GET", "/jobs").then((jobs) => {
       const run = jobs.data.find((j) => j.kind === "inspection-run" && j.state === "running");
       if (run) onJob(run);
