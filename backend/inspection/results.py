@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import func, select
+from sqlalchemy import delete, func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
-from backend.db.models import Decision, Inspection, InspectionImage
+from backend.db.models import Decision, Inspection, InspectionImage, InspectionInProgress
 from backend.db.session import Database
 from vision.errors import InvalidInput, NotFound
 
@@ -58,9 +58,30 @@ class InspectionRecord:
             raise InvalidInput(f"decision must be one of {DECISIONS}, got {self.decision!r}")
 
 
-async def store(db: Database, cell_id: int, rec: InspectionRecord) -> int:
-    """Write the row and its images in one transaction; returns the inspection id."""
+async def store(
+    db: Database, cell_id: int, rec: InspectionRecord, *, marker_id: int | None = None
+) -> int:
+    """Write the row and its images in one transaction; returns the inspection id.
+
+    ``marker_id``: the inspection's in-progress marker
+    (:func:`backend.inspection.recovery.begin`), deleted in the same transaction, so either
+    the result is there or the marker is, never both and never neither.
+    """
     async with db.session() as session:
+        if marker_id is not None:
+            gone = await session.execute(
+                delete(InspectionInProgress).where(InspectionInProgress.id == marker_id)
+            )
+            if gone.rowcount == 0:  # type: ignore[attr-defined]
+                # An earlier attempt committed and lost its answer (the link failed after
+                # the commit): that row is the result; writing another would duplicate it.
+                earlier = await session.scalar(
+                    select(Inspection.id).where(
+                        Inspection.cell_id == cell_id, Inspection.started_at == rec.started_at
+                    )
+                )
+                if earlier is not None:
+                    return int(earlier)
         row = Inspection(
             cell_id=cell_id,
             started_at=rec.started_at,
