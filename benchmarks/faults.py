@@ -63,8 +63,8 @@ out = Console()
 err = Console(stderr=True)
 
 #: The taught model and the untrained part the feeder alternates.
-TAUGHT = "wheel"
-UNTRAINED_FALLBACK = "bracket"
+TAUGHT = "wheel-steel"
+UNTRAINED_FALLBACK = "oil-filter"
 KINDS = ("camera", "estop", "database", "serial", "kill")
 
 
@@ -597,13 +597,15 @@ async def kill_campaign(args: argparse.Namespace, progress: Any) -> KindResult:
                 await asyncio.sleep(0.1)
         raise RuntimeError("serve did not answer /api/health within 60 s")
 
-    async def markers() -> int:
-        from sqlalchemy import func, select
+    async def markers() -> list[Any]:
+        from sqlalchemy import select
 
         from backend.db.models import InspectionInProgress
 
         async with db.session() as s:
-            return int(await s.scalar(select(func.count(InspectionInProgress.id))) or 0)
+            return [m.started_at for m in (await s.scalars(select(InspectionInProgress))).all()]
+
+    killed: list[Any] = []
 
     async def complete_after(iid: int) -> int:
         _, _, rows = await audit_rows(db, 1, iid)
@@ -620,16 +622,17 @@ async def kill_campaign(args: argparse.Namespace, progress: Any) -> KindResult:
                 _, _, rows = await audit_rows(db, 1, 0)
                 last = max((x["id"] for x in rows), default=0)
                 t0 = time.monotonic()
-                while await complete_after(last) == 0 or await markers() == 0:
+                while await complete_after(last) == 0 or not await markers():
                     if time.monotonic() - t0 > 300:
                         raise TimeoutError("no inspection in progress within 300 s")
                     await asyncio.sleep(0.05)
                 await asyncio.sleep(float(np.random.default_rng(k).uniform(0.1, 0.8)))
-                if await markers() == 0:
-                    await asyncio.sleep(0.05)
+                while not (held := await markers()):
+                    await asyncio.sleep(0.02)
                 progress(f"kill {k + 1}/{args.per_kind}")
                 proc.send_signal(signal.SIGKILL)
                 proc.wait(30)
+                killed.extend(held)
                 res.injected += 1
                 t_clear = time.monotonic()
                 proc = await launch()
@@ -654,15 +657,22 @@ async def kill_campaign(args: argparse.Namespace, progress: Any) -> KindResult:
             proc.wait(10)
         log.close()
     partial, left, rows = await audit_rows(db, 1, 0)
+    from sqlalchemy import select
+
+    from backend.db.models import Inspection
+
+    async with db.session() as s:
+        started = [r.started_at for r in (await s.scalars(select(Inspection))).all()]
     await db.dispose()
     res.inspections = len(rows)
     res.partial = partial
     res.reasons = [r["reason"].split(";")[0][:90] for r in rows if r["decision"] == "failed"]
     interrupted = sum(1 for r in rows if r["reason"].startswith("interrupted"))
-    # every kill hit an inspection with a marker (checked before the kill): each must have
-    # become exactly one interrupted row; markers left after the last clean stop are lost
-    res.lost = max(0, res.injected - interrupted) + left
-    res.duplicated = max(0, interrupted - res.injected)
+    # every inspection in progress at a kill (its marker read just before) must have
+    # exactly one row afterwards: the interrupted row written at start-up, or its own
+    # result if it finished in the instant between the read and the kill
+    res.lost = sum(1 for t in killed if started.count(t) == 0) + left
+    res.duplicated = sum(started.count(t) - 1 for t in killed if started.count(t) > 1)
     res.note = (f"{interrupted} interrupted row(s) written at start-up; unsafe motions not "
                 "audited in the child process")  # fmt: skip
     shutil.rmtree(tmp, ignore_errors=True)

@@ -122,6 +122,21 @@ async def begin(db: Database, cell_id: int, policy: str) -> int:
         return int(row.id)
 
 
+def _alive_elsewhere(owner: str) -> bool:
+    """Whether ``owner`` (``host:pid``) is another process of this host that still runs
+    (a CLI run beside ``serve``): its inspection is not interrupted."""
+    host, _, pid = owner.rpartition(":")
+    if host != socket.gethostname()[:100] or not pid.isdigit() or int(pid) == os.getpid():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 async def mark_interrupted(db: Database, cell_id: int) -> list[int]:
     """Turn every marker of ``cell_id`` left by an earlier process into a complete ``failed``
     row (reason ``interrupted: ...``), removing the markers in the same transaction.
@@ -134,6 +149,7 @@ async def mark_interrupted(db: Database, cell_id: int) -> list[int]:
                 .order_by(InspectionInProgress.id)
             )
         ).all()
+        markers = [m for m in markers if not _alive_elsewhere(m.owner)]
         rows = []
         now = utcnow()
         for m in markers:
