@@ -225,7 +225,11 @@ class CellRuntime:
         self.teach_backgrounds.images.update(await recovery.load_backgrounds(db, self.cell_id))
         self.teach_backgrounds.on_put = recovery.background_saver(db, self.cell_id)
 
-        hardware = self._hardware or await asyncio.to_thread(make_hardware, s)
+        hardware: Hardware = (
+            self._hardware
+            if self._hardware is not None
+            else await asyncio.to_thread(make_hardware, s)
+        )
         if hardware.sim is not None:
             engine = hardware.sim
             stack.push_async_callback(asyncio.to_thread, engine.stop)

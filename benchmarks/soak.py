@@ -82,11 +82,17 @@ def slope_per_1000(x: list[float], y: list[float]) -> float:
 
 
 async def soak(args: argparse.Namespace, progress: Any) -> dict[str, Any]:
-    from benchmarks.faults import Feeder, settings_for, teach_one, untrained_name, watch_truths
-    from benchmarks.faults import TAUGHT
     from backend.db.migrate import upgrade
     from backend.inspection import service
     from backend.runtime import CellRuntime
+    from benchmarks.faults import (
+        TAUGHT,
+        Feeder,
+        settings_for,
+        teach_one,
+        untrained_name,
+        watch_truths,
+    )
 
     tmp = Path(tempfile.mkdtemp(prefix="vc-soak-"))
     url = f"sqlite+aiosqlite:///{tmp / 'soak.db'}"
@@ -123,13 +129,21 @@ async def soak(args: argparse.Namespace, progress: Any) -> dict[str, Any]:
         opts = service.InspectOptions(policy=args.policy, max_views=2, wait_s=30.0)
         t0 = time.monotonic()
         run = service.start_run(rt, opts, args.inspections)
+
+        async def budget() -> None:  # a wall-time budget ends the run after its object
+            await asyncio.sleep(args.max_wall_s)
+            progress(f"wall-time budget of {args.max_wall_s:g} s spent: stopping the run")
+            service.stop_run(rt)
+
+        guard = asyncio.create_task(budget())
         await rt.jobs.wait(run.job)
+        guard.cancel()
         wall = time.monotonic() - t0
         task.cancel()
         if run.job.state.value != "done":
             raise RuntimeError(f"the run ended {run.job.state.value}: {run.job.error}")
-    from benchmarks import faults as fmod
     from backend.inspection import results as results_mod
+    from benchmarks import faults as fmod
 
     if "store" in fmod._ORIGINAL_STORE:
         results_mod.store = fmod._ORIGINAL_STORE.pop("store")
@@ -156,7 +170,8 @@ async def soak(args: argparse.Namespace, progress: Any) -> dict[str, Any]:
     for s in samples:
         decisions[str(s["decision"])] = decisions.get(str(s["decision"]), 0) + 1
     plot = _plot(samples, args.warmup, args.docs)
-    return {"benchmark": "soak", "inspections": len(samples), "warmup": args.warmup,
+    return {"benchmark": "soak", "inspections": len(samples), "asked": args.inspections,
+            "warmup": args.warmup,
             "wall_s": round(wall, 1), "per_inspection_s": round(wall / max(1, len(samples)), 3),
             "time_scale": args.time_scale, "policy": args.policy, "decisions": decisions,
             "series": series, "plot": None if plot is None else str(plot)}  # fmt: skip
@@ -172,7 +187,9 @@ def _plot(samples: list[dict[str, float]], warmup: int, docs: bool) -> Path | No
 
     fig, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
     n = [s["n"] for s in samples]
-    for ax, key, label in zip(axes, BOUNDS, ("RSS, MB", "open files", "DB connections"), strict=True):
+    for ax, key, label in zip(
+        axes, BOUNDS, ("RSS, MB", "open files", "DB connections"), strict=True
+    ):
         ax.plot(n, [s[key] for s in samples], lw=1)
         ax.axvline(warmup, color="grey", ls="--", lw=0.8)
         ax.set_ylabel(label)
@@ -188,20 +205,31 @@ def _plot(samples: list[dict[str, float]], warmup: int, docs: bool) -> Path | No
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--inspections", type=int, default=1000, help="inspections (10..10000)")
     p.add_argument("--warmup", type=int, default=100, help="inspections before the fit")
-    p.add_argument("--taught-every", type=int, default=4, help="every k-th object is the taught model (1..20)")
+    p.add_argument(
+        "--taught-every", type=int, default=4, help="every k-th object is the taught model (1..20)"
+    )
     p.add_argument("--policy", default="top-only", help="recognition policy")
     p.add_argument("--time-scale", type=float, default=8.0, help="simulated s per wall s (1..20)")
     p.add_argument("--idle-s", type=float, default=10.0, help="idle baseline, s (1..300)")
+    p.add_argument(
+        "--max-wall-s",
+        type=float,
+        default=36_000.0,
+        help="stop the run after this many wall seconds (60..86400)",
+    )
     p.add_argument("--docs", action="store_true", help="write the plot to docs/")
     p.add_argument("--json", action="store_true", help="one JSON line on the last line")
     args = p.parse_args(argv)
     for name, v, lo, hi in (("--inspections", args.inspections, 10, 10_000),
                             ("--warmup", args.warmup, 0, args.inspections - 3),
                             ("--taught-every", args.taught_every, 1, 20),
-                            ("--time-scale", args.time_scale, 1, 20), ("--idle-s", args.idle_s, 1, 300)):  # fmt: skip
+                            ("--time-scale", args.time_scale, 1, 20), ("--idle-s", args.idle_s, 1, 300),
+                            ("--max-wall-s", args.max_wall_s, 60, 86_400)):  # fmt: skip
         if not lo <= v <= hi:
             p.error(f"{name} must be in [{lo}, {hi}], got {v!r}")
     t0 = time.monotonic()

@@ -178,7 +178,9 @@ async def mark_interrupted(db: Database, cell_id: int) -> list[int]:
     return ids
 
 
-async def load_backgrounds(db: Database, cell_id: int) -> dict[tuple[float, ...], NDArray[np.uint8]]:
+async def load_backgrounds(
+    db: Database, cell_id: int
+) -> dict[tuple[float, ...], NDArray[np.uint8]]:
     """The stored empty-belt backgrounds of the cell, by shot key (newest per key)."""
     from backend.recognition.images import rgb_from_png
 

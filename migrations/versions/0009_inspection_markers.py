@@ -32,9 +32,11 @@ def upgrade() -> None:
         sa.Column("policy", sa.String(length=16), nullable=False),
         sa.Column("owner", sa.String(length=128), nullable=False),
         sa.ForeignKeyConstraint(
-            ["cell_id"], ["cells.id"], name=op.f("fk_inspections_in_progress_cell_id_cells"),
+            ["cell_id"],
+            ["cells.id"],
+            name=op.f("fk_inspections_in_progress_cell_id_cells"),
             ondelete="CASCADE",
-        ),  # fmt: skip
+        ),
         sa.PrimaryKeyConstraint("id", name=op.f("pk_inspections_in_progress")),
     )
     op.create_index(
@@ -48,9 +50,11 @@ def upgrade() -> None:
         sa.Column("image_png", sa.LargeBinary(), nullable=False),
         sa.Column("taken_at", UTCDateTime(), nullable=False),
         sa.ForeignKeyConstraint(
-            ["cell_id"], ["cells.id"], name=op.f("fk_station_backgrounds_cell_id_cells"),
+            ["cell_id"],
+            ["cells.id"],
+            name=op.f("fk_station_backgrounds_cell_id_cells"),
             ondelete="CASCADE",
-        ),  # fmt: skip
+        ),
         sa.PrimaryKeyConstraint("id", name=op.f("pk_station_backgrounds")),
     )
     op.create_index(op.f("ix_station_backgrounds_cell_id"), "station_backgrounds", ["cell_id"])
@@ -59,7 +63,5 @@ def upgrade() -> None:
 def downgrade() -> None:
     op.drop_index(op.f("ix_station_backgrounds_cell_id"), table_name="station_backgrounds")
     op.drop_table("station_backgrounds")
-    op.drop_index(
-        op.f("ix_inspections_in_progress_cell_id"), table_name="inspections_in_progress"
-    )
+    op.drop_index(op.f("ix_inspections_in_progress_cell_id"), table_name="inspections_in_progress")
     op.drop_table("inspections_in_progress")

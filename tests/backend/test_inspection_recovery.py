@@ -9,16 +9,15 @@ import sqlite3
 import threading
 from datetime import timedelta
 
-import numpy as np
 import pytest
 from sqlalchemy import func, select
 from sqlalchemy.exc import OperationalError
 
 from backend.db.models import Inspection, InspectionInProgress
 from backend.db.session import Database
+from backend.db.types import utcnow
 from backend.inspection import recovery, results
 from backend.runtime import ensure_cell_row
-from backend.db.types import utcnow
 from tests.utils.factories import make_settings, migrate
 
 
