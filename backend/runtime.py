@@ -35,7 +35,8 @@ from backend.cell import Cell, EventBus
 from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Cell as CellRow
 from backend.db.session import Database
-from backend.hardware import make_hardware
+from backend.hardware import Hardware, make_hardware
+from backend.inspection import recovery
 from backend.jobs import JobManager
 from backend.recognition.index import LiveIndex, load_live_index
 from backend.recognition.teach import BackgroundStore
@@ -103,6 +104,9 @@ class CellRuntime:
         The process's configuration.
     view3d : bool, optional
         Start the 3D view (default: ``settings.view3d_enabled``).
+    hardware : Hardware, optional
+        Driver, camera and engine built by the caller (the fault campaign puts the serial
+        driver in front of a simulated arm); default: :func:`make_hardware` of the settings.
 
     Attributes (after entering)
     ---------------------------
@@ -117,8 +121,11 @@ class CellRuntime:
     view3d : View3D or None
     """
 
-    def __init__(self, settings: Settings, *, view3d: bool | None = None) -> None:
+    def __init__(
+        self, settings: Settings, *, view3d: bool | None = None, hardware: Hardware | None = None
+    ) -> None:
         self.settings = settings
+        self._hardware = hardware
         self._want_view = settings.view3d_enabled if view3d is None else bool(view3d)
         self.bus = EventBus()
         self._database: Database | None = None
@@ -129,6 +136,8 @@ class CellRuntime:
         self._live_index: LiveIndex | None = None
         #: Empty-belt backgrounds grabbed by teaches, for later teaches of this cell.
         self.teach_backgrounds = BackgroundStore()
+        #: Ids of the failed rows written at start-up for inspections left unfinished.
+        self.interrupted_at_start: list[int] = []
         #: The continuous inspection run, if one was started (``backend.inspection.service``).
         self.inspection_run: Any = None
         #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).
@@ -210,19 +219,28 @@ class CellRuntime:
 
     async def _build(self, stack: contextlib.AsyncExitStack) -> None:
         s = self.settings
-        db = Database(s.database_url)
+        db = Database(s.database_url, busy_timeout_s=s.database_busy_timeout_s)
         stack.push_async_callback(db.dispose)
         await check_database(db)
         self._database = db
         self.cell_id = await ensure_cell_row(db, s.cell_name)
         self._live_index = await load_live_index(db, s)
+        # Inspections a previous process left unfinished (killed mid-inspection) become
+        # complete failed rows before this one inspects; the stored backgrounds come back.
+        self.interrupted_at_start = await recovery.mark_interrupted(db, self.cell_id)
+        self.teach_backgrounds.images.update(await recovery.load_backgrounds(db, self.cell_id))
+        self.teach_backgrounds.on_put = recovery.background_saver(db, self.cell_id)
         if s.image_max_age_days is not None or s.image_max_bytes is not None:
             from backend.reports import prune_loop
 
             pruning = asyncio.get_running_loop().create_task(prune_loop(db, s), name="image-prune")
             stack.push_async_callback(_cancel, pruning)
 
-        hardware = await asyncio.to_thread(make_hardware, s)
+        hardware: Hardware = (
+            self._hardware
+            if self._hardware is not None
+            else await asyncio.to_thread(make_hardware, s)
+        )
         if hardware.sim is not None:
             engine = hardware.sim
             stack.push_async_callback(asyncio.to_thread, engine.stop)

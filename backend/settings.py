@@ -62,6 +62,12 @@ class Settings(BaseSettings):
         "sqlite+aiosqlite:///var/visioncell.db",
         description="SQLAlchemy async URL: sqlite+aiosqlite:///FILE or postgresql+asyncpg://USER@HOST/DB.",
     )
+    database_busy_timeout_s: float = Field(
+        30.0,
+        gt=0,
+        le=300,
+        description="SQLite: how long a write waits for another connection's lock, seconds.",
+    )
     http_host: str = Field("127.0.0.1", description="Address of the console and REST API.")
     http_port: int = Field(8000, ge=1, le=65535, description="Port of the console and REST API.")
     viser_host: str = Field("127.0.0.1", description="Address of the viser 3D view.")

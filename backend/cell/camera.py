@@ -37,6 +37,8 @@ log = logging.getLogger(__name__)
 DEMAND_S = 2.0
 #: Longest wait for one fresh frame, seconds.
 MAX_WAIT_S = 120.0
+#: Longest time one ``grab()`` may take before the camera counts as stalled, seconds.
+GRAB_TIMEOUT_S = 3.0
 
 
 class CameraFeed:
@@ -99,6 +101,11 @@ class CameraFeed:
             await self.camera.close()
 
     @property
+    def failing(self) -> str:
+        """The camera's last error while it is failing (empty when frames come)."""
+        return self._error
+
+    @property
     def running(self) -> bool:
         """Whether the task is alive."""
         return self._task is not None and not self._task.done()
@@ -120,7 +127,12 @@ class CameraFeed:
                     await self.camera.open()
                     opened = True
                 t0 = time.monotonic()
-                frame = await self.camera.grab()
+                try:  # a grab that never returns is a stalled camera, not a slow one
+                    frame = await asyncio.wait_for(self.camera.grab(), GRAB_TIMEOUT_S)
+                except TimeoutError:
+                    raise CameraError(
+                        f"camera stalled: no frame within {GRAB_TIMEOUT_S:g} s"
+                    ) from None
                 if not isinstance(frame, Frame):
                     raise CameraError(f"grab() returned {type(frame).__name__}, not a Frame")
                 now = time.monotonic()

@@ -44,7 +44,7 @@ from robot.kinematics import ik
 from robot.model import check_joints
 from robot.trajectory import MIN_SPEED, JointTrajectory, plan_joint_move
 from robot.trajectory_cartesian import plan_cartesian_line
-from vision.errors import InvalidInput
+from vision.errors import CameraError, InvalidInput
 from vision.sources import Frame
 
 if TYPE_CHECKING:
@@ -302,6 +302,9 @@ class CellMotion:
         ``acquire_s`` durations (wall seconds).
         """
         t0 = time.monotonic()
+        if target is not None and self.feed.failing:
+            # No move for a picture the camera cannot take (the arm holds where it is).
+            raise CameraError(f"the camera is failing, not moving to look: {self.feed.failing}")
         with self._arm("a look call"):
             if target is not None:
                 traj = self.plan_move(target, speed=speed, path=path, world=world)

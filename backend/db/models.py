@@ -43,11 +43,13 @@ __all__ = [
     "Decision",
     "Inspection",
     "InspectionImage",
+    "InspectionInProgress",
     "InspectionScene",
     "ObjectKind",
     "ObjectModel",
     "RecognitionSettings",
     "Role",
+    "StationBackground",
     "TrainedView",
     "User",
 ]
@@ -419,3 +421,36 @@ class AuditEntry(Base):
             "kind IN ('threshold', 'model', 'view', 'calibration', 'user', 'token')", name="kind"
         ),
     )
+
+
+class InspectionInProgress(Base):
+    """The durable marker of an inspection that has started and not yet stored its result.
+
+    Written (committed) before the arm moves for the inspection and deleted in the same
+    transaction that writes the :class:`Inspection` row, so a marker that is still there at
+    start-up names an inspection cut short by the process ending (issue 16, part 1); the
+    start-up turns it into a complete ``failed`` row with the reason ``interrupted``.
+    """
+
+    __tablename__ = "inspections_in_progress"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    cell_id: Mapped[int] = mapped_column(ForeignKey("cells.id", ondelete="CASCADE"), index=True)
+    started_at: Mapped[datetime] = mapped_column(default=utcnow)
+    policy: Mapped[str] = mapped_column(String(16))
+    #: Process that started it (host:pid), for the interruption's reason.
+    owner: Mapped[str] = mapped_column(String(128), default="")
+
+
+class StationBackground(Base):
+    """An empty-belt background image of one camera shot of a cell (by its joints), kept
+    so that a restarted process inspects without teaching again."""
+
+    __tablename__ = "station_backgrounds"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    cell_id: Mapped[int] = mapped_column(ForeignKey("cells.id", ondelete="CASCADE"), index=True)
+    #: The shot's joints, rounded as :class:`backend.recognition.teach.Shot` keys them.
+    shot_key: Mapped[list[Any]] = mapped_column(JSON)
+    image_png: Mapped[bytes] = mapped_column(LargeBinary)
+    taken_at: Mapped[datetime] = mapped_column(default=utcnow)

@@ -11,10 +11,16 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import func, select
+from sqlalchemy import delete, func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
-from backend.db.models import Decision, Inspection, InspectionImage, InspectionScene
+from backend.db.models import (
+    Decision,
+    Inspection,
+    InspectionImage,
+    InspectionInProgress,
+    InspectionScene,
+)
 from backend.db.session import Database
 from vision.errors import InvalidInput, NotFound
 
@@ -58,15 +64,42 @@ class InspectionRecord:
             raise InvalidInput(f"decision must be one of {DECISIONS}, got {self.decision!r}")
 
 
-async def store(db: Database, cell_id: int, rec: InspectionRecord, *, retention: str = "all",
-                scene: bytes | None = None) -> int:  # fmt: skip
+async def store(
+    db: Database,
+    cell_id: int,
+    rec: InspectionRecord,
+    *,
+    retention: str = "all",
+    scene: bytes | None = None,
+    marker_id: int | None = None,
+) -> int:
     """Write the row, its images and its 3D scene recording in one transaction (all or
-    nothing); returns the inspection id.  ``retention`` (``Settings.image_retention``) says
-    whether this decision keeps its images and scene (:func:`backend.reports.keeps_images`)."""
+    nothing); returns the inspection id.
+
+    ``retention`` (``Settings.image_retention``) says whether this decision keeps its images
+    and scene (:func:`backend.reports.keeps_images`).  ``marker_id``: the inspection's
+    in-progress marker (:func:`backend.inspection.recovery.begin`), deleted in the same
+    transaction, so either the result is there or the marker is, never both and never
+    neither.
+    """
     from backend.reports.retention import keeps_images
 
     keep = keeps_images(retention, rec.decision)
     async with db.session() as session:
+        if marker_id is not None:
+            gone = await session.execute(
+                delete(InspectionInProgress).where(InspectionInProgress.id == marker_id)
+            )
+            if gone.rowcount == 0:  # type: ignore[attr-defined]
+                # An earlier attempt committed and lost its answer (the link failed after
+                # the commit): that row is the result; writing another would duplicate it.
+                earlier = await session.scalar(
+                    select(Inspection.id).where(
+                        Inspection.cell_id == cell_id, Inspection.started_at == rec.started_at
+                    )
+                )
+                if earlier is not None:
+                    return int(earlier)
         row = Inspection(
             cell_id=cell_id,
             started_at=rec.started_at,

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import math
 import time
 from dataclasses import dataclass, field
@@ -40,7 +41,7 @@ from numpy.typing import NDArray
 
 from backend.cell.events import CellEvent
 from backend.db.models import TrainedView, utcnow
-from backend.inspection import results
+from backend.inspection import recovery, results
 from backend.inspection.pose import (
     ObjectPose,
     PoseFailed,
@@ -60,7 +61,9 @@ from vision.errors import Conflict, InvalidInput, VisionCellError
 from vision.recognition import POLICIES, recognise_views
 from vision.segmentation import iou
 
-__all__ = ["InspectOptions", "InspectionDone", "InspectionRun", "inspect_object", "start_inspection", "start_run"]  # fmt: skip
+__all__ = ["InspectOptions", "InspectionDone", "InspectionRun", "hold_until_ready", "inspect_object", "readiness", "start_inspection", "start_run"]  # fmt: skip
+
+log = logging.getLogger(__name__)
 
 #: Longest wait for an object at the station, seconds; most objects in one run.
 MAX_WAIT_S = 600.0
@@ -301,7 +304,8 @@ def _geometry(name: str | None) -> tuple[float, float, NDArray[np.float64] | Non
 
 
 async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
-                         clear_first: bool = False) -> dict[str, Any]:  # fmt: skip
+                         clear_first: bool = False,
+                         db_wait_s: float | None = None) -> dict[str, Any]:  # fmt: skip
     """Inspect the next object at the station and store the result (module docstring).
 
     ``clear_first`` (continuous operation, index mode): wait until the station is empty
@@ -309,6 +313,11 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
 
     Returns the stored inspection's public form.  Cut short (cancel: e-stop or stop), the
     complete ``failed`` row is stored with the reason before the cancellation goes on.
+
+    Faults (issue 16): an in-progress marker is committed first (waiting, without moving,
+    up to ``db_wait_s`` -- None: until cancelled -- while the database is unavailable); any
+    failure inside becomes a ``failed`` row with its reason; the row is stored with retries
+    until the database takes it, in the transaction that removes the marker.
     """
     cell = ctx.rt.cell
     started = utcnow()
@@ -321,6 +330,13 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
     view = getattr(ctx.rt, "view3d", None)
     state["scene"] = SceneRecorder(getattr(view, "server", None))
     report = (lambda f, m: job.report(f, m)) if job is not None else (lambda f, m: None)
+    db = ctx.rt.database
+    # The durable marker goes in before anything moves (a database outage holds here: no
+    # motion); the result's transaction removes it (recovery module).
+    marker = await recovery.retry_database(
+        "starting an inspection", lambda: recovery.begin(db, ctx.rt.cell_id, opts.policy),
+        max_wait_s=db_wait_s, on_wait=lambda m: report(0.0, "holding: " + m),
+    )  # fmt: skip
     try:
         await _inspect_body(ctx, opts, durations, views, cams, state, report, clear_first)
     except asyncio.CancelledError:
@@ -328,19 +344,27 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
         state["reason"] = (
             "emergency stop" if cell.estopped else "stopped"
         ) + f" during {state.get('stage', 'the inspection')}"
-        await asyncio.shield(_store(ctx, opts, started, durations, views, cams, state))
+        await asyncio.shield(_store(ctx, opts, started, durations, views, cams, state, marker))
         raise
     except (VisionCellError, ValueError) as exc:
         state["decision"] = "failed"
         code = getattr(exc, "code", "error")
         detail = getattr(exc, "detail", str(exc))
         state["reason"] = f"{code}: {detail}"
-    return await _store(ctx, opts, started, durations, views, cams, state)
+    except Exception as exc:  # never a lost inspection: the cause goes into a failed row
+        state["decision"] = "failed"
+        if recovery.is_database_error(exc):
+            state["reason"] = (f"database_unavailable: during {state.get('stage', 'the start')}: "
+                               f"{type(exc).__name__}: {str(exc)[:300]}")  # fmt: skip
+        else:
+            log.exception("inspection failed unexpectedly")
+            state["reason"] = f"internal_error: {type(exc).__name__}: {str(exc)[:300]}"
+    return await _store(ctx, opts, started, durations, views, cams, state, marker)
 
 
 async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[str, float],
                  views: list[results.ViewRecord], cams: list[NDArray[np.float64]],
-                 state: dict[str, Any]) -> dict[str, Any]:  # fmt: skip
+                 state: dict[str, Any], marker: int | None = None) -> dict[str, Any]:  # fmt: skip
     rec = results.InspectionRecord(
         started_at=started, finished_at=utcnow(), decision=state["decision"], reason=state["reason"],
         policy=opts.policy, model_id=state["model_id"], model_name=state["model"],
@@ -349,8 +373,14 @@ async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[
         views=tuple(views),
     )  # fmt: skip
     scene = await state["scene"].finish() if state.get("scene") is not None else None
-    iid = await results.store(ctx.rt.database, ctx.rt.cell_id, rec,
-                              retention=ctx.rt.settings.image_retention, scene=scene)  # fmt: skip
+    db = ctx.rt.database
+    retention = ctx.rt.settings.image_retention
+    iid = await recovery.retry_database(
+        "storing an inspection",
+        lambda: results.store(
+            db, ctx.rt.cell_id, rec, retention=retention, scene=scene, marker_id=marker
+        ),
+    )
     pose = state["pose"]
     ev = InspectionDone(
         iid, rec.decision, rec.model_name, rec.reason, rec.score, rec.viewpoints,
@@ -358,9 +388,12 @@ async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[
         tuple(tuple(tuple(float(v) for v in r) for r in T) for T in cams), rec.pick,
     )  # fmt: skip
     ctx.rt.bus.publish(ev)
-    async with ctx.rt.database.session() as session:
-        row = await results.get_inspection(session, iid)
-        return results.inspection_public(row)
+
+    async def read() -> dict[str, Any]:
+        async with db.session() as session:
+            return results.inspection_public(await results.get_inspection(session, iid))
+
+    return await recovery.retry_database("reading an inspection back", read)
 
 
 async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, float],
@@ -623,11 +656,53 @@ async def start_inspection(rt: Any, opts: InspectOptions) -> Any:
     ctx = await context(rt)
 
     async def body(job: Any) -> dict[str, Any]:
-        out = await inspect_object(ctx, opts, job)
+        out = await inspect_object(ctx, opts, job, db_wait_s=opts.wait_s)
         return {"inspection": out, "inspection_id": out["id"]}
 
     return rt.jobs.start("inspect", body, motion=True,
                          params={"policy": opts.policy, "sort": opts.sort, "camera_model": ctx.source})  # fmt: skip
+
+
+def readiness(rt: Any) -> list[str]:
+    """What keeps the cell from starting an inspection now (empty: ready): the camera
+    failing, the arm's link down; the database is checked by :func:`hold_until_ready`."""
+    why = []
+    cam = rt.cell.camera_status()
+    if not cam.ok:
+        why.append(f"camera {cam.name}: {cam.error or 'no frames yet'}")
+    st = rt.cell.state
+    if not st.connected:
+        why.append(f"robot link down{': ' + st.fault if st.fault else ''}")
+    return why
+
+
+async def hold_until_ready(rt: Any, job: Any, *, max_s: float | None = None) -> float:
+    """Wait, without moving, until :func:`readiness` is empty and the database answers
+    (backoff with jitter between checks); returns the seconds held.  A continuous run
+    calls it before every object, so a fault holds the cell and the run goes on by itself
+    when the fault clears."""
+    from robot.backoff import Backoff
+
+    b = Backoff(initial_s=0.1, max_s=2.0)
+    t0 = time.monotonic()
+    said = ""
+    while True:
+        why = readiness(rt)
+        if not why and not await rt.database.ping():
+            why.append("database unavailable")
+        if not why:
+            if said:
+                log.info("cell ready again after %.1f s", time.monotonic() - t0)
+                job.report(job.progress, "ready again: inspecting")
+            return time.monotonic() - t0
+        msg = "holding: " + "; ".join(why)
+        if msg != said:
+            log.warning("%s", msg)
+            said = msg
+        job.report(job.progress, msg)
+        if max_s is not None and time.monotonic() - t0 >= max_s:
+            raise Conflict(f"the cell is not ready after {max_s:g} s: {msg}")
+        await b.sleep()
 
 
 def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun:
@@ -648,11 +723,19 @@ def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun
     run = InspectionRun(opts, count)
 
     async def body(job: Any) -> dict[str, Any]:
-        ctx = await context(rt)
+        ctx = await recovery.retry_database(
+            "reading the calibration", lambda: context(rt), on_wait=lambda m: job.report(0.0, m)
+        )
         decisions: dict[str, int] = {}
+        last = ""
         while not run.stop_requested and (count is None or run.done < count):
+            await hold_until_ready(rt, job)
             index_mode = _belt(rt)[0] == "index"
-            out = await inspect_object(ctx, opts, None, clear_first=run.done > 0 and index_mode)
+            # After a failed inspection the object may still be at the station: look at it
+            # again rather than wait for it to leave (it would never be inspected).
+            clear = run.done > 0 and index_mode and last != "failed"
+            out = await inspect_object(ctx, opts, None, clear_first=clear)
+            last = out["decision"]
             run.done += 1
             run.ids.append(out["id"])
             decisions[out["decision"]] = decisions.get(out["decision"], 0) + 1

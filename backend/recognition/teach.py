@@ -28,6 +28,7 @@ from __future__ import annotations
 import asyncio
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -188,6 +189,8 @@ class BackgroundStore:
 
     images: dict[tuple[float, ...], NDArray[np.uint8]] = field(default_factory=dict)
     taken_at: float = 0.0
+    #: Called with (key, image) after every :meth:`put` (the runtime stores it durably).
+    on_put: Callable[[tuple[float, ...], NDArray[np.uint8]], None] | None = None
 
     def get(self, shot: Shot) -> NDArray[np.uint8] | None:
         return self.images.get(shot.key)
@@ -195,6 +198,8 @@ class BackgroundStore:
     def put(self, shot: Shot, image: NDArray[np.uint8]) -> None:
         self.images[shot.key] = image
         self.taken_at = time.time()
+        if self.on_put is not None:
+            self.on_put(shot.key, image)
 
 
 async def _wait_for_object(

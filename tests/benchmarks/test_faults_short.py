@@ -1,0 +1,42 @@
+"""Short fault campaign (issue 16, part 1): one fault of each kind during continuous
+inspection in the simulated cell -- camera stall, e-stop, locked SQLite file, serial link
+drop over a real PTY, SIGKILL of ``visioncell serve`` -- and nothing is lost, duplicated
+or partial, no motion is unsafe, and the cell inspects again after every fault."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+
+import pytest
+
+from benchmarks import faults
+
+pytestmark = pytest.mark.slow
+
+
+def _args(**kw):
+    base = dict(per_kind=1, baseline=1, fault_s=11.0, time_scale=5.0, kinds=faults.KINDS,
+                postgres=False, json=False)  # fmt: skip
+    base.update(kw)
+    return argparse.Namespace(**base)
+
+
+def test_one_fault_of_each_kind_loses_nothing():
+    summary = asyncio.run(faults.campaign(_args(), lambda msg: None))
+    kinds = {r["kind"]: r for r in summary["kinds"]}
+    assert set(kinds) == {"baseline", "camera", "estop", "database", "serial", "kill"}
+    assert kinds["baseline"]["cycle_median_s"] is not None
+    for kind in ("camera", "estop", "database", "serial", "kill"):
+        r = kinds[kind]
+        assert r["injected"] == 1, r
+        # the cell went on: a complete inspection after the fault's end
+        assert r["recovery_median_s"] is not None, r
+    t = summary["totals"]
+    assert (t["lost"], t["duplicated"], t["partial"], t["unsafe_motions"]) == (0, 0, 0, 0), summary
+    # the e-stop cut an inspection short: a failed row with the reason
+    assert any("emergency stop" in x for x in kinds["estop"]["reasons"]), kinds["estop"]
+    # the camera stalled longer than a look waits: that inspection failed with the reason
+    assert any("camera" in x for x in kinds["camera"]["reasons"]), kinds["camera"]
+    # the killed inspection was found at start-up and marked interrupted, once
+    assert any(x.startswith("interrupted") for x in kinds["kill"]["reasons"]), kinds["kill"]
