@@ -146,6 +146,19 @@ class Settings(BaseSettings):
     recognition_max_features: int = Field(
         1000, ge=50, le=4000, description="Strongest keypoints kept per trained view."
     )
+    index_poll_s: float = Field(
+        2.0,
+        ge=0.05,
+        le=60.0,
+        description="How often the live index checks the database for models and views "
+        "changed by another process (cell or CLI) when it cannot LISTEN (SQLite, or the "
+        "PostgreSQL listening connection lost), s.",
+    )
+    index_listen: bool = Field(
+        True,
+        description="On PostgreSQL, learn of other processes' model and view changes at once "
+        "through LISTEN/NOTIFY (polling every index_poll_s otherwise).",
+    )
 
     @field_validator("http_host", "viser_host")
     @classmethod
