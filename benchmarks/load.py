@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import math
 import os
@@ -100,10 +101,8 @@ async def _rest_client(
             if code == 200:
                 lat[name].append(dt * 1e3)
             if think_s > 0:
-                try:
+                with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(stop.wait(), think_s)
-                except TimeoutError:
-                    pass
 
 
 async def _socket_client(
@@ -264,7 +263,9 @@ async def _cycles(rt: Any, ctx: Any, n: int, phase: str, rng: Any, model: str) -
             yaw_rad=float(rng.uniform(-math.pi, math.pi)),
         )
         t0 = time.perf_counter()
-        row = await service.inspect_object(ctx, service.InspectOptions(policy="two-views", wait_s=20.0))
+        row = await service.inspect_object(
+            ctx, service.InspectOptions(policy="two-views", wait_s=20.0)
+        )
         times.append(time.perf_counter() - t0)
         err.print(f"[{phase} {i + 1}/{n}] {row['decision']} {row['model']} {times[-1]:.2f} s")
     return times
@@ -345,13 +346,23 @@ def _print(res: dict[str, Any]) -> None:
         title=f"Reads under load: {res['clients']} REST clients (think {res['think_s']} s), "
         f"{res['sockets']} WebSockets, {load['rate_per_s']:.0f} req/s, {res['database']}"
     )
-    for col in ("route", "n", "p50 ms", "p99 ms", "max ms", "status", f"p99 <= {TARGET_READ_P99_MS:.0f}"):
+    for col in (
+        "route",
+        "n",
+        "p50 ms",
+        "p99 ms",
+        "max ms",
+        "status",
+        f"p99 <= {TARGET_READ_P99_MS:.0f}",
+    ):
         t.add_column(col)
     for name, r in load["routes"].items():
         ok = r["p99_ms"] is not None and r["p99_ms"] <= TARGET_READ_P99_MS
         t.add_row(name, str(r["n"]), _f(r["p50_ms"]), _f(r["p99_ms"]), _f(r["max_ms"]),
                   " ".join(f"{k}:{v}" for k, v in r["status"].items()), "yes" if ok else "NO")  # fmt: skip
-    t.add_row("all reads", str(load["ok"]), _f(load["read_p50_ms"]), _f(load["read_p99_ms"]), "", "", "")
+    t.add_row(
+        "all reads", str(load["ok"]), _f(load["read_p50_ms"]), _f(load["read_p99_ms"]), "", "", ""
+    )
     out.print(t)
     c = Table(title="Inspection cycle and WebSocket lag (same run)")
     for col in ("measure", "value", "target"):

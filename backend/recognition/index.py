@@ -36,9 +36,9 @@ from vision.features import Features
 from vision.recognition import ViewIndex
 
 __all__ = [
+    "IndexDiff",
     "IndexedModel",
     "LiveIndex",
-    "IndexDiff",
     "LoadReport",
     "StaleFeatures",
     "StaleView",

@@ -222,7 +222,9 @@ class IndexSync:
                         ).where(TrainedView.id.in_(chunk))
                     )
                 ).all()
-            out.extend((int(a), int(b), int(c), bytes(d), str(e), str(f)) for a, b, c, d, e, f in rows)
+            out.extend(
+                (int(a), int(b), int(c), bytes(d), str(e), str(f)) for a, b, c, d, e, f in rows
+            )
         return out
 
     # -- the task ---------------------------------------------------------------------------
@@ -284,7 +286,7 @@ class IndexSync:
         return True
 
     async def _connect(self) -> Any:
-        import asyncpg
+        import asyncpg  # type: ignore[import-untyped]
 
         u = make_url(self.db.url)
         return await asyncpg.connect(

@@ -30,7 +30,9 @@ def _eventually(check, *, timeout_s: float = WAIT_S, what: str = "") -> None:
 
 def _upload(client, hdr, model_id, seeds):
     files = [("images", (f"v{s}.png", png_bytes(textured_rgb(s)), "image/png")) for s in seeds]
-    r = client.post(f"/api/models/{model_id}/views", files=files, data={"viewpoints": "1"}, headers=hdr)
+    r = client.post(
+        f"/api/models/{model_id}/views", files=files, data={"viewpoints": "1"}, headers=hdr
+    )
     assert r.status_code == 201, r.text
     return [v["id"] for v in r.json()["data"]]
 

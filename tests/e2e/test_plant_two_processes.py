@@ -34,7 +34,8 @@ def _start(tmp_path, url: str, name: str) -> Server:
         VISIONCELL_DRIVER="sim",
         VISIONCELL_CAMERA="sim",
         VISIONCELL_SIM_DEMO="false",
-        VISIONCELL_TIME_SCALE="5",
+        VISIONCELL_TIME_SCALE="2",
+        VISIONCELL_CAMERA_FPS="4",
         VISIONCELL_VIEW3D_ENABLED="false",
     )
 
@@ -168,7 +169,10 @@ def test_two_cells_share_models_keep_their_inspections_and_run_busy_at_once(
         gone = httpx.get(f"{a.base}/api/inspections/{row['id']}", headers=hdr, timeout=TIMEOUT)
         assert gone.status_code == 404
         # A deletion on B reaches A's index too.
-        assert httpx.delete(f"{b.base}/api/models/{up}", headers=hdr, timeout=TIMEOUT).status_code == 204
+        assert (
+            httpx.delete(f"{b.base}/api/models/{up}", headers=hdr, timeout=TIMEOUT).status_code
+            == 204
+        )
         _eventually(lambda: _indexed(a, hdr, up) == -1 and _indexed(a, hdr, gear) == n_gear,
                     "the deletion in A")  # fmt: skip
     finally:
