@@ -298,52 +298,69 @@ async def _cycles(rt: Any, ctx: Any, n: int, phase: str, rng: Any, model: str) -
 
 
 async def _run(args: argparse.Namespace) -> dict[str, Any]:
-    import numpy as np
     import uvicorn
 
+    from backend.api.limits import uvicorn_options
     from backend.app import create_app
     from backend.db.migrate import upgrade
-    from backend.inspection import service
+    from backend.runtime import CellRuntime
 
     tmp = Path(tempfile.mkdtemp(prefix="bench-load-"))
     settings = _settings(tmp, args)
     await asyncio.to_thread(upgrade, settings.database_url)
     token = await _token(settings)
-    app = create_app(settings)
-    config = uvicorn.Config(app, host="127.0.0.1", port=settings.http_port, log_level="warning",
-                            lifespan="on", ws="websockets")  # fmt: skip
-    server = uvicorn.Server(config)
-    serving = asyncio.create_task(server.serve())
-    while not server.started:
-        if serving.done():
-            serving.result()
-            raise RuntimeError("the server stopped at start-up")
-        await asyncio.sleep(0.05)
+    async with CellRuntime(settings) as rt:
+        # The server as `visioncell serve` configures it (backend/cli/serve.py).
+        config = uvicorn.Config(
+            create_app(settings, runtime=rt), host="127.0.0.1", port=settings.http_port,
+            log_level="warning", timeout_graceful_shutdown=1, ws_ping_interval=10,
+            **uvicorn_options(),
+        )  # fmt: skip
+        server = uvicorn.Server(config)
+        serving = asyncio.create_task(server.serve())
+        while not server.started:
+            if serving.done():
+                serving.result()
+                raise RuntimeError("the server stopped at start-up")
+            await asyncio.sleep(0.05)
+        try:
+            res = await _phases(args, rt, settings, token)
+        finally:
+            server.should_exit = True
+            await serving
+    return res
+
+
+async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) -> dict[str, Any]:
+    import numpy as np
+
+    from backend.inspection import service
+
     base = f"http://127.0.0.1:{settings.http_port}"
     rng = np.random.default_rng(args.seed)
+    err.print("[teach] gear-housing (2d)")
+    await _teach(rt, "gear-housing")
+    ctx = await service.context(rt)
+    await _cycles(rt, ctx, 1, "warm-up", rng, "gear-housing")
+    before = await _cycles(rt, ctx, args.cycles, "no load", rng, "gear-housing")
+    child = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "benchmarks.load", "--clients-only", "--base", base,
+        "--token", token, "--clients", str(args.clients), "--sockets", str(args.sockets),
+        "--think", str(args.think), stdin=asyncio.subprocess.PIPE,
+        stdout=asyncio.subprocess.PIPE,
+    )  # fmt: skip
     try:
-        rt = app.state.runtime
-        err.print("[teach] gear-housing (2d)")
-        await _teach(rt, "gear-housing")
-        ctx = await service.context(rt)
-        await _cycles(rt, ctx, 1, "warm-up", rng, "gear-housing")
-        before = await _cycles(rt, ctx, args.cycles, "no load", rng, "gear-housing")
-        child = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "benchmarks.load", "--clients-only", "--base", base,
-            "--token", token, "--clients", str(args.clients), "--sockets", str(args.sockets),
-            "--think", str(args.think), stdin=asyncio.subprocess.PIPE,
-            stdout=asyncio.subprocess.PIPE,
-        )  # fmt: skip
         await asyncio.sleep(2.0)  # the clients connect and reach their steady rate
         loaded = await _cycles(rt, ctx, args.cycles, "load", rng, "gear-housing")
         assert child.stdin is not None
         child.stdin.close()
         stdout, _ = await asyncio.wait_for(child.communicate(), 120)
-        clients = json.loads(stdout.decode().strip().splitlines()[-1])
-        after = await _cycles(rt, ctx, args.cycles, "no load again", rng, "gear-housing")
     finally:
-        server.should_exit = True
-        await serving
+        if child.returncode is None:  # an error above: never leave the clients running
+            child.terminate()
+            await child.wait()
+    clients = json.loads(stdout.decode().strip().splitlines()[-1])
+    after = await _cycles(rt, ctx, args.cycles, "no load again", rng, "gear-housing")
     base_s = statistics.median(before + after)
     load_s = statistics.median(loaded)
     return {
