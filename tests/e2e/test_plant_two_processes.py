@@ -16,6 +16,7 @@ import pytest
 
 from robot.sim.world import ConveyorSpec
 from tests.e2e.conftest import Server, start_server
+from tests.utils.factories import make_settings, make_tokens
 from tests.utils.models import png_bytes, textured_rgb
 from tests.utils.postgres import postgres_url  # noqa: F401  (the fixture)
 
@@ -23,12 +24,13 @@ pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 STATION = ConveyorSpec().station_s_m
 TIMEOUT = 30.0  # one request
-JOB_S = 240.0  # one job on a loaded machine (a bound, not a timing assertion)
+JOB_S = 600.0  # one job on a loaded machine (a bound, not a timing assertion)
 
 
 def _start(tmp_path, url: str, name: str) -> Server:
     return start_server(
         tmp_path / name,
+        start_timeout_s=300.0,  # two simulated cells starting on a loaded machine
         VISIONCELL_DATABASE_URL=url,
         VISIONCELL_CELL_NAME=name,
         VISIONCELL_DRIVER="sim",
@@ -111,14 +113,19 @@ def test_two_cells_share_models_keep_their_inspections_and_run_busy_at_once(
     tmp_path,
     postgres_url,  # noqa: F811
 ):
-    a = _start(tmp_path, postgres_url, "cell-a")
+    with concurrent.futures.ThreadPoolExecutor(max_workers=2) as pool:
+        starting = [pool.submit(_start, tmp_path, postgres_url, n) for n in ("cell-a", "cell-b")]
+        concurrent.futures.wait(starting)
+    servers = [f.result() for f in starting if f.exception() is None]
+    if len(servers) < 2:
+        for s in servers:
+            s.stop()
+        raise next(f.exception() for f in starting if f.exception() is not None)
+    a, b = servers
     try:
-        b = _start(tmp_path, postgres_url, "cell-b")
-    except BaseException:
-        a.stop()
-        raise
-    try:
-        hdr = {"Authorization": f"Bearer {a.token('plant-engineer', 'engineer')}"}
+        # Users belong to the plant: one engineer token for both cells.
+        token = make_tokens(make_settings(tmp_path / "users", database_url=postgres_url))
+        hdr = {"Authorization": f"Bearer {token['engineer']}"}
         cells = httpx.get(f"{b.base}/api/cells", headers=hdr, timeout=TIMEOUT).json()["data"]
         assert {c["name"] for c in cells} == {"cell-a", "cell-b"}
 
