@@ -293,7 +293,11 @@ async def _cycles(rt: Any, ctx: Any, n: int, phase: str, rng: Any, model: str) -
             ctx, service.InspectOptions(policy="top-only", wait_s=20.0)
         )
         times.append(time.perf_counter() - t0)
-        err.print(f"[{phase} {i + 1}/{n}] {row['decision']} {row['model']} {times[-1]:.2f} s")
+        err.print(
+            f"[{phase} {i + 1}/{n}] {row['decision']} {row['model']} score={row['score']} "
+            f"{times[-1]:.2f} s {row['reason'][:70]}",
+            markup=False,
+        )
     return times
 
 
@@ -338,7 +342,7 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
 
     base = f"http://127.0.0.1:{settings.http_port}"
     rng = np.random.default_rng(args.seed)
-    err.print("[teach] gear-housing (2d)")
+    err.print("[teach] gear-housing (2d)", markup=False)
     await _teach(rt, "gear-housing")
     ctx = await service.context(rt)
     await _cycles(rt, ctx, 1, "warm-up", rng, "gear-housing")
