@@ -2,11 +2,11 @@
 WebSockets against the simulated cell while it inspects, with its unloaded cycle as baseline.
 
 One process serves the cell exactly as ``visioncell serve`` does (uvicorn, the FastAPI app
-and the :class:`~backend.runtime.CellRuntime` on one event loop) and runs the cell: one
-2d model taught (top view), then objects placed at the station one after the other (index
-mode, random yaw) and inspected (``top-only``: move, look, segment, match, pose, store) with
-:func:`backend.inspection.service.inspect_object`, what continuous operation runs per
-object.  The clients run in a child process (``--clients-only``), so
+and the :class:`~backend.runtime.CellRuntime` on one event loop) and runs the cell: one 2d
+model taught (top view), then objects placed at the station one after the other (index
+mode, within 3 degrees of the taught yaw) and inspected (``top-only``: move, look, segment,
+match, pose, store) with :func:`backend.inspection.service.inspect_object`, what continuous
+operation runs per object.  The clients run in a child process (``--clients-only``), so
 their own CPU time is not the server's:
 
 * ``--clients`` REST clients (httpx, async), each looping over :data:`ROUTES` (what the
@@ -286,7 +286,9 @@ async def _cycles(rt: Any, ctx: Any, n: int, phase: str, rng: Any, model: str) -
             model,
             s_m=spec.station_s_m + float(rng.uniform(-0.003, 0.003)),
             lateral_m=float(rng.uniform(-0.003, 0.003)),
-            yaw_rad=float(rng.uniform(-math.pi, math.pi)),
+            # Near the taught yaw: at any yaw recognition is issue 14's open miss, and a
+            # cycle that ends `unknown` skips the pose (it would flatter the cycle time).
+            yaw_rad=float(rng.uniform(-0.05, 0.05)),
         )
         t0 = time.perf_counter()
         row = await service.inspect_object(

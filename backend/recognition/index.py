@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -119,11 +120,18 @@ class IndexDiff:
     remove_views: tuple[int, ...]
     load_views: tuple[int, ...]
     """Views to (re)load from the database: new ones, re-extracted ones, reused ids."""
+    deferred: bool = False
+    """Views added here in the last :data:`LOCAL_GRACE_S` were missing from the snapshot and
+    kept (their transaction may not have committed yet): diff again later."""
 
     @property
     def empty(self) -> bool:
         return not (self.put_models or self.drop_models or self.remove_views or self.load_views)
 
+
+#: How long a view added by this process is kept although a database snapshot lacks it
+#: (``add_views`` indexes views just before its transaction commits), seconds.
+LOCAL_GRACE_S = 30.0
 
 #: A stored view as :meth:`LiveIndex.apply` takes it:
 #: ``(view_id, model_id, viewpoint, features blob, descriptor kind, descriptor version)``.
@@ -150,6 +158,8 @@ class LiveIndex:
         self._stale: dict[int, StaleView] = {}
         #: Count of changes made through the change methods (see :meth:`apply`).
         self._generation = 0
+        #: When this process added each recent view (``time.monotonic()``), see :meth:`diff`.
+        self._added_at: dict[int, float] = {}
         # The descriptor version this build extracts (changes with OpenCV, a PCA basis...),
         # with the extraction options that change what is extracted (stored per view).
         self.feature_version = self._index.features(_probe_image()).version
@@ -227,8 +237,6 @@ class LiveIndex:
     # -- building -----------------------------------------------------------------------
     async def load(self, db: Database) -> LoadReport:
         """Fill the (empty) index from every model and trained view in the database."""
-        import time
-
         t0 = time.perf_counter()
         async with db.session() as session:
             models = list(await session.scalars(select(ObjectModel)))
@@ -301,8 +309,13 @@ class LiveIndex:
         with self._lock:
             put = tuple(m for mid, m in sorted(models.items()) if self._models.get(mid) != m)
             drop = tuple(mid for mid in sorted(self._models) if mid not in models)
+            now = time.monotonic()
+            for vid in [v for v, t in self._added_at.items() if now - t >= LOCAL_GRACE_S]:
+                del self._added_at[vid]
             known = set(self._view_model) | set(self._stale)
-            remove = tuple(sorted(v for v in known if v not in views))
+            missing = [v for v in known if v not in views]
+            remove = tuple(sorted(v for v in missing if v not in self._added_at))
+            deferred = len(remove) < len(missing)
             load = []
             for vid, (mid, kind, version) in sorted(views.items()):
                 if mid not in models:
@@ -319,7 +332,7 @@ class LiveIndex:
                     version,
                 ):
                     load.append(vid)
-            return IndexDiff(self._generation, put, drop, remove, tuple(load))
+            return IndexDiff(self._generation, put, drop, remove, tuple(load), deferred)
 
     def apply(self, diff: IndexDiff, rows: list[ViewRow]) -> bool:
         """Apply ``diff`` with the stored ``rows`` of its :attr:`IndexDiff.load_views`.
@@ -399,6 +412,7 @@ class LiveIndex:
                 self._index.remove_view(view_id)
                 del self._view_model[view_id]
             self._models[model.id] = model
+            self._added_at[view_id] = time.monotonic()
             try:
                 self._index.add(
                     model.name,

@@ -15,7 +15,9 @@ other without a restart.  :class:`IndexSync` runs one task per process that
 A sync compares the fingerprint with the last one; when it moved it reads the ids of every
 model and view (no images, no features), asks :meth:`LiveIndex.diff` what differs, loads
 the features of the new views only and applies the change with :meth:`LiveIndex.apply`
-(retried when a local change slipped in between).  A lost connection or a database that is
+(retried when a local change slipped in between; a view this process indexed just before
+its own commit is kept for :data:`~backend.recognition.index.LOCAL_GRACE_S` although the
+snapshot lacks it).  A lost connection or a database that is
 away is logged and retried: the cell never stops for it, and the first sync after it
 catches up on everything missed (the snapshot is complete, not a replay of events).
 """
@@ -168,7 +170,9 @@ class IndexSync:
             rows = await self._load(diff.load_views) if diff.load_views else []
             # The index's lock may be held by a recognition thread: wait for it off the loop.
             if await asyncio.to_thread(self.live.apply, diff, rows):
-                self._last = fp
+                # A deferred diff kept views this process added that the snapshot lacked:
+                # leave the fingerprint unseen, so a later round looks again.
+                self._last = None if diff.deferred else fp
                 report = SyncReport(
                     not diff.empty,
                     len(diff.put_models),

@@ -152,3 +152,19 @@ def test_poll_period_is_bounded(tmp_path):
     for bad in (0.0, -1.0, 61.0, float("inf"), float("nan")):
         with pytest.raises(ValidationError, match="index_poll_s"):
             make_settings(tmp_path, index_poll_s=bad)
+
+
+def test_a_view_added_here_is_kept_until_its_commit_can_have_landed(monkeypatch):
+    import backend.recognition.index as index_mod
+
+    live = LiveIndex(method="orb", max_features=200)
+    m = IndexedModel(1, "m", "m", "default", "2d", None)
+    live.add_view(m, 7, 1, live.extract(textured_rgb(3), None))
+    # A snapshot taken before this process's transaction committed lacks view 7: kept.
+    diff = live.diff({1: m}, {})
+    assert diff.remove_views == () and diff.deferred
+    assert live.apply(diff, []) and live.has_view(7)
+    monkeypatch.setattr(index_mod, "LOCAL_GRACE_S", 0.0)  # long after: it really is gone
+    diff = live.diff({1: m}, {})
+    assert diff.remove_views == (7,) and not diff.deferred
+    assert live.apply(diff, []) and not live.has_view(7)
