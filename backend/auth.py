@@ -23,6 +23,7 @@ from backend.db.types import utcnow
 from vision.errors import Conflict, InvalidInput
 
 __all__ = [
+    "LAST_USED_RESOLUTION_S",
     "MAX_EXPIRES_IN_DAYS",
     "TOKEN_PREFIX",
     "UserExists",
@@ -157,6 +158,10 @@ async def revoke_tokens(session: AsyncSession, user: User, *, label: str | None 
     return int(result.rowcount or 0)  # type: ignore[attr-defined]
 
 
+#: How stale a token's ``last_used_at`` may get before a request writes it again, seconds.
+LAST_USED_RESOLUTION_S = 60.0
+
+
 async def authenticate(session: AsyncSession, token: str, secret: str) -> User | None:
     """The enabled user owning ``token`` if it is neither revoked nor expired, or None."""
     if not isinstance(token, str) or not token.startswith(TOKEN_PREFIX) or len(token) > 200:
@@ -168,7 +173,14 @@ async def authenticate(session: AsyncSession, token: str, secret: str) -> User |
     )
     if row is None or row.user.disabled:
         return None
-    row.last_used_at = utcnow()
+    now = utcnow()
+    last = row.last_used_at
+    if last is not None and last.tzinfo is None:
+        last = last.replace(tzinfo=now.tzinfo)
+    # A write per request made every read a write transaction (on SQLite, one writer at a
+    # time: readers queued behind inspections); "last used" to the minute is enough.
+    if last is None or (now - last).total_seconds() >= LAST_USED_RESOLUTION_S:
+        row.last_used_at = now
     return row.user
 
 

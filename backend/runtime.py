@@ -44,6 +44,7 @@ from backend.settings import Settings
 from backend.throttle import SignInThrottle
 
 if TYPE_CHECKING:
+    from backend.recognition.sync import IndexSync
     from backend.view3d import View3D
     from robot.sim import SimEngine
 
@@ -134,6 +135,8 @@ class CellRuntime:
         self.sim: SimEngine | None = None
         self.view3d: View3D | None = None
         self._live_index: LiveIndex | None = None
+        #: Keeps the live index in step with other processes' changes (after entering).
+        self.index_sync: IndexSync | None = None
         #: Empty-belt backgrounds grabbed by teaches, for later teaches of this cell.
         self.teach_backgrounds = BackgroundStore()
         #: Ids of the failed rows written at start-up for inspections left unfinished.
@@ -225,6 +228,13 @@ class CellRuntime:
         self._database = db
         self.cell_id = await ensure_cell_row(db, s.cell_name)
         self._live_index = await load_live_index(db, s)
+        from backend.recognition.sync import IndexSync
+
+        self.index_sync = IndexSync(
+            db, self._live_index, poll_s=s.index_poll_s, listen=s.index_listen
+        )
+        self.index_sync.start()
+        stack.push_async_callback(self.index_sync.stop)
         # Inspections a previous process left unfinished (killed mid-inspection) become
         # complete failed rows before this one inspects; the stored backgrounds come back.
         self.interrupted_at_start = await recovery.mark_interrupted(db, self.cell_id)

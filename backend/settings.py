@@ -169,6 +169,19 @@ class Settings(BaseSettings):
     image_prune_interval_s: float = Field(
         3600.0, ge=10.0, le=7 * 86400.0, description="Period of the automatic prune, s."
     )
+    index_poll_s: float = Field(
+        2.0,
+        ge=0.05,
+        le=60.0,
+        description="How often the live index checks the database for models and views "
+        "changed by another process (cell or CLI) when it cannot LISTEN (SQLite, or the "
+        "PostgreSQL listening connection lost), s.",
+    )
+    index_listen: bool = Field(
+        True,
+        description="On PostgreSQL, learn of other processes' model and view changes at once "
+        "through LISTEN/NOTIFY (polling every index_poll_s otherwise).",
+    )
 
     @field_validator("http_host", "viser_host")
     @classmethod

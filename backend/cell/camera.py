@@ -220,11 +220,15 @@ class CameraFeed:
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(self._new.wait(), left)
 
-    def latest_jpeg(self, *, quality: int = 80) -> bytes | None:
-        """The newest frame as JPEG, encoded once per frame (keyed by its index)."""
+    def latest_jpeg(self, *, quality: int = 80, demand: bool = True) -> bytes | None:
+        """The newest frame as JPEG, encoded once per frame (keyed by its index).
+
+        With ``demand=False`` it does not touch the event loop's objects, so it may run in a
+        worker thread (call :meth:`note_demand` on the loop first)."""
         if isinstance(quality, bool) or not isinstance(quality, int) or not 1 <= quality <= 100:
             raise ValueError(f"quality must be an int in [1, 100], got {quality!r}")
-        self.note_demand()
+        if demand:
+            self.note_demand()
         frame = self._frame
         if frame is None:
             return None

@@ -225,6 +225,11 @@ class Cell(CellMotion):
         """The newest frame as JPEG, encoded once per frame."""
         return self.feed.latest_jpeg(quality=quality)
 
+    async def latest_jpeg_async(self, *, quality: int = 80) -> bytes | None:
+        """:meth:`latest_jpeg` with the encoding in a worker thread (off the event loop)."""
+        self.feed.note_demand()
+        return await asyncio.to_thread(self.feed.latest_jpeg, quality=quality, demand=False)
+
     def camera_status(self) -> CameraStatus:
         """Name, health, frame count, rate and last error of the camera."""
         return self.feed.status()

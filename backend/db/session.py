@@ -31,7 +31,15 @@ class Database:
         self.engine: AsyncEngine = create_async_engine(url, **kwargs)
         if url.startswith("sqlite"):
             event.listen(self.engine.sync_engine, "connect", _sqlite_pragmas)
-        self.sessionmaker = async_sessionmaker(self.engine, expire_on_commit=False)
+        if url.startswith("postgresql"):
+            # Changes of models and views notify the plant's other processes (their indexes).
+            from backend.db.changes import NotifyingSession
+
+            self.sessionmaker = async_sessionmaker(
+                self.engine, expire_on_commit=False, sync_session_class=NotifyingSession
+            )
+        else:
+            self.sessionmaker = async_sessionmaker(self.engine, expire_on_commit=False)
 
     @asynccontextmanager
     async def session(self) -> AsyncIterator[AsyncSession]:

@@ -9,12 +9,18 @@ from their stored images) rather than mixed with the others.
 
 The index is not thread-safe and recognition runs in worker threads, so readers and writers
 share one lock: ``with live.reading() as index: recognise(index, ...)``.
+
+Changes made by another process of the plant (another cell on the same PostgreSQL database,
+or the CLI) reach the index through :meth:`LiveIndex.diff` and :meth:`LiveIndex.apply`,
+driven by :class:`backend.recognition.sync.IndexSync`; every change method is idempotent so
+that a change seen both locally and from the database is applied once.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -31,6 +37,7 @@ from vision.features import Features
 from vision.recognition import ViewIndex
 
 __all__ = [
+    "IndexDiff",
     "IndexedModel",
     "LiveIndex",
     "LoadReport",
@@ -102,6 +109,35 @@ def _probe_image() -> NDArray[np.uint8]:
     )  # 96 x 96 blocks: corners for every detector
 
 
+@dataclass(frozen=True)
+class IndexDiff:
+    """What separates the index from a snapshot of the database (:meth:`LiveIndex.diff`)."""
+
+    generation: int
+    """The index's change count when the diff was taken (:meth:`LiveIndex.apply` checks it)."""
+    put_models: tuple[IndexedModel, ...]
+    drop_models: tuple[int, ...]
+    remove_views: tuple[int, ...]
+    load_views: tuple[int, ...]
+    """Views to (re)load from the database: new ones, re-extracted ones, reused ids."""
+    deferred: bool = False
+    """Views added here in the last :data:`LOCAL_GRACE_S` were missing from the snapshot and
+    kept (their transaction may not have committed yet): diff again later."""
+
+    @property
+    def empty(self) -> bool:
+        return not (self.put_models or self.drop_models or self.remove_views or self.load_views)
+
+
+#: How long a view added by this process is kept although a database snapshot lacks it
+#: (``add_views`` indexes views just before its transaction commits), seconds.
+LOCAL_GRACE_S = 30.0
+
+#: A stored view as :meth:`LiveIndex.apply` takes it:
+#: ``(view_id, model_id, viewpoint, features blob, descriptor kind, descriptor version)``.
+ViewRow = tuple[int, int, int, bytes, str, str]
+
+
 class LiveIndex:
     """The in-memory index of every trained view, kept in step with the database.
 
@@ -120,6 +156,10 @@ class LiveIndex:
         self._models: dict[int, IndexedModel] = {}
         self._view_model: dict[int, int] = {}
         self._stale: dict[int, StaleView] = {}
+        #: Count of changes made through the change methods (see :meth:`apply`).
+        self._generation = 0
+        #: When this process added each recent view (``time.monotonic()``), see :meth:`diff`.
+        self._added_at: dict[int, float] = {}
         # The descriptor version this build extracts (changes with OpenCV, a PCA basis...),
         # with the extraction options that change what is extracted (stored per view).
         self.feature_version = self._index.features(_probe_image()).version
@@ -169,6 +209,12 @@ class LiveIndex:
             return view_id in self._view_model
 
     @property
+    def generation(self) -> int:
+        """How many changes the index has taken (grows with every change method)."""
+        with self._lock:
+            return self._generation
+
+    @property
     def stale(self) -> dict[int, StaleView]:
         """Stored views refused because of their descriptor version, by view id."""
         with self._lock:
@@ -191,8 +237,6 @@ class LiveIndex:
     # -- building -----------------------------------------------------------------------
     async def load(self, db: Database) -> LoadReport:
         """Fill the (empty) index from every model and trained view in the database."""
-        import time
-
         t0 = time.perf_counter()
         async with db.session() as session:
             models = list(await session.scalars(select(ObjectModel)))
@@ -213,24 +257,9 @@ class LiveIndex:
             if len(self._index):
                 raise RuntimeError("LiveIndex.load() fills an empty index only")
             self._models = dict(by_id)
-            for vid, mid, viewpoint, blob, kind, version in rows:
-                model = by_id[mid]
-                try:
-                    self.check_features(kind, version, what=f"view {vid} of {model.name!r}")
-                    feats = Features.from_bytes(blob)
-                    self._index.add(
-                        model.name,
-                        feats,
-                        viewpoint=viewpoint,
-                        part=model.part,
-                        base=model.sitting_base,
-                        view_id=vid,
-                    )
-                except (ValueError, VisionCellError) as exc:
-                    reason = getattr(exc, "detail", str(exc))
-                    self._stale[vid] = StaleView(vid, mid, kind, version, reason)
-                    continue
-                self._view_model[vid] = mid
+            for row in rows:
+                self._index_row(by_id[row[1]], tuple(row))  # type: ignore[arg-type]
+            self._generation += 1
             report = LoadReport(
                 len(by_id),
                 len(self._view_model),
@@ -245,10 +274,96 @@ class LiveIndex:
             )
         return report
 
+    def _index_row(self, model: IndexedModel, row: ViewRow) -> bool:
+        """Index one stored view (lock held), or list it as stale; True if indexed."""
+        vid, mid, viewpoint, blob, kind, version = row
+        try:
+            self.check_features(kind, version, what=f"view {vid} of {model.name!r}")
+            feats = Features.from_bytes(blob)
+            self._index.add(
+                model.name,
+                feats,
+                viewpoint=viewpoint,
+                part=model.part,
+                base=model.sitting_base,
+                view_id=vid,
+            )
+        except (ValueError, VisionCellError) as exc:
+            reason = getattr(exc, "detail", str(exc))
+            self._stale[vid] = StaleView(vid, mid, kind, version, reason)
+            return False
+        self._view_model[vid] = mid
+        return True
+
+    # -- changes made by other processes ---------------------------------------------------
+    def diff(
+        self, models: dict[int, IndexedModel], views: dict[int, tuple[int, str, str]]
+    ) -> IndexDiff:
+        """What to change so that the index matches a snapshot of the database.
+
+        ``models`` are every model row by id; ``views`` map every trained view's id to
+        ``(model_id, descriptor_kind, descriptor_version)`` (no features: a cheap query).
+        A view whose id is known but now belongs to another model, or was re-extracted
+        with another descriptor version, is loaded again.
+        """
+        with self._lock:
+            put = tuple(m for mid, m in sorted(models.items()) if self._models.get(mid) != m)
+            drop = tuple(mid for mid in sorted(self._models) if mid not in models)
+            now = time.monotonic()
+            for vid in [v for v, t in self._added_at.items() if now - t >= LOCAL_GRACE_S]:
+                del self._added_at[vid]
+            known = set(self._view_model) | set(self._stale)
+            missing = [v for v in known if v not in views]
+            remove = tuple(sorted(v for v in missing if v not in self._added_at))
+            deferred = len(remove) < len(missing)
+            load = []
+            for vid, (mid, kind, version) in sorted(views.items()):
+                if mid not in models:
+                    continue  # the model went between the two reads: the next sync sees it
+                have = self._view_model.get(vid)
+                if have is not None:
+                    if have != mid or (kind, version) != (self.method, self.version):
+                        load.append(vid)
+                    continue
+                st = self._stale.get(vid)
+                if st is None or (st.model_id, st.descriptor_kind, st.descriptor_version) != (
+                    mid,
+                    kind,
+                    version,
+                ):
+                    load.append(vid)
+            return IndexDiff(self._generation, put, drop, remove, tuple(load), deferred)
+
+    def apply(self, diff: IndexDiff, rows: list[ViewRow]) -> bool:
+        """Apply ``diff`` with the stored ``rows`` of its :attr:`IndexDiff.load_views`.
+
+        Returns False, changing nothing, if the index took a change since the diff was
+        taken (the snapshot may predate it: take a new diff).  Rows of views whose model
+        the index does not know (deleted meanwhile) are skipped.
+        """
+        with self._lock:
+            if self._generation != diff.generation:
+                return False
+            for vid in diff.remove_views:
+                self.remove_view(vid)
+            for mid in diff.drop_models:
+                self.drop_model(mid)
+            for m in diff.put_models:
+                self.put_model(m)
+            for row in rows:
+                model = self._models.get(row[1])
+                if model is None:
+                    continue
+                self.remove_view(row[0])
+                self._index_row(model, row)
+            self._generation += 1
+            return True
+
     # -- changes (call after the database accepted them) ----------------------------------
     def put_model(self, model: IndexedModel) -> None:
         """Add or update a model's entry; views follow a rename or a new part or base."""
         with self._lock:
+            self._generation += 1
             old = self._models.get(model.id)
             self._models[model.id] = model
             if old is None or (old.name, old.part, old.sitting_base) == (
@@ -272,6 +387,7 @@ class LiveIndex:
     def drop_model(self, model_id: int) -> int:
         """Forget a model and its views; return how many views left the index."""
         with self._lock:
+            self._generation += 1
             model = self._models.pop(model_id, None)
             gone = self.views_of(model_id)
             for vid in gone:
@@ -286,11 +402,17 @@ class LiveIndex:
     def add_view(
         self, model: IndexedModel, view_id: int, viewpoint: int, features: Features
     ) -> None:
-        """Index one stored view (its features must be of the index's method and version)."""
+        """Index one stored view (its features must be of the index's method and version);
+        a view already indexed under this id is replaced."""
         if features.method != self.method or features.version != self.feature_version:
             self.check_features(features.method, features.version, what=f"view {view_id}")
         with self._lock:
+            self._generation += 1
+            if view_id in self._view_model:
+                self._index.remove_view(view_id)
+                del self._view_model[view_id]
             self._models[model.id] = model
+            self._added_at[view_id] = time.monotonic()
             try:
                 self._index.add(
                     model.name,
@@ -308,6 +430,7 @@ class LiveIndex:
     def remove_view(self, view_id: int) -> bool:
         """Take one view out of the index; False if it was not in it."""
         with self._lock:
+            self._generation += 1
             self._stale.pop(view_id, None)
             if view_id not in self._view_model:
                 return False

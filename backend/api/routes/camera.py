@@ -29,7 +29,7 @@ class CameraStatusOut(BaseModel):
     responses={200: {"content": {"image/jpeg": {}}, "description": "The frame"}},
 )
 async def read_frame(_: ViewerUser, cell: CellDep) -> Response:
-    jpeg = cell.latest_jpeg()
+    jpeg = await cell.latest_jpeg_async()  # the JPEG encoding off the event loop
     if jpeg is None:
         status = cell.camera_status()
         raise ApiError(503, "camera_unavailable", status.error or "no frame has arrived yet")

@@ -23,6 +23,9 @@ Messages from the server (JSON objects, ``type`` first):
   reason, score, viewpoints, T_base_obj, the cameras of the views, pick);
 - ``{"type": "estop", "active": bool, "conveyors": [names]}``: the cell-wide emergency stop
   was pressed or reset.
+
+Every message but ``hello`` also carries ``"at"``: when its event was made, wall-clock
+seconds since the epoch (``benchmarks/load.py`` measures the message lag with it).
 """
 
 from __future__ import annotations
@@ -52,6 +55,14 @@ RECHECK_S = 5.0
 
 
 def _message(event: Any) -> dict[str, Any] | None:
+    msg = _body(event)
+    if msg is not None:
+        # When the event was made, wall-clock seconds (clients measure the lag with it).
+        msg["at"] = time.time() - (time.monotonic() - event.stamp_s)
+    return msg
+
+
+def _body(event: Any) -> dict[str, Any] | None:
     if isinstance(event, ArmState):
         return {"type": "state", "state": event.state.as_dict(), "speed": event.speed}
     if isinstance(event, JobState | JobProgress):
