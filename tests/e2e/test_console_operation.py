@@ -112,7 +112,7 @@ def test_teach_inspect_report_export(browser, sim_server):
     page.wait_for_function(
         "() => [...document.querySelectorAll('#views-grid img')].some(i => i.naturalWidth > 0)"
     )
-    assert page.text_content("#models-table tbody").count(MODEL) == 1
+    assert page.locator(f'#models-table tr[data-name="{MODEL}"]').count() == 1
     # One top view and one model: no automatic threshold yet; the engineer sets the model's.
     page.fill("#model-threshold", "0.25")
     page.click("#model-threshold-save")
