@@ -30,6 +30,7 @@ MODEL = "gear-housing"
 def sim_server(tmp_path):
     s = start_server(
         tmp_path,
+        ready_s=300.0,  # MuJoCo and the first renders start slowly on a busy machine
         VISIONCELL_DRIVER="sim",
         VISIONCELL_CAMERA="sim",
         VISIONCELL_SIM_DEMO="false",
