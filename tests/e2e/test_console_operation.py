@@ -126,7 +126,7 @@ def test_teach_inspect_report_export(browser, sim_server):
     page.fill("#model-threshold", "0.25")
     page.click("#model-threshold-save")
     page.wait_for_function(
-        "() => document.querySelector('#models-table tbody').textContent.includes('0.250')"
+        "() => document.querySelector('#model-summary').textContent.includes('Threshold: 0.250')"
     )
     _shot(page, "models")
 
@@ -155,6 +155,9 @@ def test_teach_inspect_report_export(browser, sim_server):
         "() => [...document.querySelectorAll('#filmstrip img')].every(i => i.naturalWidth > 0)"
     )
     assert "/min" in page.text_content("#throughput")
+    page.wait_for_function(
+        "() => [...document.querySelectorAll('#live-images img')].every(i => i.naturalWidth > 0)"
+    )
     _shot(page, "inspection")
 
     # -- Reports: both found, one opened, the CSV matches the database ---------------------
