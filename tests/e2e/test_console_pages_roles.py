@@ -112,3 +112,25 @@ def test_reports_page_shows_the_refusal_of_a_bad_range(browser, shared_server):
     page.wait_for_function("() => document.querySelector('#rep-message').textContent !== ''")
     assert "from" in page.text_content("#rep-message")
     page.close()
+
+
+def test_roc_and_bins_of_the_threshold_charts(browser, shared_server):
+    """The ROC the Models page draws: (FAR, TAR) for every threshold, accepting score >= t."""
+    server = shared_server
+    page = browser.new_page()
+    page.goto(server.base + "/")
+    got = page.evaluate(
+        """async () => { const m = await import('/static/js/charts.js');
+             return { roc: m.rocPoints([0.9, 0.8], [0.1, 0.85]),
+                      bins: m.binCounts([0, 0.05, 0.5, 1, 1.2, NaN], [0, 0.25, 0.5, 0.75, 1]) }; }"""
+    )
+    page.close()
+    assert got["roc"] == [
+        [0, 0, 1],
+        [0, 0.5, 0.9],
+        [0.5, 0.5, 0.85],
+        [0.5, 1, 0.8],
+        [1, 1, 0.1],
+        [1, 1, 0],
+    ]
+    assert got["bins"] == [2, 0, 1, 1]  # 1.0 falls in the last bin; 1.2 and NaN are dropped
