@@ -2,8 +2,10 @@
 
 Everything is aggregated in SQL (SQLAlchemy Core); only group results leave the database.
 Counts and nearest-rank percentiles (:mod:`backend.reports.stats`) are exact and identical on
-SQLite and PostgreSQL; means are sums divided in Python and rounded to 1e-6 (the engines may
-add floats in different orders, which changes the last bits only).
+SQLite and PostgreSQL.  Means are sums of seconds quantised to 0.1 ms (:data:`QUANTUM`, the
+resolution the inspection service stores durations with) as whole numbers, which either
+engine adds exactly in any order, divided in Python and rounded to 1e-6; summing the floats
+themselves would differ in the last bits between the engines.
 """
 
 from __future__ import annotations
@@ -11,12 +13,12 @@ from __future__ import annotations
 from datetime import UTC, datetime, timedelta
 from typing import Any, Literal
 
-from sqlalchemy import ColumnElement, String, case, cast, func, literal, select, union_all
+from sqlalchemy import ColumnElement, String, case, cast, func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
-from backend.db.models import Decision, Inspection
+from backend.db.models import Decision, Inspection, InspectionStage
 from backend.reports.filters import DECISIONS, ReportFilters, conditions
-from backend.reports.stats import percentiles, ranked
+from backend.reports.stats import percentiles, percentiles_by_offset, ranked
 from vision.errors import InvalidInput
 
 __all__ = ["BUCKETS", "HIST_BINS", "MAX_BUCKETS", "STAGES", "confusion", "summary", "timeseries"]
@@ -24,6 +26,8 @@ __all__ = ["BUCKETS", "HIST_BINS", "MAX_BUCKETS", "STAGES", "confusion", "summar
 #: Stages of an inspection as ``backend.inspection.service`` times them (``durations`` keys).
 STAGES = ("wait", "move", "settle", "acquire", "segment", "features", "match", "plan", "decide",
           "pose", "pick")  # fmt: skip
+#: Durations are summed as whole multiples of this many seconds (module docstring).
+QUANTUM = 1e-4
 #: Score histogram bins over [0, 1].
 HIST_BINS = 10
 BUCKETS: dict[str, timedelta] = {
@@ -39,6 +43,11 @@ _I = Inspection.__table__.c
 
 def _r6(x: float | None) -> float | None:
     return None if x is None else round(float(x), 6)
+
+
+def _qsum(col: Any) -> Any:
+    """Exact sum of ``col`` in units of :data:`QUANTUM` (whole numbers as floats < 2^53)."""
+    return func.sum(func.round(col * (1.0 / QUANTUM)))
 
 
 def _recognized() -> ColumnElement[bool]:
@@ -57,7 +66,7 @@ async def summary(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
                 func.min(_I.started_at),
                 func.max(_I.started_at),
                 func.count(_I.duration_s),
-                func.sum(_I.duration_s),
+                _qsum(_I.duration_s),
                 func.max(_I.duration_s),
                 func.sum(func.json_array_length(_I.viewpoints_visited)),
             )
@@ -67,13 +76,13 @@ async def summary(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
     ).all()
     by = dict.fromkeys(DECISIONS, 0)
     firsts, lasts, maxes = [], [], []
-    n_dur, sum_dur, sum_views = 0, 0.0, 0
+    n_dur, sum_q, sum_views = 0, 0, 0
     for dec, n, t0, t1, nd, sd, md, sv in rows:
         by[str(dec)] = int(n)
         firsts.append(t0)
         lasts.append(t1)
         n_dur += int(nd)
-        sum_dur += float(sd or 0.0)
+        sum_q += round(float(sd or 0.0))
         sum_views += int(sv or 0)
         if md is not None:
             maxes.append(float(md))
@@ -83,17 +92,17 @@ async def summary(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
         vals = [v for v in values if v is not None]
         return pick(vals).isoformat() if vals else None
 
-    cyc = (await percentiles(session, ranked(_I.duration_s, None, conds), (50, 95, 99))).get(0, {})
+    cyc = await percentiles_by_offset(session, _I.duration_s, conds, (50, 95, 99), n_dur)
     return {
         "count": count,
         "by_decision": by,
         "yield": None if count == 0 else round(by["recognized"] / count, 6),
         "cycle_s": {
             "p50": cyc.get(50), "p95": cyc.get(95), "p99": cyc.get(99),
-            "mean": _r6(sum_dur / n_dur) if n_dur else None,
+            "mean": _r6(sum_q * QUANTUM / n_dur) if n_dur else None,
             "max": max(maxes) if maxes else None,
         },  # fmt: skip
-        "stages": await _stages(session, conds),
+        "stages": await _stages(session, f),
         "views_mean": _r6(sum_views / count) if count else None,
         "per_model": await _per_model(session, conds),
         "first": _t(firsts, min),
@@ -102,25 +111,23 @@ async def summary(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
     }
 
 
-async def _stages(session: AsyncSession, conds: list[Any]) -> dict[str, dict[str, float | None]]:
-    parts = [
-        select(literal(s).label("stage"), Inspection.durations[s].as_float().label("sec")).where(*conds)
-        for s in STAGES
-    ]  # fmt: skip
-    u = union_all(*parts).subquery("stage_values")
+async def _stages(session: AsyncSession, f: ReportFilters) -> dict[str, dict[str, float | None]]:
+    st = InspectionStage.__table__
+    conds = await conditions(session, f, st)
     agg = (
         await session.execute(
-            select(u.c.stage, func.count(u.c.sec), func.sum(u.c.sec))
-            .where(u.c.sec.is_not(None))
-            .group_by(u.c.stage)
+            select(st.c.stage, func.count(), _qsum(st.c.seconds))
+            .where(*conds)
+            .group_by(st.c.stage)
         )
     ).all()
-    pct = await percentiles(session, ranked(u.c.sec, u.c.stage, [], source=u), (50, 95))
+    counts = {str(s): int(n) for s, n, _ in agg}
+    means = {str(s): round(float(t)) * QUANTUM / int(n) for s, n, t in agg if n}
     out: dict[str, dict[str, float | None]] = {}
-    means = {str(s): float(t) / int(n) for s, n, t in agg if n}
-    for s in STAGES:  # the service's order
-        if s in means:
-            out[s] = {"mean": _r6(means[s]), "p50": pct[s][50], "p95": pct[s][95]}
+    for s in sorted(means, key=lambda s: (STAGES.index(s) if s in STAGES else len(STAGES), s)):
+        pct = await percentiles_by_offset(session, st.c.seconds, [*conds, st.c.stage == s],
+                                          (50, 95), counts[s])  # fmt: skip
+        out[s] = {"mean": _r6(means[s]), "p50": pct[50], "p95": pct[95]}
     return out
 
 
@@ -149,7 +156,10 @@ async def _per_model(session: AsyncSession, conds: list[Any]) -> list[dict[str, 
     counts: dict[str, list[int]] = {}
     for m, i, n in hist:
         counts.setdefault(str(m), [0] * HIST_BINS)[int(i)] = int(n)
-    pct = await percentiles(session, ranked(_I.score, _I.model_name, mc), (50, 95))
+    pct = {
+        m: await percentiles_by_offset(session, _I.score, [*mc, _I.model_name == m], (50, 95), n)
+        for m, n, _, _ in agg
+    }
     edges = [round(i / HIST_BINS, 6) for i in range(HIST_BINS + 1)]
     return [
         {
