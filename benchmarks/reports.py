@@ -88,7 +88,9 @@ async def _fill(db: Database, rows: int, images: int) -> datetime:
     blob = b"\xff\xd8" + os.urandom(2046)
     async with db.session() as s:
         first = await s.scalar(select(Inspection.id).order_by(Inspection.id).limit(1))
-        last_t = await s.scalar(select(Inspection.started_at).order_by(Inspection.id.desc()).limit(1))
+        last_t = await s.scalar(
+            select(Inspection.started_at).order_by(Inspection.id.desc()).limit(1)
+        )
     for k in range(0, images, 2000):
         async with db.session() as s:
             await s.execute(insert(InspectionImage), [

@@ -14,7 +14,13 @@ from typing import Any
 from sqlalchemy import func, insert, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
-from backend.db.models import Decision, Inspection, InspectionImage, InspectionScene, InspectionStage
+from backend.db.models import (
+    Decision,
+    Inspection,
+    InspectionImage,
+    InspectionScene,
+    InspectionStage,
+)
 from backend.db.session import Database
 from vision.errors import InvalidInput, NotFound
 

@@ -80,7 +80,9 @@ def parse_time(value: str | datetime, name: str) -> datetime:
             raise InvalidInput(f"{name} must be an ISO-8601 date-time, got {value!r}") from None
     t = t.replace(tzinfo=UTC) if t.tzinfo is None else t.astimezone(UTC)
     if not _YEARS[0] <= t.year < _YEARS[1]:
-        raise InvalidInput(f"{name} must be within the years {_YEARS[0]}..{_YEARS[1] - 1}, got {value!r}")
+        raise InvalidInput(
+            f"{name} must be within the years {_YEARS[0]}..{_YEARS[1] - 1}, got {value!r}"
+        )
     return t
 
 

@@ -98,10 +98,12 @@ async def summary(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
         "by_decision": by,
         "yield": None if count == 0 else round(by["recognized"] / count, 6),
         "cycle_s": {
-            "p50": cyc.get(50), "p95": cyc.get(95), "p99": cyc.get(99),
+            "p50": cyc.get(50),
+            "p95": cyc.get(95),
+            "p99": cyc.get(99),
             "mean": _r6(sum_q * QUANTUM / n_dur) if n_dur else None,
             "max": max(maxes) if maxes else None,
-        },  # fmt: skip
+        },
         "stages": await _stages(session, f),
         "views_mean": _r6(sum_views / count) if count else None,
         "per_model": await _per_model(session, conds),
@@ -116,9 +118,7 @@ async def _stages(session: AsyncSession, f: ReportFilters) -> dict[str, dict[str
     conds = await conditions(session, f, st)
     agg = (
         await session.execute(
-            select(st.c.stage, func.count(), _qsum(st.c.seconds))
-            .where(*conds)
-            .group_by(st.c.stage)
+            select(st.c.stage, func.count(), _qsum(st.c.seconds)).where(*conds).group_by(st.c.stage)
         )
     ).all()
     counts = {str(s): int(n) for s, n, _ in agg}
@@ -127,7 +127,7 @@ async def _stages(session: AsyncSession, f: ReportFilters) -> dict[str, dict[str
     for s in sorted(means, key=lambda s: (STAGES.index(s) if s in STAGES else len(STAGES), s)):
         pct = await percentiles_by_offset(session, st.c.seconds, [*conds, st.c.stage == s],
                                           (50, 95), counts[s])  # fmt: skip
-        out[s] = {"mean": _r6(means[s]), "p50": pct[50], "p95": pct[95]}
+        out[s] = {"mean": _r6(means[s]), "p50": pct.get(50), "p95": pct.get(95)}
     return out
 
 
@@ -165,7 +165,12 @@ async def _per_model(session: AsyncSession, conds: list[Any]) -> list[dict[str, 
         {
             "model": str(m),
             "count": int(n),
-            "score": {"p50": pct[m][50], "p95": pct[m][95], "min": float(lo), "max": float(hi)},
+            "score": {
+                "p50": pct[m].get(50),
+                "p95": pct[m].get(95),
+                "min": float(lo),
+                "max": float(hi),
+            },
             "hist": {"edges": edges, "counts": counts.get(str(m), [0] * HIST_BINS)},
         }
         for m, n, lo, hi in sorted(agg, key=lambda r: str(r[0]))
@@ -175,7 +180,11 @@ async def _per_model(session: AsyncSession, conds: list[Any]) -> list[dict[str, 
 def _bucket_expr(dialect: str, bucket: str) -> ColumnElement[str]:
     """The bucket's start as ``YYYY-MM-DDTHH:MM:SS`` text (UTC) in either engine's SQL."""
     if dialect == "sqlite":
-        fmt = {"minute": "%Y-%m-%dT%H:%M:00", "hour": "%Y-%m-%dT%H:00:00", "day": "%Y-%m-%dT00:00:00"}
+        fmt = {
+            "minute": "%Y-%m-%dT%H:%M:00",
+            "hour": "%Y-%m-%dT%H:00:00",
+            "day": "%Y-%m-%dT00:00:00",
+        }
         return func.strftime(fmt[bucket], _I.started_at)
     if dialect == "postgresql":
         utc = func.timezone("UTC", _I.started_at)
@@ -216,9 +225,7 @@ async def timeseries(session: AsyncSession, f: ReportFilters,
             )
     bx = _bucket_expr(session.get_bind().dialect.name, bucket).label("t")
     dec = [func.sum(case((_I.decision == d, 1), else_=0)) for d in DECISIONS]
-    rows = (
-        await session.execute(select(bx, func.count(), *dec).where(*conds).group_by(bx))
-    ).all()
+    rows = (await session.execute(select(bx, func.count(), *dec).where(*conds).group_by(bx))).all()
     p50 = await percentiles(session, ranked(_I.duration_s, bx, conds), (50,))
     by_t = {str(r[0]): r for r in rows}
     data: list[dict[str, Any]] = []
@@ -265,4 +272,10 @@ async def confusion(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
     for t, lb, n in rows:
         matrix[ti[str(t)]][li[str(lb)]] += int(n)
         total += int(n)
-    return {"labels": labels, "truth": truths, "matrix": matrix, "count": total, "filters": f.echo()}
+    return {
+        "labels": labels,
+        "truth": truths,
+        "matrix": matrix,
+        "count": total,
+        "filters": f.echo(),
+    }

@@ -26,7 +26,14 @@ from sqlalchemy.ext.asyncio import AsyncSession
 from backend.db.models import InspectionScene
 from vision.errors import NotFound
 
-__all__ = ["CLOCK_S", "MAX_SCENE_BYTES", "MAX_SCENE_S", "SceneRecorder", "decode_scene", "read_scene"]
+__all__ = [
+    "CLOCK_S",
+    "MAX_SCENE_BYTES",
+    "MAX_SCENE_S",
+    "SceneRecorder",
+    "decode_scene",
+    "read_scene",
+]
 
 log = logging.getLogger(__name__)
 
@@ -144,7 +151,9 @@ def decode_scene(data: bytes) -> dict[str, Any]:
         raise ValueError(f"a .viser recording has at least 16 bytes, got {len(data)}")
     size = int.from_bytes(data[:8], "little")
     if not 8 < size <= MAX_DECODED_BYTES:
-        raise ValueError(f"recording of {size} bytes decompressed is outside 9..{MAX_DECODED_BYTES}")
+        raise ValueError(
+            f"recording of {size} bytes decompressed is outside 9..{MAX_DECODED_BYTES}"
+        )
     inner = zstandard.ZstdDecompressor().decompress(data[8:], max_output_size=size)
     n = int.from_bytes(inner[:8], "little")
     meta: dict[str, Any] = msgspec.msgpack.decode(inner[8 : 8 + n])

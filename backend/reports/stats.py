@@ -58,7 +58,7 @@ async def percentiles(session: AsyncSession, sub: Subquery, ps: Sequence[int]) -
     want = or_(*[sub.c.rn == (sub.c.n * p + 99) // 100 for p in ps])
     rows = (await session.execute(select(sub.c.k, sub.c.v, sub.c.rn, sub.c.n).where(want))).all()
     at: dict[Any, dict[int, float]] = {}
-    for k, v, rn, n in rows:
+    for k, v, rn, _ in rows:
         at.setdefault(k, {})[int(rn)] = float(v)
     out: dict[Any, dict[int, float]] = {}
     counts = {k: n for k, _, _, n in rows}
@@ -80,5 +80,7 @@ async def percentiles_by_offset(session: AsyncSession, value: ColumnElement[Any]
     for p in ps:
         k = nearest_rank(p, n) - 1
         v = await session.scalar(select(value).where(*where).order_by(value).limit(1).offset(k))
+        if v is None:  # rows deleted between the count and this query
+            break
         out[p] = float(v)
     return out

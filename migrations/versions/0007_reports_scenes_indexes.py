@@ -85,9 +85,7 @@ def upgrade() -> None:
         op.f("ix_inspection_stages_inspection_id"), "inspection_stages", ["inspection_id"]
     )
     _backfill()
-    op.create_index(
-        "ix_inspection_stages_stage_seconds", "inspection_stages", ["stage", "seconds"]
-    )
+    op.create_index("ix_inspection_stages_stage_seconds", "inspection_stages", ["stage", "seconds"])
     op.create_index("ix_inspections_report_duration", "inspections", ["duration_s"])
     op.create_index("ix_inspections_report_model_score", "inspections", ["model_name", "score"])
     op.create_index("ix_inspections_report_cell_time", "inspections", ["cell_id", "started_at"])

@@ -13,8 +13,8 @@ from backend.db.models import Inspection, InspectionImage, InspectionScene
 from backend.db.session import Database
 from backend.inspection.results import InspectionRecord, ViewRecord, store
 from backend.reports import SceneRecorder, keeps_images, prune, storage_used
-from backend.reports.scenes import decode_scene
 from backend.reports.retention import PruneResult
+from backend.reports.scenes import decode_scene
 from benchmarks.reports_data import ensure_cells
 from tests.utils.factories import free_port, make_settings, migrate
 from vision.errors import InvalidInput
@@ -77,7 +77,7 @@ def test_a_failure_mid_write_leaves_no_row(db_url) -> None:
             (cid,) = await ensure_cells(db, ("cell-1",))
             rec = _rec("unknown", datetime.now(UTC), 1)
             bad = InspectionRecord(**{**rec.__dict__, "views": (*rec.views, ViewRecord(2, None, {}))})  # type: ignore[arg-type]  # fmt: skip
-            with pytest.raises(Exception, match="(?i)null"):
+            with pytest.raises(Exception, match=r"(?i)null"):
                 await store(db, cid, bad, scene=b"x" * 10)
             return await _counts(db)
         finally:
