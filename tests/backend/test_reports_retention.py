@@ -14,9 +14,9 @@ from backend.db.session import Database
 from backend.inspection.results import InspectionRecord, ViewRecord, store
 from backend.reports import SceneRecorder, keeps_images, prune, storage_used
 from backend.reports.retention import PruneResult
-from backend.reports.scenes import decode_scene
 from benchmarks.reports_data import ensure_cells
 from tests.utils.factories import free_port, make_settings, migrate
+from tests.utils.scenes import decode_scene
 from vision.errors import InvalidInput
 
 JPEG = b"\xff\xd8" + bytes(998)
