@@ -11,10 +11,16 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import func, select
+from sqlalchemy import func, insert, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
-from backend.db.models import Decision, Inspection, InspectionImage, InspectionScene
+from backend.db.models import (
+    Decision,
+    Inspection,
+    InspectionImage,
+    InspectionScene,
+    InspectionStage,
+)
 from backend.db.session import Database
 from vision.errors import InvalidInput, NotFound
 
@@ -64,6 +70,7 @@ async def store(db: Database, cell_id: int, rec: InspectionRecord, *, retention:
     nothing); returns the inspection id.  ``retention`` (``Settings.image_retention``) says
     whether this decision keeps its images and scene (:func:`backend.reports.keeps_images`)."""
     from backend.reports.retention import keeps_images
+    from backend.reports.stages import stage_rows
 
     keep = keeps_images(retention, rec.decision)
     async with db.session() as session:
@@ -93,6 +100,11 @@ async def store(db: Database, cell_id: int, rec: InspectionRecord, *, retention:
             )
         session.add(row)
         await session.flush()
+        stages = stage_rows(row.id, {"cell_id": cell_id, "started_at": rec.started_at,
+                                     "decision": rec.decision, "model_name": rec.model_name,
+                                     "policy": rec.policy, "durations": rec.durations})  # fmt: skip
+        if stages:
+            await session.execute(insert(InspectionStage), stages)
         if keep and scene:
             session.add(InspectionScene(inspection_id=row.id, scene=scene, size_bytes=len(scene)))
             await session.flush()
