@@ -18,9 +18,10 @@ from typing import Any
 
 from sqlalchemy import insert, select
 
-from backend.db.models import Cell, Inspection
+from backend.db.models import Cell, Inspection, InspectionStage
 from backend.db.session import Database
 from backend.reports.queries import STAGES
+from backend.reports.stages import stage_rows
 
 __all__ = ["CELLS", "MODELS", "POLICIES", "ensure_cells", "generate_rows", "insert_rows"]
 
@@ -105,14 +106,24 @@ async def ensure_cells(db: Database, names: tuple[str, ...] = CELLS) -> list[int
 
 async def insert_rows(db: Database, rows: Iterator[dict[str, Any]], *, chunk: int = 5000,
                       progress: Any = None) -> int:  # fmt: skip
-    """Bulk-insert ``rows`` in chunks (one transaction each); returns how many."""
+    """Bulk-insert ``rows`` and their stage rows in chunks (one transaction each); sets each
+    row's ``id``; returns how many."""
     done = 0
     buf: list[dict[str, Any]] = []
 
     async def flush() -> None:
         nonlocal done
         async with db.session() as s:
-            await s.execute(insert(Inspection), buf)
+            ids = (
+                await s.scalars(
+                    insert(Inspection).returning(Inspection.id, sort_by_parameter_order=True), buf
+                )
+            ).all()
+            stages = [st for i, r in zip(ids, buf, strict=True) for st in stage_rows(i, r)]
+            for k in range(0, len(stages), 20_000):
+                await s.execute(insert(InspectionStage), stages[k : k + 20_000])
+            for i, r in zip(ids, buf, strict=True):
+                r["id"] = i
         done += len(buf)
         buf.clear()
         if progress is not None:

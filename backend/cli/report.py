@@ -59,7 +59,9 @@ def _f(v: float | None, unit: str = "", digits: int = 3) -> str:
 
 def _print_summary(s: dict[str, Any]) -> None:
     f = {k: v for k, v in s["filters"].items() if v is not None}
-    t = Table(title="Inspections" + (f" ({', '.join(f'{k}={v}' for k, v in f.items())})" if f else ""))
+    t = Table(
+        title="Inspections" + (f" ({', '.join(f'{k}={v}' for k, v in f.items())})" if f else "")
+    )
     t.add_column("measure")
     t.add_column("value", justify="right")
     t.add_row("inspections", str(s["count"]))

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import delete, func, select
+from sqlalchemy import delete, func, insert, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.db.models import (
@@ -20,6 +20,7 @@ from backend.db.models import (
     InspectionImage,
     InspectionInProgress,
     InspectionScene,
+    InspectionStage,
 )
 from backend.db.session import Database
 from vision.errors import InvalidInput, NotFound
@@ -83,6 +84,7 @@ async def store(
     neither.
     """
     from backend.reports.retention import keeps_images
+    from backend.reports.stages import stage_rows
 
     keep = keeps_images(retention, rec.decision)
     async with db.session() as session:
@@ -126,6 +128,11 @@ async def store(
             )
         session.add(row)
         await session.flush()
+        stages = stage_rows(row.id, {"cell_id": cell_id, "started_at": rec.started_at,
+                                     "decision": rec.decision, "model_name": rec.model_name,
+                                     "policy": rec.policy, "durations": rec.durations})  # fmt: skip
+        if stages:
+            await session.execute(insert(InspectionStage), stages)
         if keep and scene:
             session.add(InspectionScene(inspection_id=row.id, scene=scene, size_bytes=len(scene)))
             await session.flush()

@@ -36,8 +36,9 @@ _I = Inspection.__table__.c
 
 def _row(r: Any) -> dict[str, Any]:
     pose = r.pose if isinstance(r.pose, dict) else {}
-    pos = pose.get("position_m")
-    ok = isinstance(pos, list) and len(pos) >= 2
+    got = pose.get("position_m")
+    pos: list[Any] = got if isinstance(got, list) and len(got) >= 2 else []
+    ok = bool(pos)
     yaw = pose.get("yaw_rad")
     truth = r.truth if isinstance(r.truth, dict) else {}
     vps = [int(v) for v in (r.viewpoints_visited or [])]
@@ -83,10 +84,20 @@ async def export_rows(db: Database, f: ReportFilters) -> AsyncIterator[dict[str,
             conds = await conditions(s, f)
             q = (
                 select(
-                    _I.id, Cell.name.label("cell"), _I.started_at, _I.finished_at, _I.decision,
-                    _I.model_name, _I.score, _I.policy, _I.viewpoints_visited, _I.duration_s,
-                    _I.reason, _I.pose, _I.truth,
-                )  # fmt: skip
+                    _I.id,
+                    Cell.name.label("cell"),
+                    _I.started_at,
+                    _I.finished_at,
+                    _I.decision,
+                    _I.model_name,
+                    _I.score,
+                    _I.policy,
+                    _I.viewpoints_visited,
+                    _I.duration_s,
+                    _I.reason,
+                    _I.pose,
+                    _I.truth,
+                )
                 .join(Cell, Cell.id == _I.cell_id)
                 .where(*conds, _I.id > last)
                 .order_by(_I.id)

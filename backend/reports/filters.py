@@ -80,7 +80,9 @@ def parse_time(value: str | datetime, name: str) -> datetime:
             raise InvalidInput(f"{name} must be an ISO-8601 date-time, got {value!r}") from None
     t = t.replace(tzinfo=UTC) if t.tzinfo is None else t.astimezone(UTC)
     if not _YEARS[0] <= t.year < _YEARS[1]:
-        raise InvalidInput(f"{name} must be within the years {_YEARS[0]}..{_YEARS[1] - 1}, got {value!r}")
+        raise InvalidInput(
+            f"{name} must be within the years {_YEARS[0]}..{_YEARS[1] - 1}, got {value!r}"
+        )
     return t
 
 
@@ -115,22 +117,24 @@ def make_filters(
     return ReportFilters(t0, t1, cell, model, decision, policy)
 
 
-async def conditions(session: AsyncSession, f: ReportFilters) -> list[ColumnElement[bool]]:
-    """WHERE conditions on ``inspections`` for ``f``; :class:`NotFound` for an unknown cell."""
+async def conditions(session: AsyncSession, f: ReportFilters, table: Any = None) -> list[ColumnElement[bool]]:  # fmt: skip
+    """WHERE conditions for ``f`` on ``inspections`` (or ``table``, with the same filter
+    columns: ``inspection_stages``); :class:`NotFound` for an unknown cell."""
+    c = (Inspection.__table__ if table is None else table).c
     conds: list[ColumnElement[bool]] = []
     if f.cell is not None:
         cell_id = await session.scalar(select(Cell.id).where(Cell.name == f.cell))
         if cell_id is None:
             raise NotFound(f"no cell named {f.cell!r}")
-        conds.append(Inspection.cell_id == cell_id)
+        conds.append(c.cell_id == cell_id)
     if f.start is not None:
-        conds.append(Inspection.started_at >= f.start)
+        conds.append(c.started_at >= f.start)
     if f.end is not None:
-        conds.append(Inspection.started_at <= f.end)
+        conds.append(c.started_at <= f.end)
     if f.model is not None:
-        conds.append(Inspection.model_name == f.model)
+        conds.append(c.model_name == f.model)
     if f.decision is not None:
-        conds.append(Inspection.decision == Decision(f.decision))
+        conds.append(c.decision == f.decision)
     if f.policy is not None:
-        conds.append(Inspection.policy == f.policy)
+        conds.append(c.policy == f.policy)
     return conds

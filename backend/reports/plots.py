@@ -7,6 +7,7 @@ and writes one PNG; nothing here touches the database.
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 from typing import Any
 
@@ -90,7 +91,7 @@ def plot_scores(summary: dict[str, Any], path: Path) -> Path:
     for ax, m in zip(axes.flat, models, strict=False):
         ax.set_visible(True)
         e, c = m["hist"]["edges"], m["hist"]["counts"]
-        ax.bar(e[:-1], c, width=[b - a for a, b in zip(e, e[1:], strict=False)], align="edge",
+        ax.bar(e[:-1], c, width=[b - a for a, b in itertools.pairwise(e)], align="edge",
                color="#2e7d32", edgecolor="white")  # fmt: skip
         ax.set_xlim(0, 1)
         ax.set_title(f"{m['model']} (n={m['count']})", fontsize=9)

@@ -2,8 +2,10 @@
 
 Everything is aggregated in SQL (SQLAlchemy Core); only group results leave the database.
 Counts and nearest-rank percentiles (:mod:`backend.reports.stats`) are exact and identical on
-SQLite and PostgreSQL; means are sums divided in Python and rounded to 1e-6 (the engines may
-add floats in different orders, which changes the last bits only).
+SQLite and PostgreSQL.  Means are sums of seconds quantised to 0.1 ms (:data:`QUANTUM`, the
+resolution the inspection service stores durations with) as whole numbers, which either
+engine adds exactly in any order, divided in Python and rounded to 1e-6; summing the floats
+themselves would differ in the last bits between the engines.
 """
 
 from __future__ import annotations
@@ -11,12 +13,12 @@ from __future__ import annotations
 from datetime import UTC, datetime, timedelta
 from typing import Any, Literal
 
-from sqlalchemy import ColumnElement, String, case, cast, func, literal, select, union_all
+from sqlalchemy import ColumnElement, String, case, cast, func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
-from backend.db.models import Decision, Inspection
+from backend.db.models import Decision, Inspection, InspectionStage
 from backend.reports.filters import DECISIONS, ReportFilters, conditions
-from backend.reports.stats import percentiles, ranked
+from backend.reports.stats import percentiles, percentiles_by_offset, ranked
 from vision.errors import InvalidInput
 
 __all__ = ["BUCKETS", "HIST_BINS", "MAX_BUCKETS", "STAGES", "confusion", "summary", "timeseries"]
@@ -24,6 +26,8 @@ __all__ = ["BUCKETS", "HIST_BINS", "MAX_BUCKETS", "STAGES", "confusion", "summar
 #: Stages of an inspection as ``backend.inspection.service`` times them (``durations`` keys).
 STAGES = ("wait", "move", "settle", "acquire", "segment", "features", "match", "plan", "decide",
           "pose", "pick")  # fmt: skip
+#: Durations are summed as whole multiples of this many seconds (module docstring).
+QUANTUM = 1e-4
 #: Score histogram bins over [0, 1].
 HIST_BINS = 10
 BUCKETS: dict[str, timedelta] = {
@@ -39,6 +43,11 @@ _I = Inspection.__table__.c
 
 def _r6(x: float | None) -> float | None:
     return None if x is None else round(float(x), 6)
+
+
+def _qsum(col: Any) -> Any:
+    """Exact sum of ``col`` in units of :data:`QUANTUM` (whole numbers as floats < 2^53)."""
+    return func.sum(func.round(col * (1.0 / QUANTUM)))
 
 
 def _recognized() -> ColumnElement[bool]:
@@ -57,7 +66,7 @@ async def summary(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
                 func.min(_I.started_at),
                 func.max(_I.started_at),
                 func.count(_I.duration_s),
-                func.sum(_I.duration_s),
+                _qsum(_I.duration_s),
                 func.max(_I.duration_s),
                 func.sum(func.json_array_length(_I.viewpoints_visited)),
             )
@@ -67,13 +76,13 @@ async def summary(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
     ).all()
     by = dict.fromkeys(DECISIONS, 0)
     firsts, lasts, maxes = [], [], []
-    n_dur, sum_dur, sum_views = 0, 0.0, 0
+    n_dur, sum_q, sum_views = 0, 0, 0
     for dec, n, t0, t1, nd, sd, md, sv in rows:
         by[str(dec)] = int(n)
         firsts.append(t0)
         lasts.append(t1)
         n_dur += int(nd)
-        sum_dur += float(sd or 0.0)
+        sum_q += round(float(sd or 0.0))
         sum_views += int(sv or 0)
         if md is not None:
             maxes.append(float(md))
@@ -83,17 +92,19 @@ async def summary(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
         vals = [v for v in values if v is not None]
         return pick(vals).isoformat() if vals else None
 
-    cyc = (await percentiles(session, ranked(_I.duration_s, None, conds), (50, 95, 99))).get(0, {})
+    cyc = await percentiles_by_offset(session, _I.duration_s, conds, (50, 95, 99), n_dur)
     return {
         "count": count,
         "by_decision": by,
         "yield": None if count == 0 else round(by["recognized"] / count, 6),
         "cycle_s": {
-            "p50": cyc.get(50), "p95": cyc.get(95), "p99": cyc.get(99),
-            "mean": _r6(sum_dur / n_dur) if n_dur else None,
+            "p50": cyc.get(50),
+            "p95": cyc.get(95),
+            "p99": cyc.get(99),
+            "mean": _r6(sum_q * QUANTUM / n_dur) if n_dur else None,
             "max": max(maxes) if maxes else None,
-        },  # fmt: skip
-        "stages": await _stages(session, conds),
+        },
+        "stages": await _stages(session, f),
         "views_mean": _r6(sum_views / count) if count else None,
         "per_model": await _per_model(session, conds),
         "first": _t(firsts, min),
@@ -102,25 +113,21 @@ async def summary(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
     }
 
 
-async def _stages(session: AsyncSession, conds: list[Any]) -> dict[str, dict[str, float | None]]:
-    parts = [
-        select(literal(s).label("stage"), Inspection.durations[s].as_float().label("sec")).where(*conds)
-        for s in STAGES
-    ]  # fmt: skip
-    u = union_all(*parts).subquery("stage_values")
+async def _stages(session: AsyncSession, f: ReportFilters) -> dict[str, dict[str, float | None]]:
+    st = InspectionStage.__table__
+    conds = await conditions(session, f, st)
     agg = (
         await session.execute(
-            select(u.c.stage, func.count(u.c.sec), func.sum(u.c.sec))
-            .where(u.c.sec.is_not(None))
-            .group_by(u.c.stage)
+            select(st.c.stage, func.count(), _qsum(st.c.seconds)).where(*conds).group_by(st.c.stage)
         )
     ).all()
-    pct = await percentiles(session, ranked(u.c.sec, u.c.stage, [], source=u), (50, 95))
+    counts = {str(s): int(n) for s, n, _ in agg}
+    means = {str(s): round(float(t)) * QUANTUM / int(n) for s, n, t in agg if n}
     out: dict[str, dict[str, float | None]] = {}
-    means = {str(s): float(t) / int(n) for s, n, t in agg if n}
-    for s in STAGES:  # the service's order
-        if s in means:
-            out[s] = {"mean": _r6(means[s]), "p50": pct[s][50], "p95": pct[s][95]}
+    for s in sorted(means, key=lambda s: (STAGES.index(s) if s in STAGES else len(STAGES), s)):
+        pct = await percentiles_by_offset(session, st.c.seconds, [*conds, st.c.stage == s],
+                                          (50, 95), counts[s])  # fmt: skip
+        out[s] = {"mean": _r6(means[s]), "p50": pct.get(50), "p95": pct.get(95)}
     return out
 
 
@@ -149,13 +156,21 @@ async def _per_model(session: AsyncSession, conds: list[Any]) -> list[dict[str, 
     counts: dict[str, list[int]] = {}
     for m, i, n in hist:
         counts.setdefault(str(m), [0] * HIST_BINS)[int(i)] = int(n)
-    pct = await percentiles(session, ranked(_I.score, _I.model_name, mc), (50, 95))
+    pct = {
+        m: await percentiles_by_offset(session, _I.score, [*mc, _I.model_name == m], (50, 95), n)
+        for m, n, _, _ in agg
+    }
     edges = [round(i / HIST_BINS, 6) for i in range(HIST_BINS + 1)]
     return [
         {
             "model": str(m),
             "count": int(n),
-            "score": {"p50": pct[m][50], "p95": pct[m][95], "min": float(lo), "max": float(hi)},
+            "score": {
+                "p50": pct[m].get(50),
+                "p95": pct[m].get(95),
+                "min": float(lo),
+                "max": float(hi),
+            },
             "hist": {"edges": edges, "counts": counts.get(str(m), [0] * HIST_BINS)},
         }
         for m, n, lo, hi in sorted(agg, key=lambda r: str(r[0]))
@@ -165,7 +180,11 @@ async def _per_model(session: AsyncSession, conds: list[Any]) -> list[dict[str, 
 def _bucket_expr(dialect: str, bucket: str) -> ColumnElement[str]:
     """The bucket's start as ``YYYY-MM-DDTHH:MM:SS`` text (UTC) in either engine's SQL."""
     if dialect == "sqlite":
-        fmt = {"minute": "%Y-%m-%dT%H:%M:00", "hour": "%Y-%m-%dT%H:00:00", "day": "%Y-%m-%dT00:00:00"}
+        fmt = {
+            "minute": "%Y-%m-%dT%H:%M:00",
+            "hour": "%Y-%m-%dT%H:00:00",
+            "day": "%Y-%m-%dT00:00:00",
+        }
         return func.strftime(fmt[bucket], _I.started_at)
     if dialect == "postgresql":
         utc = func.timezone("UTC", _I.started_at)
@@ -206,9 +225,7 @@ async def timeseries(session: AsyncSession, f: ReportFilters,
             )
     bx = _bucket_expr(session.get_bind().dialect.name, bucket).label("t")
     dec = [func.sum(case((_I.decision == d, 1), else_=0)) for d in DECISIONS]
-    rows = (
-        await session.execute(select(bx, func.count(), *dec).where(*conds).group_by(bx))
-    ).all()
+    rows = (await session.execute(select(bx, func.count(), *dec).where(*conds).group_by(bx))).all()
     p50 = await percentiles(session, ranked(_I.duration_s, bx, conds), (50,))
     by_t = {str(r[0]): r for r in rows}
     data: list[dict[str, Any]] = []
@@ -255,4 +272,10 @@ async def confusion(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
     for t, lb, n in rows:
         matrix[ti[str(t)]][li[str(lb)]] += int(n)
         total += int(n)
-    return {"labels": labels, "truth": truths, "matrix": matrix, "count": total, "filters": f.echo()}
+    return {
+        "labels": labels,
+        "truth": truths,
+        "matrix": matrix,
+        "count": total,
+        "filters": f.echo(),
+    }

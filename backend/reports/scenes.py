@@ -26,7 +26,13 @@ from sqlalchemy.ext.asyncio import AsyncSession
 from backend.db.models import InspectionScene
 from vision.errors import NotFound
 
-__all__ = ["CLOCK_S", "MAX_SCENE_BYTES", "MAX_SCENE_S", "SceneRecorder", "read_scene"]
+__all__ = [
+    "CLOCK_S",
+    "MAX_SCENE_BYTES",
+    "MAX_SCENE_S",
+    "SceneRecorder",
+    "read_scene",
+]
 
 log = logging.getLogger(__name__)
 

@@ -7,6 +7,12 @@ value of rank ``ceil(p n / 100)`` in ascending order, so it is always one of the
 ranks with the same window functions (``ROW_NUMBER() OVER (PARTITION BY k ORDER BY v)``,
 ``COUNT(*) OVER (PARTITION BY k)``) and the same integer arithmetic, and only the rows at
 the wanted ranks leave the database.
+
+:func:`percentiles_by_offset` gives the same values without window functions: a count, then
+``ORDER BY v LIMIT 1 OFFSET rank - 1`` per percentile, which an index on ``v`` (or on
+``(group, v)``) answers by walking the index instead of sorting; SQLite's window functions
+materialise and sort every row, which is several times slower over 100,000 rows
+(``benchmarks/reports.py``).
 """
 
 from __future__ import annotations
@@ -17,7 +23,7 @@ from typing import Any
 from sqlalchemy import ColumnElement, Subquery, func, literal, or_, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
-__all__ = ["nearest_rank", "percentiles", "ranked"]
+__all__ = ["nearest_rank", "percentiles", "percentiles_by_offset", "ranked"]
 
 
 def nearest_rank(p: int, n: int) -> int:
@@ -52,10 +58,29 @@ async def percentiles(session: AsyncSession, sub: Subquery, ps: Sequence[int]) -
     want = or_(*[sub.c.rn == (sub.c.n * p + 99) // 100 for p in ps])
     rows = (await session.execute(select(sub.c.k, sub.c.v, sub.c.rn, sub.c.n).where(want))).all()
     at: dict[Any, dict[int, float]] = {}
-    for k, v, rn, n in rows:
+    for k, v, rn, _ in rows:
         at.setdefault(k, {})[int(rn)] = float(v)
     out: dict[Any, dict[int, float]] = {}
     counts = {k: n for k, _, _, n in rows}
     for k, by_rank in at.items():
         out[k] = {p: by_rank[nearest_rank(p, int(counts[k]))] for p in ps}
+    return out
+
+
+async def percentiles_by_offset(session: AsyncSession, value: ColumnElement[Any], conds: Sequence[Any],
+                                ps: Sequence[int], n: int | None = None) -> dict[int, float]:  # fmt: skip
+    """``{p: value}``: the nearest-rank percentiles of ``value`` over the rows matching
+    ``conds`` (``n``: their number of non-null values, counted when not given)."""
+    where = [value.is_not(None), *conds]
+    if n is None:
+        n = int(await session.scalar(select(func.count(value)).where(*where)) or 0)
+    if n == 0:
+        return {}
+    out: dict[int, float] = {}
+    for p in ps:
+        k = nearest_rank(p, n) - 1
+        v = await session.scalar(select(value).where(*where).order_by(value).limit(1).offset(k))
+        if v is None:  # rows deleted between the count and this query
+            break
+        out[p] = float(v)
     return out

@@ -94,7 +94,9 @@ async def _db_rows(url: str) -> dict[int, Any]:
     db = Database(url)
     try:
         async with db.session() as s:
-            rows = (await s.scalars(select(Inspection).where(Inspection.policy == "best-next"))).all()
+            rows = (
+                await s.scalars(select(Inspection).where(Inspection.policy == "best-next"))
+            ).all()
             return {r.id: r for r in rows}
     finally:
         await db.dispose()
@@ -153,7 +155,9 @@ def test_storage_and_prune(settings, client, headers) -> None:
     r = client.post("/api/reports/storage/prune", json={"older_than_days": -1},
                     headers=headers["engineer"])  # fmt: skip
     assert r.status_code == 422
-    r = client.post("/api/reports/storage/prune", json={"max_bytes": "1"}, headers=headers["engineer"])
+    r = client.post(
+        "/api/reports/storage/prune", json={"max_bytes": "1"}, headers=headers["engineer"]
+    )
     assert r.status_code == 422
     # The size cap: the oldest inspection's images and scene go first, all together.
     r = client.post("/api/reports/storage/prune", json={"max_bytes": 2 * 1554},

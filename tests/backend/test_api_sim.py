@@ -258,3 +258,19 @@ def test_sim_driver_moves_with_tracking_errors_in_the_job(sim, roles):
     assert 0.0 < result["rms_tracking_error_rad"] <= 5e-3
     state = sim.get("/api/robot/state", headers=roles["viewer"]).json()["state"]
     assert state["q"] == pytest.approx(ready, abs=0.5e-3)
+
+
+def test_conveyor_tells_where_the_station_is(sim, eng):
+    """The console places objects at the station: GET /api/sim/conveyor gives its position."""
+    conv = sim.get("/api/sim/conveyor", headers=eng).json()["conveyor"]
+    station = sim.app.state.runtime.sim.config.layout.conveyor.station_s_m
+    assert conv["station_s_m"] == pytest.approx(station)
+    obj = sim.post(
+        "/api/sim/objects",
+        json={"name": "gear-housing", "position_along_belt_m": conv["station_s_m"]},
+        headers=eng,
+    ).json()["object"]
+    try:
+        assert obj["position_along_belt_m"] == pytest.approx(station)
+    finally:
+        sim.delete(f"/api/sim/objects/{obj['id']}", headers=eng)

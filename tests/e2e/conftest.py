@@ -70,7 +70,7 @@ class Server:
         return time.monotonic() - t0
 
 
-def start_server(tmp_path: Path, *, start_timeout_s: float = 90.0, **extra_env: str) -> Server:
+def start_server(tmp_path: Path, *, ready_s: float = 90.0, **extra_env: str) -> Server:
     http_port, viser_port = free_port(), free_port()
     env = {
         **os.environ,
@@ -98,7 +98,7 @@ def start_server(tmp_path: Path, *, start_timeout_s: float = 90.0, **extra_env: 
     server = Server(
         proc, f"http://127.0.0.1:{http_port}", f"http://127.0.0.1:{viser_port}", env, log
     )
-    deadline = time.monotonic() + start_timeout_s
+    deadline = time.monotonic() + ready_s
     while time.monotonic() < deadline:
         if proc.poll() is not None:
             raise RuntimeError(f"visioncell serve exited early:\n{log.read_text()}")
@@ -109,9 +109,7 @@ def start_server(tmp_path: Path, *, start_timeout_s: float = 90.0, **extra_env: 
             pass
         time.sleep(0.3)
     server.stop()
-    raise RuntimeError(
-        f"visioncell serve did not answer within {start_timeout_s} s:\n{log.read_text()}"
-    )
+    raise RuntimeError(f"visioncell serve did not answer within {ready_s:g} s:\n{log.read_text()}")
 
 
 @pytest.fixture(scope="module")

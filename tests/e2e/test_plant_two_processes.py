@@ -30,7 +30,7 @@ JOB_S = 600.0  # one job on a loaded machine (a bound, not a timing assertion)
 def _start(tmp_path, url: str, name: str) -> Server:
     return start_server(
         tmp_path / name,
-        start_timeout_s=300.0,  # two simulated cells starting on a loaded machine
+        ready_s=300.0,  # two simulated cells starting on a loaded machine
         VISIONCELL_DATABASE_URL=url,
         VISIONCELL_CELL_NAME=name,
         VISIONCELL_DRIVER="sim",

@@ -30,6 +30,9 @@ function empty(g, w, h, text) {
   g.fillText(text, w / 2, h / 2);
 }
 
+/** An axis top for counts whose four tick steps are whole numbers. */
+const countTop = (top) => Math.max(4, Math.ceil((top * 1.1) / 4) * 4);
+
 const fmt = (v) => (Math.abs(v) >= 100 ? v.toFixed(0) : Math.abs(v) >= 10 ? v.toFixed(1) : v.toFixed(2));
 
 /**
@@ -129,7 +132,7 @@ export function histogram(canvas, edges, series, { mark = null, density = false,
   });
   const top = Math.max(0, ...shown.flatMap((s) => s.values));
   if (!edges.length || top === 0) { empty(g, w, h, "no data"); return; }
-  const a = axes(g, w, h, { x0: edges[0], x1: edges[edges.length - 1], y0: 0, y1: top * 1.1,
+  const a = axes(g, w, h, { x0: edges[0], x1: edges[edges.length - 1], y0: 0, y1: density ? top * 1.1 : countTop(top),
     xLabel, yLabel: density ? "share" : "count" });
   shown.forEach((s, si) => {
     const color = s.color || COLORS[si % COLORS.length];
@@ -198,7 +201,7 @@ export function columns(canvas, items, { stack = null, yLabel = "" } = {}) {
   if (!items.length || top === 0) { empty(g, w, h, "no data"); return; }
   const every = Math.max(1, Math.ceil(items.length / 8));
   const ticks = items.map((it, i) => ({ v: i + 0.5, label: i % every ? "" : it.label }));
-  const a = axes(g, w, h, { x0: 0, x1: items.length, y0: 0, y1: top * 1.1, yLabel, xTicks: ticks });
+  const a = axes(g, w, h, { x0: 0, x1: items.length, y0: 0, y1: countTop(top), yLabel, xTicks: ticks });
   const bw = Math.max(1, (a.sx(1) - a.sx(0)) * 0.8);
   items.forEach((it, i) => {
     let base = 0;

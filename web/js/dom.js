@@ -73,9 +73,10 @@ let lazyObserver = null;
 /**
  * An `<img loading="lazy">` for an API image: the bearer-token request (which the browser's
  * own lazy loading cannot make) starts only when the image comes near the viewport.
- * `fetchBlob(url)` is the caller's authenticated fetch.
+ * `fetchBlob(url)` is the caller's authenticated fetch; when it fails, a `fallback` text
+ * (if given) takes the image's place.
  */
-export function lazyImage(url, fetchBlob, { alt = "", className = "" } = {}) {
+export function lazyImage(url, fetchBlob, { alt = "", className = "", fallback = "" } = {}) {
   const img = el("img", { alt, className, loading: "lazy", decoding: "async", dataset: { src: url } });
   if (!lazyObserver) {
     lazyObserver = new IntersectionObserver((entries) => {
@@ -86,11 +87,16 @@ export function lazyImage(url, fetchBlob, { alt = "", className = "" } = {}) {
         node._fetch(node.dataset.src).then((blob) => {
           if (node.isConnected) showBlob(node, blob);
           node.dataset.loaded = "1";
-        }).catch(() => { node.classList.add("broken"); node.dataset.loaded = "0"; });
+        }).catch(() => {
+          node.classList.add("broken");
+          node.dataset.loaded = "0";
+          if (node._fallback && node.isConnected) node.replaceWith(el("span", { className: `${node.className} fallback` }, node._fallback));
+        });
       }
     }, { rootMargin: "200px" });
   }
   img._fetch = fetchBlob;
+  img._fallback = fallback;
   lazyObserver.observe(img);
   return img;
 }

@@ -232,6 +232,8 @@ async def prune_storage(
 
 @router.get("/inspections/{inspection_id}/scene", response_class=Response,
             summary="The 3D scene recorded during the inspection (viser scene serializer)")  # fmt: skip
-async def read_inspection_scene(_: ViewerUser, session: SessionDep, inspection_id: DbId) -> Response:
+async def read_inspection_scene(
+    _: ViewerUser, session: SessionDep, inspection_id: DbId
+) -> Response:
     data = await read_scene(session, inspection_id)
     return Response(data, media_type="application/octet-stream")

@@ -77,7 +77,7 @@ function viewCard(v) {
   const card = el("figure", { className: "view-card", dataset: { view: Number(v.id), viewpoint: v.viewpoint } },
     el("div", { className: "view-pair" },
       lazyImage(v.thumbnail_url, fetchBlob, { alt: `view ${v.id}` }),
-      lazyImage(v.mask_url, fetchBlob, { alt: `mask of view ${v.id}`, className: "mask" })),
+      lazyImage(v.mask_url, fetchBlob, { alt: `mask of view ${v.id}`, className: "mask", fallback: "no mask: the whole image" })),
     el("figcaption", {}, `#${v.id} vp ${v.viewpoint} · ${v.keypoints} kp · ${v.source}`,
       v.stale ? el("span", { className: "alarm" }, ` stale: ${v.stale}`) : ""));
   if (ctx.can("engineer")) {
@@ -245,7 +245,7 @@ function onTeachJob(job) {
     el("div", { className: "views-grid" }, ...(res.views || []).map((v, i) => el("figure", { className: "view-card new-view" },
       el("div", { className: "view-pair" },
         lazyImage(v.thumbnail_url, fetchBlob, { alt: `new view ${v.id}` }),
-        lazyImage(v.mask_url, fetchBlob, { alt: `mask of new view ${v.id}`, className: "mask" })),
+        lazyImage(v.mask_url, fetchBlob, { alt: `mask of new view ${v.id}`, className: "mask", fallback: "no mask: the whole image" })),
       el("figcaption", {}, `vp ${v.viewpoint}${shots[i] ? ` · ${shots[i].mask_px} px mask · ${shots[i].segmentation}` : ""}`)))));
   const conf = res.confusable_from_top || [];
   if (conf.length) out.append(confusableList(conf));
