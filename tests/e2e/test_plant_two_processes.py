@@ -20,7 +20,9 @@ from tests.utils.factories import make_settings, make_tokens
 from tests.utils.models import png_bytes, textured_rgb
 from tests.utils.postgres import postgres_url  # noqa: F401  (the fixture)
 
-pytestmark = [pytest.mark.e2e, pytest.mark.slow]
+# Two simulated cells teach and inspect: about two minutes on an idle 2-core machine, far
+# more when it is shared; every wait below is bounded on its own.
+pytestmark = [pytest.mark.e2e, pytest.mark.slow, pytest.mark.timeout(1800)]
 
 STATION = ConveyorSpec().station_s_m
 TIMEOUT = 30.0  # one request
