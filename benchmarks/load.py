@@ -14,12 +14,17 @@ their own CPU time is not the server's:
 * ``--sockets`` console WebSockets (``/api/ws``); the lag of a message is its receipt time
   minus its ``at`` (when the server's event was made; one machine, one clock).
 
+``--route-cpu N`` measures instead the server's CPU per request of each route (one client,
+``N`` requests per route, a ``visioncell serve`` child on the ideal arm): a figure that,
+unlike latencies, hardly moves with the machine's load.
+
 Phases, in one run: ``--cycles`` inspections without load, the same with the clients
 running, and again without load; the baseline is the median over both unloaded phases and
 the slowdown is the ratio of the medians.  Targets: read p99 <= 100 ms on every route,
 cycle time +10 % at most.  Run::
 
     nice -n 5 .venv/bin/python -m benchmarks.load [--clients 50 --sockets 10 --cycles 12] [--json]
+    .venv/bin/python -m benchmarks.load --route-cpu 40 [--json]
 """
 
 from __future__ import annotations
@@ -408,6 +413,100 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
     }
 
 
+def _proc_cpu_s(pid: int) -> float:
+    """User + system CPU seconds of process ``pid`` (Linux ``/proc``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def route_cpu(requests: int = 40) -> dict[str, Any]:
+    """Server CPU per request of each route: ``visioncell serve`` (ideal arm, folder camera)
+    in a child process, one client asking each route ``requests`` times in a row; the
+    server's idle CPU over the same time is subtracted.  CPU time, unlike latency, hardly
+    depends on what else the machine runs."""
+    import subprocess
+
+    import cv2
+    import httpx
+    import numpy as np
+
+    from backend.db.migrate import upgrade
+
+    if not 5 <= requests <= 10_000:
+        raise ValueError(f"requests must be within 5..10000, got {requests!r}")
+    tmp = Path(tempfile.mkdtemp(prefix="bench-route-cpu-"))
+    images = tmp / "images"
+    images.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(3):
+        cv2.imwrite(str(images / f"{i}.png"), rng.integers(0, 255, (480, 640, 3), dtype=np.uint8))
+    ns = argparse.Namespace(database_url=None, time_scale=1.0)
+    settings = _settings(tmp, ns)
+    upgrade(settings.database_url)
+    token = asyncio.run(_token(settings))
+    env = {
+        **os.environ, "VISIONCELL_DATABASE_URL": settings.database_url,
+        "VISIONCELL_VAR_DIR": str(tmp / "var"), "VISIONCELL_HTTP_PORT": str(settings.http_port),
+        "VISIONCELL_VISER_PORT": str(_free_port()), "VISIONCELL_VIEW3D_ENABLED": "false",
+        "VISIONCELL_SECRET_KEY": settings.secret_key.get_secret_value(),
+        "VISIONCELL_DRIVER": "ideal", "VISIONCELL_CAMERA": "folder",
+        "VISIONCELL_CAMERA_FOLDER": str(images), "VISIONCELL_BOOTSTRAP_OPERATOR": "false",
+    }  # fmt: skip
+    log = (tmp / "serve.log").open("w")
+    proc = subprocess.Popen([sys.executable, "-m", "backend.cli", "serve"], env=env,
+                            stdout=log, stderr=subprocess.STDOUT)  # fmt: skip
+    base = f"http://127.0.0.1:{settings.http_port}"
+    out_rows: dict[str, Any] = {}
+    try:
+        deadline = time.monotonic() + 300
+        while True:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"visioncell serve did not start: {tmp / 'serve.log'}")
+            try:
+                if httpx.get(f"{base}/api/health", timeout=1).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                pass
+            time.sleep(0.3)
+        with httpx.Client(base_url=base, headers={"Authorization": f"Bearer {token}"},
+                          timeout=REQUEST_TIMEOUT_S) as c:  # fmt: skip
+            for route in ROUTES:
+                c.get(route)
+            c0, t0 = _proc_cpu_s(proc.pid), time.monotonic()
+            time.sleep(5.0)
+            idle = (_proc_cpu_s(proc.pid) - c0) / (time.monotonic() - t0)
+            for route in ROUTES:
+                c0, t0 = _proc_cpu_s(proc.pid), time.monotonic()
+                codes = [c.get(route).status_code for _ in range(requests)]
+                wall = time.monotonic() - t0
+                used = _proc_cpu_s(proc.pid) - c0 - idle * wall
+                out_rows[route.split("?")[0]] = {
+                    "cpu_ms": max(0.0, used) / requests * 1e3,
+                    "wall_ms": wall / requests * 1e3,
+                    "ok": all(code == 200 for code in codes),
+                }
+                err.print(f"[route cpu] {route}: {out_rows[route.split('?')[0]]}", markup=False)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        log.close()
+    return {"requests_per_route": requests, "idle_cpu_pct": idle * 100, "routes": out_rows}
+
+
+def _print_route_cpu(res: dict[str, Any]) -> None:
+    t = Table(title=f"Server CPU per request, one client ({res['requests_per_route']} requests "
+                    f"per route; idle server {res['idle_cpu_pct']:.1f} % of a core subtracted)")  # fmt: skip
+    for col in ("route", "CPU ms / request", "wall ms / request", "all 200"):
+        t.add_column(col)
+    for name, r in res["routes"].items():
+        t.add_row(name, f"{r['cpu_ms']:.1f}", f"{r['wall_ms']:.1f}", "yes" if r["ok"] else "NO")
+    out.print(t)
+
+
 def _f(v: float | None, fmt: str = "{:.1f}") -> str:
     return "-" if v is None else fmt.format(v)
 
@@ -463,6 +562,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--database-url", default=None, help="default: a fresh SQLite file")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument(
+        "--route-cpu", type=int, default=None, metavar="N",
+        help="only measure the server's CPU per request of each route (N requests each)",
+    )  # fmt: skip
     ap.add_argument("--clients-only", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--base", default="", help=argparse.SUPPRESS)
     ap.add_argument("--token", default="", help=argparse.SUPPRESS)
@@ -481,6 +584,14 @@ def main(argv: list[str] | None = None) -> None:
         if not args.base.startswith("http://") or not args.token:
             ap.error("--clients-only needs --base http://... and --token")
         asyncio.run(_clients_main(args))
+        return
+    if args.route_cpu is not None:
+        if not 5 <= args.route_cpu <= 10_000:
+            ap.error(f"--route-cpu must be in 5..10000, got {args.route_cpu}")
+        cpu = route_cpu(args.route_cpu)
+        _print_route_cpu(cpu)
+        if args.json:
+            print(json.dumps(cpu))
         return
     res = asyncio.run(_run(args))
     _print(res)
