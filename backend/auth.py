@@ -28,6 +28,7 @@ __all__ = [
     "TOKEN_PREFIX",
     "UserExists",
     "authenticate",
+    "authenticate_with_expiry",
     "create_user",
     "hash_token",
     "issue_token",
@@ -37,6 +38,7 @@ __all__ = [
     "token_expiry",
     "token_is_live",
     "validate_user_name",
+    "well_formed",
 ]
 
 TOKEN_PREFIX = "vc_"
@@ -162,9 +164,22 @@ async def revoke_tokens(session: AsyncSession, user: User, *, label: str | None 
 LAST_USED_RESOLUTION_S = 60.0
 
 
+def well_formed(token: object) -> bool:
+    """Whether ``token`` has the shape of a VisionCell token (checked before any lookup)."""
+    return isinstance(token, str) and token.startswith(TOKEN_PREFIX) and len(token) <= 200
+
+
 async def authenticate(session: AsyncSession, token: str, secret: str) -> User | None:
     """The enabled user owning ``token`` if it is neither revoked nor expired, or None."""
-    if not isinstance(token, str) or not token.startswith(TOKEN_PREFIX) or len(token) > 200:
+    found = await authenticate_with_expiry(session, token, secret)
+    return None if found is None else found[0]
+
+
+async def authenticate_with_expiry(
+    session: AsyncSession, token: str, secret: str
+) -> tuple[User, datetime | None] | None:
+    """:func:`authenticate` with the token's expiry (for :class:`backend.authcache.AuthCache`)."""
+    if not well_formed(token):
         return None
     row = await session.scalar(
         select(ApiToken)
@@ -181,7 +196,7 @@ async def authenticate(session: AsyncSession, token: str, secret: str) -> User |
     # time: readers queued behind inspections); "last used" to the minute is enough.
     if last is None or (now - last).total_seconds() >= LAST_USED_RESOLUTION_S:
         row.last_used_at = now
-    return row.user
+    return row.user, row.expires_at
 
 
 async def token_is_live(session: AsyncSession, token: str, secret: str) -> bool:

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 
+from backend.authcache import AuthCache
 from backend.cell import Cell, EventBus
 from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Cell as CellRow
@@ -144,6 +145,8 @@ class CellRuntime:
         #: The continuous inspection run, if one was started (``backend.inspection.service``).
         self.inspection_run: Any = None
         #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).
+        #: Successful sign-ins reused for 2 s (``backend.authcache``).
+        self.auth_cache = AuthCache()
         self.signin_throttle = SignInThrottle(
             max_failures=settings.signin_max_failures,
             window_s=settings.signin_window_s,

@@ -14,12 +14,17 @@ their own CPU time is not the server's:
 * ``--sockets`` console WebSockets (``/api/ws``); the lag of a message is its receipt time
   minus its ``at`` (when the server's event was made; one machine, one clock).
 
+``--route-cpu N`` measures instead the server's CPU per request of each route (one client,
+``N`` requests per route, a ``visioncell serve`` child on the ideal arm): a figure that,
+unlike latencies, hardly moves with the machine's load.
+
 Phases, in one run: ``--cycles`` inspections without load, the same with the clients
 running, and again without load; the baseline is the median over both unloaded phases and
 the slowdown is the ratio of the medians.  Targets: read p99 <= 100 ms on every route,
 cycle time +10 % at most.  Run::
 
     nice -n 5 .venv/bin/python -m benchmarks.load [--clients 50 --sockets 10 --cycles 12] [--json]
+    .venv/bin/python -m benchmarks.load --route-cpu 40 [--json]
 """
 
 from __future__ import annotations
@@ -67,6 +72,8 @@ MAX_CLIENTS = 500
 MAX_SOCKETS = 100
 MAX_CYCLES = 500
 REQUEST_TIMEOUT_S = 30.0
+#: Seconds of load before the loaded cycles start and the clients' figures count.
+WARMUP_S = 5.0
 
 
 def _q(xs: list[float], q: float) -> float | None:
@@ -79,36 +86,35 @@ def _q(xs: list[float], q: float) -> float | None:
 
 # -- the clients (child process, or called by the tests) ------------------------------------
 async def _rest_client(
-    k: int, base: str, token: str, think_s: float, stop: asyncio.Event, lat: dict[str, list[float]],
-    status: dict[str, dict[int, int]], routes: tuple[str, ...],
+    k: int, c: Any, think_s: float, stop: asyncio.Event, lat: dict[str, list[float]],
+    status: dict[str, dict[int, int]], routes: tuple[str, ...], measure_from: float,
 ) -> None:  # fmt: skip
     import httpx
 
-    hdr = {"Authorization": f"Bearer {token}"}
     i = k % len(routes)
-    async with httpx.AsyncClient(base_url=base, headers=hdr, timeout=REQUEST_TIMEOUT_S) as c:
-        while not stop.is_set():
-            route = routes[i]
-            i = (i + 1) % len(routes)
-            t0 = time.perf_counter()
-            try:
-                r = await c.get(route)
-                code = r.status_code
-            except httpx.HTTPError:
-                code = 0  # no answer (counted, never a latency)
-            dt = time.perf_counter() - t0
+    while not stop.is_set():
+        route = routes[i]
+        i = (i + 1) % len(routes)
+        t0 = time.perf_counter()
+        try:
+            r = await c.get(route)
+            code = r.status_code
+        except httpx.HTTPError:
+            code = 0  # no answer (counted, never a latency)
+        dt = time.perf_counter() - t0
+        if t0 >= measure_from:
             name = route.split("?")[0]
             status[name][code] = status[name].get(code, 0) + 1
             if code == 200:
                 lat[name].append(dt * 1e3)
-            if think_s > 0:
-                with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(stop.wait(), think_s)
+        if think_s > 0:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), think_s)
 
 
 async def _socket_client(
     ws_url: str, token: str, stop: asyncio.Event, lags: list[float], kinds: dict[str, int],
-    errors: list[str],
+    errors: list[str], measure_from: float,
 ) -> None:  # fmt: skip
     import websockets
 
@@ -121,6 +127,8 @@ async def _socket_client(
                 except TimeoutError:
                     continue
                 now = time.time()
+                if time.perf_counter() < measure_from:
+                    continue
                 msg = json.loads(raw)
                 kind = str(msg.get("type"))
                 kinds[kind] = kinds.get(kind, 0) + 1
@@ -133,14 +141,23 @@ async def _socket_client(
 
 async def run_clients(
     base: str, token: str, *, clients: int, sockets: int, think_s: float, stop: asyncio.Event,
-    routes: tuple[str, ...] = ROUTES,
+    routes: tuple[str, ...] = ROUTES, warmup_s: float = 0.0,
 ) -> dict[str, Any]:  # fmt: skip
     """Run ``clients`` REST readers and ``sockets`` console WebSockets until ``stop`` is set;
-    return per-route latencies (ms, p50/p99/max), status counts and WebSocket lags."""
+    return per-route latencies (ms, p50/p99/max), status counts and WebSocket lags, leaving
+    out the first ``warmup_s`` seconds (connections being opened).
+
+    The REST clients share one httpx client with a connection each (``clients``
+    connections): one TLS context and pool instead of fifty, whose set-up alone kept a
+    loaded machine's client process busy for seconds."""
+    import httpx
+
     if not (0 <= clients <= MAX_CLIENTS and 0 <= sockets <= MAX_SOCKETS):
         raise ValueError(f"clients 0..{MAX_CLIENTS}, sockets 0..{MAX_SOCKETS}")
     if not (0.0 <= think_s <= 60.0):
         raise ValueError(f"think_s must be within 0..60 s, got {think_s!r}")
+    if not (0.0 <= warmup_s <= 600.0):
+        raise ValueError(f"warmup_s must be within 0..600 s, got {warmup_s!r}")
     lat: dict[str, list[float]] = defaultdict(list)
     status: dict[str, dict[int, int]] = defaultdict(dict)
     lags: list[float] = []
@@ -148,15 +165,27 @@ async def run_clients(
     errors: list[str] = []
     ws_url = base.replace("http://", "ws://", 1) + "/api/ws"
     t0 = time.perf_counter()
-    tasks = [
-        asyncio.create_task(_rest_client(k, base, token, think_s, stop, lat, status, routes))
-        for k in range(clients)
-    ] + [
-        asyncio.create_task(_socket_client(ws_url, token, stop, lags, kinds, errors))
-        for _ in range(sockets)
-    ]
-    await asyncio.gather(*tasks)
-    wall = time.perf_counter() - t0
+    measure_from = t0 + warmup_s
+    limits = httpx.Limits(
+        max_connections=max(1, clients), max_keepalive_connections=max(1, clients)
+    )
+    hdr = {"Authorization": f"Bearer {token}"}
+    async with httpx.AsyncClient(
+        base_url=base, headers=hdr, timeout=REQUEST_TIMEOUT_S, limits=limits
+    ) as c:
+        tasks = [
+            asyncio.create_task(
+                _rest_client(k, c, think_s, stop, lat, status, routes, measure_from)
+            )
+            for k in range(clients)
+        ] + [
+            asyncio.create_task(
+                _socket_client(ws_url, token, stop, lags, kinds, errors, measure_from)
+            )
+            for _ in range(sockets)
+        ]
+        await asyncio.gather(*tasks)
+    wall = time.perf_counter() - max(t0, min(measure_from, time.perf_counter()))
     per_route = {
         name: {
             "n": len(lat[name]),
@@ -197,7 +226,7 @@ async def _clients_main(args: argparse.Namespace) -> None:
 
     waiter = asyncio.create_task(wait_eof())
     res = await run_clients(args.base, args.token, clients=args.clients, sockets=args.sockets,
-                            think_s=args.think, stop=stop)  # fmt: skip
+                            think_s=args.think, stop=stop, warmup_s=WARMUP_S)  # fmt: skip
     waiter.cancel()
     print(json.dumps(res), flush=True)
 
@@ -356,7 +385,7 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         stdout=asyncio.subprocess.PIPE,
     )  # fmt: skip
     try:
-        await asyncio.sleep(2.0)  # the clients connect and reach their steady rate
+        await asyncio.sleep(WARMUP_S)  # the clients connect and reach their steady rate
         loaded = await _cycles(rt, ctx, args.cycles, "load", rng, "gear-housing")
         assert child.stdin is not None
         child.stdin.close()
@@ -382,6 +411,100 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         "load": clients,
         "database": "postgresql" if settings.database_url.startswith("postgresql") else "sqlite",
     }
+
+
+def _proc_cpu_s(pid: int) -> float:
+    """User + system CPU seconds of process ``pid`` (Linux ``/proc``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def route_cpu(requests: int = 40) -> dict[str, Any]:
+    """Server CPU per request of each route: ``visioncell serve`` (ideal arm, folder camera)
+    in a child process, one client asking each route ``requests`` times in a row; the
+    server's idle CPU over the same time is subtracted.  CPU time, unlike latency, hardly
+    depends on what else the machine runs."""
+    import subprocess
+
+    import cv2
+    import httpx
+    import numpy as np
+
+    from backend.db.migrate import upgrade
+
+    if not 5 <= requests <= 10_000:
+        raise ValueError(f"requests must be within 5..10000, got {requests!r}")
+    tmp = Path(tempfile.mkdtemp(prefix="bench-route-cpu-"))
+    images = tmp / "images"
+    images.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(3):
+        cv2.imwrite(str(images / f"{i}.png"), rng.integers(0, 255, (480, 640, 3), dtype=np.uint8))
+    ns = argparse.Namespace(database_url=None, time_scale=1.0)
+    settings = _settings(tmp, ns)
+    upgrade(settings.database_url)
+    token = asyncio.run(_token(settings))
+    env = {
+        **os.environ, "VISIONCELL_DATABASE_URL": settings.database_url,
+        "VISIONCELL_VAR_DIR": str(tmp / "var"), "VISIONCELL_HTTP_PORT": str(settings.http_port),
+        "VISIONCELL_VISER_PORT": str(_free_port()), "VISIONCELL_VIEW3D_ENABLED": "false",
+        "VISIONCELL_SECRET_KEY": settings.secret_key.get_secret_value(),
+        "VISIONCELL_DRIVER": "ideal", "VISIONCELL_CAMERA": "folder",
+        "VISIONCELL_CAMERA_FOLDER": str(images), "VISIONCELL_BOOTSTRAP_OPERATOR": "false",
+    }  # fmt: skip
+    log = (tmp / "serve.log").open("w")
+    proc = subprocess.Popen([sys.executable, "-m", "backend.cli", "serve"], env=env,
+                            stdout=log, stderr=subprocess.STDOUT)  # fmt: skip
+    base = f"http://127.0.0.1:{settings.http_port}"
+    out_rows: dict[str, Any] = {}
+    try:
+        deadline = time.monotonic() + 300
+        while True:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"visioncell serve did not start: {tmp / 'serve.log'}")
+            try:
+                if httpx.get(f"{base}/api/health", timeout=1).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                pass
+            time.sleep(0.3)
+        with httpx.Client(base_url=base, headers={"Authorization": f"Bearer {token}"},
+                          timeout=REQUEST_TIMEOUT_S) as c:  # fmt: skip
+            for route in ROUTES:
+                c.get(route)
+            c0, t0 = _proc_cpu_s(proc.pid), time.monotonic()
+            time.sleep(5.0)
+            idle = (_proc_cpu_s(proc.pid) - c0) / (time.monotonic() - t0)
+            for route in ROUTES:
+                c0, t0 = _proc_cpu_s(proc.pid), time.monotonic()
+                codes = [c.get(route).status_code for _ in range(requests)]
+                wall = time.monotonic() - t0
+                used = _proc_cpu_s(proc.pid) - c0 - idle * wall
+                out_rows[route.split("?")[0]] = {
+                    "cpu_ms": max(0.0, used) / requests * 1e3,
+                    "wall_ms": wall / requests * 1e3,
+                    "ok": all(code == 200 for code in codes),
+                }
+                err.print(f"[route cpu] {route}: {out_rows[route.split('?')[0]]}", markup=False)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        log.close()
+    return {"requests_per_route": requests, "idle_cpu_pct": idle * 100, "routes": out_rows}
+
+
+def _print_route_cpu(res: dict[str, Any]) -> None:
+    t = Table(title=f"Server CPU per request, one client ({res['requests_per_route']} requests "
+                    f"per route; idle server {res['idle_cpu_pct']:.1f} % of a core subtracted)")  # fmt: skip
+    for col in ("route", "CPU ms / request", "wall ms / request", "all 200"):
+        t.add_column(col)
+    for name, r in res["routes"].items():
+        t.add_row(name, f"{r['cpu_ms']:.1f}", f"{r['wall_ms']:.1f}", "yes" if r["ok"] else "NO")
+    out.print(t)
 
 
 def _f(v: float | None, fmt: str = "{:.1f}") -> str:
@@ -439,6 +562,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--database-url", default=None, help="default: a fresh SQLite file")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument(
+        "--route-cpu", type=int, default=None, metavar="N",
+        help="only measure the server's CPU per request of each route (N requests each)",
+    )  # fmt: skip
     ap.add_argument("--clients-only", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--base", default="", help=argparse.SUPPRESS)
     ap.add_argument("--token", default="", help=argparse.SUPPRESS)
@@ -457,6 +584,14 @@ def main(argv: list[str] | None = None) -> None:
         if not args.base.startswith("http://") or not args.token:
             ap.error("--clients-only needs --base http://... and --token")
         asyncio.run(_clients_main(args))
+        return
+    if args.route_cpu is not None:
+        if not 5 <= args.route_cpu <= 10_000:
+            ap.error(f"--route-cpu must be in 5..10000, got {args.route_cpu}")
+        cpu = route_cpu(args.route_cpu)
+        _print_route_cpu(cpu)
+        if args.json:
+            print(json.dumps(cpu))
         return
     res = asyncio.run(_run(args))
     _print(res)

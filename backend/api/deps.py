@@ -17,7 +17,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.api.errors import ApiError
-from backend.auth import authenticate
+from backend.auth import authenticate_with_expiry, hash_token, well_formed
 from backend.cell import Cell
 from backend.db.models import Role, User
 from backend.db.session import Database
@@ -126,7 +126,7 @@ def get_view3d(conn: HTTPConnection) -> View3D | None:
 async def get_session(
     db: Annotated[Database, Depends(get_database)],
 ) -> AsyncIterator[AsyncSession]:
-    async with db.session() as session:
+    async with db.api_slots, db.session() as session:  # leave connections for the cell
         yield session
 
 
@@ -139,6 +139,28 @@ SimDep = Annotated[Any, Depends(get_sim_or_none)]
 View3DDep = Annotated[Any, Depends(get_view3d)]
 SessionDep = Annotated[AsyncSession, Depends(get_session)]
 CellDep = Annotated[Cell, Depends(get_cell)]
+
+
+async def _signed_in(
+    conn: HTTPConnection, db: Database, token: str, settings: Settings
+) -> User | None:
+    """The user of ``token``: from the runtime's short-lived sign-in cache
+    (:mod:`backend.authcache`), else from the database (then cached)."""
+    secret = settings.secret_key.get_secret_value()
+    cache = get_runtime(conn).auth_cache
+    if not well_formed(token):
+        return None
+    key = hash_token(token, secret)
+    user = cache.get(key)
+    if user is not None:
+        return user
+    generation = cache.generation
+    async with db.api_slots, db.session() as session:
+        found = await authenticate_with_expiry(session, token, secret)
+    if found is None:
+        return None
+    cache.put(key, found[0], found[1], generation=generation)
+    return found[0]
 
 
 def require_role(role: Role) -> Callable[..., Coroutine[Any, Any, User]]:
@@ -164,10 +186,7 @@ def require_role(role: Role) -> Callable[..., Coroutine[Any, Any, User]]:
                 "missing bearer token (Authorization: Bearer TOKEN)",
                 headers={"WWW-Authenticate": "Bearer"},
             )
-        async with db.session() as session:
-            user = await authenticate(
-                session, creds.credentials, settings.secret_key.get_secret_value()
-            )
+        user = await _signed_in(conn, db, creds.credentials, settings)
         if user is None:
             throttle.failure(client)
             raise ApiError(

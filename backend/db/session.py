@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from sqlalchemy import event
+from sqlalchemy.engine import make_url
 from sqlalchemy.ext.asyncio import (
     AsyncEngine,
     AsyncSession,
@@ -13,7 +15,16 @@ from sqlalchemy.ext.asyncio import (
     create_async_engine,
 )
 
-__all__ = ["Database"]
+__all__ = ["API_SLOTS", "POOL_OVERFLOW", "POOL_SIZE", "Database"]
+
+#: Pooled connections kept open, and how many more may be opened at busy times.
+POOL_SIZE = 5
+POOL_OVERFLOW = 10
+#: Connections REST requests may hold at once (``backend.api.deps``); the rest of the pool
+#: stays for the cell itself (inspections, teaching, jobs): under a surge of readers on a
+#: starved machine the readers took all 15 and the inspection in progress waited for one
+#: (``benchmarks/load.py``, ``tests/backend/test_bug_readers_starve_the_cell_of_connections.py``).
+API_SLOTS = 10
 
 
 class Database:
@@ -26,6 +37,8 @@ class Database:
     def __init__(self, url: str, *, echo: bool = False, busy_timeout_s: float = 30.0) -> None:
         self.url = url
         kwargs: dict[str, object] = {"echo": echo, "pool_pre_ping": True}
+        if make_url(url).database not in (None, "", ":memory:"):  # a pool of connections
+            kwargs.update(pool_size=POOL_SIZE, max_overflow=POOL_OVERFLOW)
         if url.startswith("sqlite"):
             kwargs["connect_args"] = {"timeout": float(busy_timeout_s)}
         self.engine: AsyncEngine = create_async_engine(url, **kwargs)
@@ -40,6 +53,8 @@ class Database:
             )
         else:
             self.sessionmaker = async_sessionmaker(self.engine, expire_on_commit=False)
+        #: Taken by every REST request's database session (see :data:`API_SLOTS`).
+        self.api_slots = asyncio.Semaphore(API_SLOTS)
 
     @asynccontextmanager
     async def session(self) -> AsyncIterator[AsyncSession]:

@@ -1,0 +1,158 @@
+"""A short-lived, in-process cache of successful token sign-ins.
+
+Checking a token took one database session with two queries per request (about 10 ms of
+CPU each, most of an authenticated read: ``benchmarks/load.py``).  A token seen valid in
+the last :data:`TTL_S` seconds is accepted again from this cache, keyed by its HMAC (never
+the token).  What keeps it safe:
+
+- any commit of this process that changes a user or a token (revocation, role change,
+  deletion, disabling) clears every cache at once (session events, below), so a change
+  made through this cell's API or CLI run in-process applies to the next request;
+- an entry carries the token's expiry, checked on every hit;
+- a change made by another process (another cell of the plant, the ``visioncell`` CLI)
+  applies here within :data:`TTL_S` seconds, when the entry expires;
+- failed sign-ins are never cached (each one still reaches the database and the throttle).
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+import time
+import weakref
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import event
+from sqlalchemy import inspect as sa_inspect
+from sqlalchemy.orm import ORMExecuteState, Session
+
+from backend.db.models import ApiToken, User
+from backend.db.types import utcnow
+
+__all__ = ["MAX_ENTRIES", "TTL_S", "AuthCache"]
+
+#: How long a successful sign-in is reused, seconds.
+TTL_S = 2.0
+#: Most tokens kept (the oldest entries go first beyond it).
+MAX_ENTRIES = 10_000
+_WATCHED = frozenset({"users", "api_tokens"})
+_FLAG = "visioncell_auth_change"
+_caches: weakref.WeakSet[AuthCache] = weakref.WeakSet()
+
+
+@dataclass(frozen=True)
+class _Entry:
+    until: float
+    expires_at: datetime | None
+    user: tuple[int, str, str, bool, datetime]
+
+
+class AuthCache:
+    """Successful sign-ins by token hash for ``ttl_s`` seconds (see the module doc)."""
+
+    def __init__(self, *, ttl_s: float = TTL_S, max_entries: int = MAX_ENTRIES) -> None:
+        if not 0.0 <= float(ttl_s) <= 60.0:
+            raise ValueError(f"ttl_s must be within 0..60 s, got {ttl_s!r}")
+        if not 1 <= int(max_entries) <= 1_000_000:
+            raise ValueError(f"max_entries must be within 1..1e6, got {max_entries!r}")
+        self.ttl_s = float(ttl_s)
+        self.max_entries = int(max_entries)
+        self._entries: dict[str, _Entry] = {}
+        self._lock = threading.Lock()
+        #: Grows with every :meth:`clear`; :meth:`put` drops a sign-in read before it.
+        self.generation = 0
+        _caches.add(self)
+
+    def get(self, token_hash: str) -> User | None:
+        """A fresh, detached copy of the cached user of ``token_hash`` (None: ask the
+        database)."""
+        with self._lock:
+            e = self._entries.get(token_hash)
+            if e is None:
+                return None
+            if time.monotonic() >= e.until or (
+                e.expires_at is not None and e.expires_at <= utcnow()
+            ):
+                del self._entries[token_hash]
+                return None
+        uid, name, role, disabled, created = e.user
+        return User(id=uid, name=name, role=role, disabled=disabled, created_at=created)
+
+    def put(
+        self, token_hash: str, user: User, expires_at: datetime | None, *, generation: int
+    ) -> None:
+        """Remember a successful sign-in read from the database when :attr:`generation`
+        was ``generation`` (a user or token change committed since: not remembered)."""
+        if self.ttl_s <= 0 or user.disabled:
+            return
+        if expires_at is not None and expires_at.tzinfo is None:
+            expires_at = expires_at.replace(tzinfo=utcnow().tzinfo)
+        entry = _Entry(
+            time.monotonic() + self.ttl_s,
+            expires_at,
+            (int(user.id), str(user.name), str(user.role), bool(user.disabled), user.created_at),
+        )
+        with self._lock:
+            if generation != self.generation:
+                return
+            self._entries.pop(token_hash, None)
+            self._entries[token_hash] = entry
+            while len(self._entries) > self.max_entries:
+                del self._entries[next(iter(self._entries))]
+
+    def clear(self) -> None:
+        """Forget every entry."""
+        with self._lock:
+            self._entries.clear()
+            self.generation += 1
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._entries)
+
+
+def clear_all() -> None:
+    """Clear every cache of this process (a user or token changed)."""
+    for cache in list(_caches):
+        cache.clear()
+
+
+#: Changes that do not change who may sign in (a sign-in's own bookkeeping).
+_HARMLESS = frozenset({"last_used_at"})
+
+
+def _changed(obj: Any) -> set[str]:
+    return {a.key for a in sa_inspect(obj).attrs if a.history.has_changes()}
+
+
+@event.listens_for(Session, "after_flush")
+def _after_flush(session: Session, _ctx: Any) -> None:
+    for o in itertools.chain(session.new, session.deleted):
+        if isinstance(o, User | ApiToken):
+            session.info[_FLAG] = True
+            return
+    for o in session.dirty:
+        if isinstance(o, User | ApiToken) and not _changed(o) <= _HARMLESS:
+            session.info[_FLAG] = True
+            return
+
+
+@event.listens_for(Session, "do_orm_execute")
+def _do_orm_execute(state: ORMExecuteState) -> None:
+    if state.is_insert or state.is_update or state.is_delete:
+        table = getattr(state.statement, "table", None)
+        if getattr(table, "name", None) in _WATCHED:
+            state.session.info[_FLAG] = True
+
+
+@event.listens_for(Session, "after_commit")
+def _after_commit(session: Session) -> None:
+    if session.info.pop(_FLAG, False):
+        clear_all()
+
+
+@event.listens_for(Session, "after_rollback")
+def _after_rollback(session: Session) -> None:
+    session.info.pop(_FLAG, None)
