@@ -96,6 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         )
     out.print(t)
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -106,9 +107,10 @@ def main(argv: list[str] | None = None) -> int:
         if rs:
             ax.plot([r["brightness"] for r in rs], [r["weight"] for r in rs], mk, ms=4, label=s)
     ax.set_xscale("log")
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel("mean image value / white level")
     ax.set_ylabel("mean colour-block noise weight")
-    ax.set_title(f"color-{args.base}: colour weight falls in dark images", fontsize=9)
+    ax.set_title(f"color-{args.base}: colour-block weight per image (0: exactly grey)", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()
