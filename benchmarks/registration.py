@@ -543,6 +543,9 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="skip the colour descriptor's :chapter and :srgb variants",
     )
+    ap.add_argument(
+        "--no-full", action="store_true", help="skip the colour descriptor's :full variant"
+    )
     args = ap.parse_args(argv)
     if args.docs and args.docs_img is None:
         args.docs_img = REPO / "docs" / "img"
@@ -551,7 +554,8 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         ap.error(f"unknown methods {unknown}; choose from {', '.join(METHODS)}")
     labels = list(dict.fromkeys([BASELINE, *args.methods]))
-    labels += [c + FULL_SUFFIX for c in COLOUR_BASE if c in labels]
+    if not args.no_full:
+        labels += [c + FULL_SUFFIX for c in COLOUR_BASE if c in labels]
     if not args.no_variants:
         labels += [c + v for v in (":chapter", ":srgb") for c in COLOUR_BASE if c in labels]
     skipped: dict[str, str] = {}

@@ -3,7 +3,7 @@ cross-validation on the real illumination scenes (issue 17).
 
     python -m benchmarks.registration_colour_cv [--json] [--base sift|surf] [--data-dir DIR]
 
-The unreduced joint descriptor (grey block, then the contrast-weighted m-image blocks; see
+The unreduced joint descriptor (grey block, then the noise-weighted m-image blocks; see
 ``vision.features.colour_joint``) is computed once per image with ``colour_weight=1``; the
 m-image blocks are then scaled by each candidate weight (0 is the grey base itself, "m only"
 drops the grey block). Per scene held out (23 folds: the 10 MIMO scenes in each of the two
@@ -30,7 +30,7 @@ from vision.evaluation import evaluate_pair
 from vision.features import Features, extract
 
 REPO = Path(__file__).resolve().parents[1]
-WEIGHTS: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5)
+WEIGHTS: tuple[float, ...] = (0.0, 0.1, 0.25, 0.5, 1.0, 1.5)
 out = Console()
 err = Console(stderr=True)
 
@@ -63,7 +63,9 @@ def recalls(pairs: list[rd.ImagePair], base: str) -> dict[Any, np.ndarray]:
             err.print(f"{base}: pair {k + 1}/{len(pairs)}")
         fa, fb = feats(p.a), feats(p.b)
         for w in res:
-            ev = evaluate_pair(_scaled(fa, grey_dim, w), _scaled(fb, grey_dim, w), p.H)
+            ev = evaluate_pair(
+                _scaled(fa, grey_dim, w), _scaled(fb, grey_dim, w), p.H, mask_a=p.mask_a
+            )
             res[w].append(ev.recall_at_01)
     return {w: np.array(v) for w, v in res.items()}
 

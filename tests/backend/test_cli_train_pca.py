@@ -50,7 +50,7 @@ def test_small_run_writes_versioned_bases_with_provenance(tmp_path):
         "--data-dir", str(tmp_path / "data"),
     )  # fmt: skip
     assert res.exit_code == 0, res.output
-    for kind, dims in (("gloh", (272, 128)), ("color-sift", (384, 128))):
+    for kind, dims in (("gloh", (272, 128)), ("color-sift", (256, 32))):
         b = load_npz(tmp_path / "out" / f"{kind}.npz")
         assert (b.dim_in, b.dim_out) == dims
         assert b.version in res.output

@@ -17,7 +17,7 @@ from vision.features.colour_input import (
     srgb_decode,
     srgb_encode,
 )
-from vision.features.colour_joint import block_contrast, joint_m_images, robust_m_images
+from vision.features.colour_joint import block_snr_weight, joint_m_images, robust_m_images
 from vision.features.opponent import opponent_channels
 from vision.features.patches import detect_sift
 from vision.features.pca import default_basis
@@ -39,12 +39,15 @@ def test_joint_layout_shapes_versions_and_the_grey_block_is_sift():
     sift = extract(img, "sift", max_features=150)
     assert full.dim == 384 and full.descriptors.dtype == np.float32
     assert full.version == "color-sift-joint-raw-1"
-    assert red.dim == 128 and red.version == default_basis("color-sift").version
-    # Same keypoints as the grey base, and the first block is its descriptor.
+    basis = default_basis("color-sift")
+    assert red.dim == 128 + basis.dim_out == 160 and red.version == basis.version
+    # Same keypoints as the grey base, and the first block is its descriptor, in both.
     np.testing.assert_array_equal(full.keypoints.xy, sift.keypoints.xy)
     np.testing.assert_array_equal(full.descriptors[:, :128], sift.descriptors)
+    np.testing.assert_array_equal(red.descriptors[:, :128], sift.descriptors)
+    # The colour blocks are projected on the basis without its mean shift (0 stays 0).
     np.testing.assert_allclose(
-        red.descriptors, default_basis("color-sift").project(full.descriptors), atol=1e-3
+        red.descriptors[:, 128:], full.descriptors[:, 128:] @ basis.components, atol=1e-3
     )
 
 
@@ -64,13 +67,13 @@ def test_colour_surf_joint_shapes():
     surf = extract(img, "surf", max_features=100)
     assert full.dim == 192 and full.version == "color-surf-joint-raw-1"
     np.testing.assert_allclose(full.descriptors[:, :64], surf.descriptors, atol=1e-6)
-    assert extract(img, "color-surf", max_features=100).dim == 64
+    assert extract(img, "color-surf", max_features=100).dim == 64 + 16
 
 
 def test_uint16_linear_input_detects_on_its_srgb_encoding():
     img16 = _linear16(3)
     f = extract(img16, "color-sift", white_level=WHITE16, max_features=120)
-    assert f.descriptors.dtype == np.float32 and f.dim == 128 and f.image_shape == (320, 320)
+    assert f.descriptors.dtype == np.float32 and f.dim == 160 and f.image_shape == (320, 320)
     grey8 = srgb8_from_linear(img16, white_level=WHITE16)
     assert grey8.dtype == np.uint8
     np.testing.assert_array_equal(
@@ -136,8 +139,8 @@ def test_colour_blocks_vanish_on_a_grey_image():
     full = colour_features(grey, reduce=False, max_features=100, colour_weight=1.0)
     assert np.abs(full.descriptors[:, 128:]).max() < 1e-6
     m = joint_m_images(textured_rgb(7), pairs=(0, 2))
-    c = block_contrast(m, full.keypoints)
-    assert c.shape == (len(full), 2) and np.all((c >= 0) & (c < 1))
+    c = block_snr_weight(m, np.full_like(m, 1e-4), full.keypoints)
+    assert c.shape == (len(full), 2) and np.all((c >= 0) & (c < 1)) and c.max() > 0.5
 
 
 def test_opponent_sift_baseline():

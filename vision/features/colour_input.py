@@ -150,3 +150,59 @@ def m_images_uint8(m: np.ndarray) -> np.ndarray:
     """Map m-images to uint8 by the fixed ``128 + 40 M`` (:data:`M_SCALE`), rounded and
     clipped, for OpenCV's SIFT, which reads only 8-bit images."""
     return np.clip(np.rint(128.0 + M_SCALE * np.asarray(m)), 0, 255).astype(np.uint8)
+
+
+def noise_model(lin: np.ndarray, step: float, *, bins: int = 16) -> tuple[float, float]:
+    """Signal-dependent sensor noise ``var(C) = a C + b`` measured in the image itself.
+
+    The Poisson-Gaussian model of a raw sensor (shot noise ``a C``, read noise and quantisation
+    ``b``; Foi, Trimeche, Katkovnik and Egiazarian, "Practical Poissonian-Gaussian noise
+    modeling and fitting for single-image raw-data", IEEE TIP 17(10), 2008): the finest
+    diagonal Haar detail ``HH = (p - q - r + s) / 2`` of 2x2 blocks, which texture barely
+    reaches, has the variance of one pixel's noise; its robust variance
+    ``(median |HH| / 0.6745)^2`` is taken in ``bins`` quantile bins of the block mean (all
+    channels pooled, clipped blocks left out) and ``a, b >= 0`` are fitted by least squares.
+    The quantisation of the input (``step^2 / 12``, ``step`` = one digital number relative to
+    white) is added to ``b``.
+
+    Parameters
+    ----------
+    lin : ndarray of shape (H, W, 3), float32
+        Relative linear light in [0, 1].
+    step : float
+        One digital number relative to white (> 0).
+
+    Returns
+    -------
+    (a, b) : tuple of float
+        Shot-noise gain and the variance at black, in relative units.
+    """
+    x = np.asarray(lin, dtype=np.float32)
+    if x.ndim == 2:
+        x = x[..., None]
+    h, w = (x.shape[0] // 2) * 2, (x.shape[1] // 2) * 2
+    q = step * step / 12.0
+    if h < 4 or w < 4:
+        return 0.0, float(q)
+    # Every second 2x2 block along each axis (a quarter of them) is plenty for 16 bins.
+    p, r = x[0:h:4, 0:w:4], x[0:h:4, 1:w:4]
+    s, t = x[1:h:4, 0:w:4], x[1:h:4, 1:w:4]
+    hh = np.abs(0.5 * (p - r - s + t)).reshape(-1)
+    mu = (0.25 * (p + r + s + t)).reshape(-1)
+    keep = np.maximum.reduce([p, r, s, t]).reshape(-1) < 0.98
+    hh, mu = hh[keep], mu[keep]
+    if hh.size < 4 * bins:
+        return 0.0, float(np.median(hh) / 0.6745) ** 2 + q if hh.size else q
+    order = np.argsort(mu, kind="stable")
+    cm, cv = [], []
+    for sel in np.array_split(order, bins):  # quantile bins of the block mean
+        cm.append(float(mu[sel].mean()))
+        cv.append(float(np.median(hh[sel]) / 0.6745) ** 2)
+    m_, v_ = np.asarray(cm), np.asarray(cv)
+    a_mat = np.stack([m_, np.ones_like(m_)], axis=1)
+    a, b = np.linalg.lstsq(a_mat, v_, rcond=None)[0]
+    if a < 0:  # no measurable shot noise: constant variance
+        a, b = 0.0, float(np.median(v_))
+    elif b < 0:  # no measurable read noise: through the origin
+        a, b = float(np.dot(m_, v_) / max(np.dot(m_, m_), 1e-30)), 0.0
+    return float(a), float(b) + q

@@ -10,8 +10,10 @@ from different sides, the illuminant colour changes with surface orientation, wh
 per-neighbourhood ratio model removes, so the colour part is less reliable than the grey
 gradients. Hence: a floor before the logarithm set from the measured noise
 (:mod:`vision.features.colour_input`), clipped pixels neutralised, each m-image block weighted
-by its contrast over the image's noise (:func:`block_contrast`), and the grey descriptor kept
-as the first block so the colour part adds to it instead of replacing it.
+by the Wiener gain of its gradient energy over what the sensor's shot and read noise
+(measured in the image) would give (:func:`block_snr_weight`; 0 where colour holds only
+noise), and the grey descriptor kept as the first block so the colour part adds to it
+instead of replacing it.
 """
 
 from __future__ import annotations
@@ -20,10 +22,12 @@ import cv2
 import numpy as np
 
 from vision.features.colour_input import (
+    M_SCALE,
     check_white_level,
     clipped_weight,
     linear_from_image,
     m_images_uint8,
+    noise_model,
     srgb_decode,
 )
 from vision.features.colour_input import noise_floor as _noise_floor
@@ -33,9 +37,10 @@ from vision.features.types import Keypoints
 __all__ = [
     "NOISE_FLOOR",
     "SATURATION",
-    "block_contrast",
+    "block_snr_weight",
     "joint_m_images",
     "joint_raw",
+    "m_noise_variance",
     "robust_m_images",
 ]
 
@@ -98,40 +103,88 @@ def robust_m_images(
     return m.astype(np.float32)
 
 
-def block_contrast(m: np.ndarray, kp: Keypoints) -> np.ndarray:
-    """Colour contrast of each m-image around each keypoint relative to the image's noise.
+#: Mean squared magnitude of the ``Sobel / 8`` gradient of unit-variance white noise:
+#: each component sums the squared kernel taps, ``(1 + 4 + 1) * 2 / 64``, and there are two.
+_SOBEL_NOISE_GAIN = 2.0 * 12.0 / 64.0
+_PAIR_CHANNELS = ((0, 1), (0, 2), (1, 2))  # M1 = log(R/G), M2 = log(R/B), M3 = log(G/B)
 
-    ``c = g / (g + g_noise)`` in [0, 1): ``g`` is the mean gradient magnitude of the m-image
-    in the keypoint's window (a square of half-width ``3 size_px``, about the extent of SIFT's
-    Gaussian-weighted descriptor window, via an integral image), ``g_noise`` the median
-    gradient magnitude over the image (most pixels hold no colour edge, so the median measures
-    the log-ratio noise). The descriptor blocks of an m-image are normalised to unit length by
-    SIFT and SURF; multiplying them by ``c`` keeps a block of pure noise from weighing as much
-    as a block of real colour edges (issue 17).
+
+def m_noise_variance(
+    lin: np.ndarray,
+    *,
+    floor: float,
+    shot: float,
+    read: float,
+    weight: np.ndarray | None = None,
+    pairs: tuple[int, ...] | None = None,
+) -> np.ndarray:
+    """Expected noise variance of each m-image pixel, propagated from the sensor noise.
+
+    With ``var(C) = shot C + read`` (:func:`vision.features.colour_input.noise_model`) and
+    ``M = log(C1 + f) - log(C2 + f)``, first-order propagation gives
+    ``var(M) = var(C1) / (C1 + f)^2 + var(C2) / (C2 + f)^2`` (the two channels' noise is
+    independent); pixels whose log ratios are multiplied by a clipping weight ``w`` get
+    ``w^2`` times that.
 
     Returns
     -------
-    ndarray of shape (N, 3), float32
+    ndarray of shape (len(pairs), H, W), float32
+    """
+    idx = range(3) if pairs is None else pairs
+    x = lin + np.float32(floor)
+    rel = (np.float32(shot) * lin + np.float32(read)) / (x * x)  # var(log(C + f)) per channel
+    out = np.stack([rel[..., _PAIR_CHANNELS[i][0]] + rel[..., _PAIR_CHANNELS[i][1]] for i in idx])
+    if weight is not None:
+        out *= (weight * weight)[None]
+    return out.astype(np.float32)
+
+
+def block_snr_weight(
+    m: np.ndarray,
+    var: np.ndarray,
+    kp: Keypoints,
+    *,
+    extra_var: float = 0.0,
+    radius_per_size: float = 3.0,
+) -> np.ndarray:
+    """Weight of each m-image block of each keypoint by its signal over the expected noise.
+
+    In the keypoint's window (a square of half-width ``radius_per_size * size_px``, the extent
+    of the descriptor's window: 3 for OpenCV SIFT, whose Gaussian window has sigma ``3 size``
+    / 2 ... ``3 size``; 0.5 for VisionCell's SURF, whose ``size_px`` is the side of its 20 s
+    window; via integral images) ``E`` is the mean squared gradient of
+    the m-image and ``N`` what the sensor noise alone would give, ``N = 0.375 mean(var(M) +
+    extra_var)`` (the ``Sobel / 8`` gradient of white noise; :func:`m_noise_variance`). The
+    weight is the Wiener gain ``max(0, E - N) / E`` (the share of the gradient energy that is
+    signal): 0 where the colour ratios hold nothing but noise -- dark, flat or clipped windows
+    -- so the joint descriptor is then exactly the grey one, towards 1 at strong colour edges.
+
+    Returns
+    -------
+    ndarray of shape (N, len(m)), float32, in [0, 1)
     """
     n, (h, w) = len(kp), m.shape[1:]
     out = np.zeros((n, len(m)), np.float32)
     if n == 0:
         return out
-    r = np.clip(np.rint(3.0 * kp.size_px), 2, max(2, min(h, w) // 2)).astype(np.int64)
+    r = np.clip(np.rint(radius_per_size * kp.size_px), 2, max(2, min(h, w) // 2))
+    r = r.astype(np.int64)
     x = np.clip(np.rint(kp.xy[:, 0]).astype(np.int64), 0, w - 1)
     y = np.clip(np.rint(kp.xy[:, 1]).astype(np.int64), 0, h - 1)
     x0, x1 = np.clip(x - r, 0, w), np.clip(x + r + 1, 0, w)
     y0, y1 = np.clip(y - r, 0, h), np.clip(y + r + 1, 0, h)
-    area = ((x1 - x0) * (y1 - y0)).astype(np.float64)
+    area = np.maximum(((x1 - x0) * (y1 - y0)).astype(np.float64), 1.0)
+
+    def window_mean(img: np.ndarray) -> np.ndarray:
+        ii = cv2.integral(img, sdepth=cv2.CV_64F)
+        return (ii[y1, x1] - ii[y0, x1] - ii[y1, x0] + ii[y0, x0]) / area
+
     for k, mk in enumerate(m):
-        gx = cv2.Sobel(mk, cv2.CV_32F, 1, 0, ksize=3) / 8.0
-        gy = cv2.Sobel(mk, cv2.CV_32F, 0, 1, ksize=3) / 8.0
-        mag = np.sqrt(gx * gx + gy * gy)
-        g_noise = max(float(np.median(mag[::4, ::4])), 1e-4)
-        ii = cv2.integral(mag, sdepth=cv2.CV_64F)
-        s = ii[y1, x1] - ii[y0, x1] - ii[y1, x0] + ii[y0, x0]
-        g = s / np.maximum(area, 1.0)
-        out[:, k] = g / (g + g_noise)
+        gx = cv2.Sobel(mk, cv2.CV_32F, 1, 0, ksize=3)
+        gy = cv2.Sobel(mk, cv2.CV_32F, 0, 1, ksize=3)
+        energy = window_mean((gx * gx + gy * gy) * np.float32(1.0 / 64.0))
+        noise = _SOBEL_NOISE_GAIN * (window_mean(var[k]) + extra_var)
+        out[:, k] = np.where(energy > noise, 1.0 - noise / np.maximum(energy, 1e-30), 0.0)
     return out
 
 
@@ -178,16 +231,60 @@ def _sift_detect_describe(
     return keypoints_from_cv(kps), kps, desc.astype(np.float32)
 
 
+def _half_resolution(kps: list[cv2.KeyPoint]) -> list[cv2.KeyPoint]:
+    """OpenCV SIFT keypoints (octave >= 0) for an image of half the size (2x2 pixel means):
+    position ``(x - 0.5) / 2``, half the size, one octave lower but at least 0, same layer.
+    Keypoints of octave >= 1 get the same pyramid level as at full size; those of octave 0 a
+    level one octave smoother (the colour ratios are smooth; the window follows ``size``)."""
+    out = []
+    for k in kps:
+        o = k.octave & 0xFF  # >= 0 here (:func:`_octave_at_least_zero`)
+        packed = (k.octave & ~0xFF) | max(o - 1, 0)
+        packed = packed - (1 << 32) if packed >= 1 << 31 else packed
+        pt = ((k.pt[0] - 0.5) / 2.0, (k.pt[1] - 0.5) / 2.0)
+        out.append(cv2.KeyPoint(pt[0], pt[1], k.size / 2.0, k.angle, k.response, packed))
+    return out
+
+
 def _m_descriptors_sift(m: np.ndarray, kps: list[cv2.KeyPoint]) -> np.ndarray:
+    """OpenCV SIFT descriptors of the m-images at ``kps``, computed on the m-images at half
+    resolution (:func:`_half_resolution`): a quarter of the pyramid's area."""
     sift = cv2.SIFT_create()  # type: ignore[attr-defined]  # missing from the OpenCV stubs
-    kk = _octave_at_least_zero(kps)
+    kk = _half_resolution(_octave_at_least_zero(kps))
+    h, w = m.shape[1] // 2, m.shape[2] // 2
     parts = []
-    for mu8 in _m_images_uint8(m):
-        got, d = sift.compute(mu8, kk)
+    for mk in m:
+        half = cv2.resize(mk, (w, h), interpolation=cv2.INTER_AREA)
+        got, d = sift.compute(_m_images_uint8(half[None])[0], kk)
         if d is None or len(got) != len(kk):
             raise RuntimeError("OpenCV SIFT dropped keypoints while describing an m-image")
         parts.append(d.astype(np.float32))
     return np.stack(parts, axis=1)  # (N, n_m, 128)
+
+
+def _m_images_and_noise(
+    rgb: np.ndarray,
+    *,
+    transfer: str,
+    white_level: float | None,
+    noise_floor: float,
+    saturation: float,
+    pairs: tuple[int, ...] | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The noise-aware m-images and their expected noise variance (:func:`m_noise_variance`
+    with the sensor noise measured in the image, :func:`~vision.features.colour_input.
+    noise_model`)."""
+    w = check_white_level(rgb, white_level)
+    lin = linear_from_image(rgb, transfer=transfer, white_level=w)
+    step = 1.0 / w
+    if transfer == "srgb":  # one DN near black of the decoded curve
+        step = float(srgb_decode(np.float32(1.0 / w)))
+    floor = max(_noise_floor(lin, step, noise_floor), 1e-6)
+    weight = clipped_weight(lin, saturation) if saturation < 1.0 else None
+    m = robust_m_images(lin, floor=floor, weight=weight, pairs=pairs)
+    shot, read = noise_model(lin, step)
+    var = m_noise_variance(lin, floor=floor, shot=shot, read=read, weight=weight, pairs=pairs)
+    return m, var
 
 
 def joint_m_images(
@@ -216,6 +313,46 @@ def joint_m_images(
     return robust_m_images(lin, floor=floor, weight=weight, pairs=pairs)
 
 
+def joint_parts(
+    rgb: np.ndarray, grey: np.ndarray, base: str, detect: dict, opts: dict, colour: dict
+) -> tuple[Keypoints, np.ndarray, np.ndarray, np.ndarray]:
+    """Keypoints, grey base descriptors (N, D), unweighted m-image descriptors (N, 2, D) of
+    M1 and M3, and their noise weights (N, 2) (:func:`block_snr_weight`) of one image.
+
+    ``colour`` holds ``transfer``, ``white_level``, ``noise_floor``, ``saturation``.
+    """
+    m, var = _m_images_and_noise(rgb, **colour, pairs=_JOINT_M)
+    if base == "sift":
+        kp, cvk, g = _sift_detect_describe(grey, **detect)
+        width = 128
+        # The uint8 mapping for OpenCV adds its quantisation step to the m-image noise.
+        c = block_snr_weight(m, var, kp, extra_var=(1.0 / M_SCALE) ** 2 / 12.0)
+        parts = np.zeros((len(kp), len(m), width), np.float32)
+        for k, mk in enumerate(m):
+            live = np.flatnonzero(c[:, k] > 0)  # blocks of weight 0 stay 0: not described
+            if len(live):
+                parts[live, k] = _m_descriptors_sift(mk[None], [cvk[i] for i in live])[:, 0]
+        return kp, g, parts, c
+    from vision.features.surf import surf_describe, surf_keypoints
+
+    det = {key: v for key, v in detect.items() if v is not None}
+    kp = surf_keypoints(grey, **det, **opts)
+    up = bool(opts.get("upright", False))
+    ext = bool(opts.get("extended", False))
+    width = 128 if ext else 64
+    if len(kp) == 0:
+        e = np.zeros((0, width), np.float32)
+        return kp, e, np.zeros((0, 2, width), np.float32), np.zeros((0, 2), np.float32)
+    g = np.asarray(surf_describe(grey, kp, upright=up, extended=ext), np.float32)
+    c = block_snr_weight(m, var, kp, radius_per_size=0.5)
+    parts = np.zeros((len(kp), len(m), width), np.float32)
+    for k, mk in enumerate(m):
+        live = np.flatnonzero(c[:, k] > 0)
+        if len(live):
+            parts[live, k] = surf_describe(mk, kp.take(live), upright=up, extended=ext, coarse=True)
+    return kp, g, parts, c
+
+
 def joint_raw(
     rgb: np.ndarray, grey: np.ndarray, base: str, detect: dict, opts: dict, colour: dict
 ) -> tuple:
@@ -224,7 +361,8 @@ def joint_raw(
     The grey base descriptor (OpenCV SIFT, 128, or VisionCell's SURF, 64) followed by the base
     descriptors of M1 and M3 (M2 = M1 + M3 adds little; its slot goes to the grey block, so
     the raw length stays 3 x the base's), each multiplied by ``colour_weight`` times its
-    :func:`block_contrast`.
+    noise weight (:func:`block_snr_weight`): where the colour ratios carry no signal above
+    the sensor noise the colour blocks are 0 and the descriptor is the grey one.
 
     Parameters
     ----------
@@ -245,27 +383,7 @@ def joint_raw(
     """
     colour = dict(colour)
     beta = colour.pop("colour_weight")
-    m = joint_m_images(rgb, **colour, pairs=_JOINT_M)
-    if base == "sift":
-        kp, cvk, g = _sift_detect_describe(grey, **detect)
-        if len(kp) == 0:
-            return kp, np.zeros((0, 384), np.float32)
-        parts = _m_descriptors_sift(m, cvk)
-    else:
-        from vision.features.surf import surf_describe, surf_keypoints
-
-        det = {k: v for k, v in detect.items() if v is not None}
-        kp = surf_keypoints(grey, **det, **opts)
-        width = 128 if opts.get("extended") else 64
-        if len(kp) == 0:
-            return kp, np.zeros((0, 3 * width), np.float32)
-        up = bool(opts.get("upright", False))
-        ext = bool(opts.get("extended", False))
-        g = np.asarray(surf_describe(grey, kp, upright=up, extended=ext), np.float32)
-        parts = np.stack(
-            [np.asarray(surf_describe(mk, kp, upright=up, extended=ext), np.float32) for mk in m],
-            axis=1,
-        )
-    c = block_contrast(m, kp)
+    kp, g, parts, c = joint_parts(rgb, grey, base, detect, opts, colour)
     parts = parts * (np.float32(beta) * c)[:, :, None]
-    return kp, np.concatenate([g, parts.reshape(len(kp), -1)], axis=1).astype(np.float32)
+    flat = parts.reshape(len(kp), parts.shape[1] * parts.shape[2])
+    return kp, np.concatenate([g, flat], axis=1).astype(np.float32)

@@ -35,8 +35,8 @@ DATA_DIR = Path(__file__).resolve().parent / "data"
 BASIS_KINDS: dict[str, tuple[int, int]] = {
     "pca-sift": (3042, 36),
     "gloh": (272, 128),
-    "color-sift": (384, 128),
-    "color-surf": (192, 64),
+    "color-sift": (256, 32),  # the joint layout's two colour blocks; the grey block stays whole
+    "color-surf": (128, 16),
     "color-sift-chapter": (384, 128),
     "color-surf-chapter": (192, 64),
 }

@@ -18,6 +18,9 @@ import numpy as np
 from vision.features.extract import extract
 from vision.features.pca import BASIS_KINDS, PcaBasis, fit_pca
 
+#: Length of the grey block that leads the joint colour descriptors (kept whole, not reduced).
+JOINT_GREY_DIMS = {"color-sift": 128, "color-surf": 64}
+
 __all__ = [
     "raw_descriptors",
     "sample_training_set",
@@ -41,8 +44,9 @@ def raw_descriptors(kind: str, rgb: np.ndarray, *, max_features: int = 3000) -> 
     Parameters
     ----------
     kind : str
-        ``"pca-sift"`` (3042-dim gradient patches), ``"gloh"`` (272), ``"color-sift"`` (384)
-        or ``"color-surf"`` (192) in their default (joint) layout, ``"color-sift-chapter"``
+        ``"pca-sift"`` (3042-dim gradient patches), ``"gloh"`` (272), ``"color-sift"`` (256)
+        or ``"color-surf"`` (128): the colour blocks of their default (joint) layout, which
+        follow the grey block (the basis reduces only them), ``"color-sift-chapter"``
         (384) or ``"color-surf-chapter"`` (192) in the chapter's layout.
     rgb : ndarray of shape (H, W, 3), uint8
     max_features : int
@@ -61,7 +65,11 @@ def raw_descriptors(kind: str, rgb: np.ndarray, *, max_features: int = 3000) -> 
     method, opts = kind, {}
     if kind.endswith("-chapter"):  # the chapter's layout of the colour descriptor
         method, opts = kind.removesuffix("-chapter"), {"layout": "chapter"}
-    return extract(rgb, method, max_features=max_features, reduce=False, **opts).descriptors
+    d = extract(rgb, method, max_features=max_features, reduce=False, **opts).descriptors
+    if kind in JOINT_GREY_DIMS:  # joint layout: the basis reduces the colour blocks only,
+        d = d[:, JOINT_GREY_DIMS[kind] :]  # from the keypoints where colour has signal
+        d = d[np.any(d != 0, axis=1)]
+    return d
 
 
 def sample_training_set(

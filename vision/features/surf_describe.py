@@ -177,7 +177,9 @@ def _accumulate(acc, base, tx, ty, w, extended):
 
 
 @numba.njit(cache=True)
-def _descriptors(ii, xs, ys, scales, thetas, extended, offs, weights, cell, cell_w, floor):
+def _descriptors(
+    ii, xs, ys, scales, thetas, extended, offs, weights, cell, cell_w, floor, haar_side=2.0
+):
     n = xs.shape[0]
     per_cell = 8 if extended else 4
     dim = 16 * per_cell
@@ -187,7 +189,7 @@ def _descriptors(ii, xs, ys, scales, thetas, extended, offs, weights, cell, cell
         s = scales[p]
         c = math.cos(thetas[p])
         sn = math.sin(thetas[p])
-        side = 2.0 * s  # Haar side 2 s
+        side = haar_side * s  # Haar side 2 s (4 s on the coarse grid)
         acc[:] = 0.0
         for b in range(offs.shape[0]):
             v = offs[b]
@@ -235,6 +237,23 @@ def _cell_weights() -> tuple[np.ndarray, np.ndarray]:
 
 
 _CELL, _CELL_W = _cell_weights()
+# Coarse grid: 10 x 10 samples spaced 2 s with Haar boxes of side 4 s, the same 20 s window,
+# sub-regions and Gaussian weight: a quarter of the work, for smooth signals (colour ratios).
+_COARSE_T = np.arange(10, dtype=np.float64) * 2.0 - 9.0
+_COARSE_W = np.exp(-(_COARSE_T[:, None] ** 2 + _COARSE_T[None, :] ** 2) / (2 * DESCRIPTOR_SIGMA**2))
+
+
+def _coarse_cell_weights() -> tuple[np.ndarray, np.ndarray]:
+    pos = _COARSE_T / 5.0 + 1.5
+    i0 = np.floor(pos).astype(np.int64)
+    frac = pos - i0
+    idx = np.c_[i0, i0 + 1]
+    w = np.c_[1.0 - frac, frac]
+    w[(idx < 0) | (idx > 3)] = 0.0
+    return np.clip(idx, 0, 3), w
+
+
+_COARSE_CELL, _COARSE_CELL_W = _coarse_cell_weights()
 
 
 def _noise_floor(ii: np.ndarray) -> float:
@@ -272,12 +291,30 @@ def describe_integral(
     theta_image: np.ndarray,
     *,
     extended: bool = False,
+    coarse: bool = False,
 ) -> np.ndarray:
     """SURF descriptors (section 4.2) on an integral image, (N, 64) or (N, 128) float32.
 
     ``theta_image`` is the keypoint orientation in the image frame (clockwise on screen).
+    ``coarse`` samples the same window on a 10 x 10 grid spaced ``2 s`` with Haar boxes of
+    side ``4 s`` (a quarter of the work; for smooth images such as colour ratios, issue 17).
     """
     xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
+    if coarse:
+        return _descriptors(
+            ii,
+            np.ascontiguousarray(xy[:, 0]),
+            np.ascontiguousarray(xy[:, 1]),
+            np.ascontiguousarray(scales, dtype=np.float64),
+            np.ascontiguousarray(theta_image, dtype=np.float64),
+            bool(extended),
+            _COARSE_T,
+            _COARSE_W,
+            _COARSE_CELL,
+            _COARSE_CELL_W,
+            _noise_floor(ii) * float(_COARSE_W.sum() / _DESC_W.sum()),
+            4.0,
+        )
     return _descriptors(
         ii,
         np.ascontiguousarray(xy[:, 0]),
