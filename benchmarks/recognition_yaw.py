@@ -62,7 +62,12 @@ def run(
     teach_yaws: int = 4,
     policy: str = "two-views",
     seed: int = 0,
+    names: list[str] | None = None,
+    untrained: list[str] | None = None,
 ) -> dict[str, Any]:
+    """Teach, choose the threshold and inspect (module docstring); ``names`` and
+    ``untrained`` replace the catalogue's trainable (first ``objects``) and untrained
+    entries."""
     from backend.hardware import headless_mujoco
 
     headless_mujoco()
@@ -79,8 +84,10 @@ def run(
     engine = SimEngine()
     try:
         belt = engine.config.layout.conveyor
-        names = [n for n, e in CATALOGUE.items() if e.trainable][:objects]
-        untrained = [n for n, e in CATALOGUE.items() if not e.trainable]
+        if names is None:
+            names = [n for n, e in CATALOGUE.items() if e.trainable][:objects]
+        if untrained is None:
+            untrained = [n for n, e in CATALOGUE.items() if not e.trainable]
         point = np.asarray(belt.station_point, dtype=np.float64)
         T_ee_cam = np.asarray(NOMINAL_T_EE_CAM)
         shots = plan_shots(

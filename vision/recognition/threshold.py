@@ -4,7 +4,8 @@ threshold").
 
 Score distributions, from the trained views alone
     *Genuine*: every trained view is held out in turn and recognised against the others of
-    its viewpoint (leave-one-view-out); its own model's score is a genuine score.
+    its viewpoint (leave-one-view-out; side views against the views of both sides, as
+    :func:`recognise_views` searches them); its own model's score is a genuine score.
     *Impostor*: every model is held out in turn and each of its views is recognised against
     the remaining models (leave-one-model-out): the best score any other model gets is what
     an untrained object would score. Negative images (nothing trained in them), when given,
@@ -65,7 +66,7 @@ from numpy.typing import ArrayLike
 from vision.features import Features
 from vision.recognition.choice import ThresholdChoice, roc_curve
 from vision.recognition.index import ViewIndex
-from vision.recognition.recognise import DEFAULT_MARGIN, evaluate
+from vision.recognition.recognise import DEFAULT_MARGIN, evaluate, search_of
 
 __all__ = [
     "RULES",
@@ -233,9 +234,10 @@ def choose_threshold(
     twins: dict[int, set[str]] = {}
     lovo: list[tuple[int, str, dict[str, float]]] = []
     for v in views:
-        others = [w for w in index.views_of(v.model, viewpoint=v.viewpoint) if w is not v]
+        pool = search_of(v.viewpoint)  # as recognise_views searches (the sides pooled)
+        others = [w for w in index.views_of(v.model) if w.viewpoint in pool and w is not v]
         if others:
-            scores, *_ = evaluate(index, v.features, viewpoint=v.viewpoint, exclude_view=v.view_id)
+            scores, *_ = evaluate(index, v.features, viewpoint=pool, exclude_view=v.view_id)
             genuine.append(scores.get(v.model, 0.0))
             genuine_models.append(v.model)
             genuine_vps.append(v.viewpoint)
@@ -273,12 +275,14 @@ def choose_threshold(
             per_model_imp_vp[m].append((s, vp))
 
     for v in views:
-        scores, *_ = evaluate(index, v.features, viewpoint=v.viewpoint, exclude_models=[v.model])
+        scores, *_ = evaluate(
+            index, v.features, viewpoint=search_of(v.viewpoint), exclude_models=[v.model]
+        )
         add_impostor(scores, v.viewpoint, twins.get(v.view_id, set()))
         tick()
     for f in neg_feats:
         for vp in viewpoints:
-            scores, *_ = evaluate(index, f, viewpoint=vp)
+            scores, *_ = evaluate(index, f, viewpoint=search_of(vp))
             add_impostor(scores, vp)
             tick()
     # Acceptance thresholds from the impostor scores without twins (module docstring): a

@@ -14,7 +14,9 @@ Policies
     ``two-views`` (section 3.5.3, the chapter's choice): top view against the top views of
     every model; its contenders (the passing best and the models within the margin of it,
     or, when no model passes, every model above the choice's candidate bar) are verified
-    with side view 2 against the side views of the contenders only, and with view 3 if still
+    with side view 2 against the side views of the contenders only (those of both side
+    viewpoints: the arm sees an object from two azimuths only, and the inner view of an
+    object turned by 180 degrees is its outer view), and with view 3 if still
     uncertain (the fused decision is not a recognition, or the winner's own side score does
     not pass); fail after three. Nothing above the candidate bar from the top: unknown
     after one view.
@@ -52,6 +54,7 @@ from vision.recognition.recognise import (
     decide_with,
     recognise,
     resolve_threshold,
+    search_of,
 )
 from vision.recognition.threshold import ThresholdChoice
 
@@ -236,6 +239,7 @@ async def recognise_views(
             threshold=at(vp),
             margin=margin,
             models=models,
+            search=None if viewpoint is None else search_of(viewpoint),
         )
         visited.append(vp)
         views.append(r)
