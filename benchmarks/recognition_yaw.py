@@ -14,8 +14,12 @@ planned from where the top view found the object (and, with ``yaw_aware``, restr
 the trained side views whose object yaw matches the top view's yaw estimate), decided by
 :func:`vision.recognition.recognise_views` with the ``two-views`` policy.
 
-Printed: the thresholds chosen, the own-model top-view score of trained objects against
-the top threshold (the failure of issue 14), and the named / unknown rates.
+Printed (rich table, ``--json`` one line): the thresholds chosen per viewpoint and the
+named / unknown rates, for the rule of :func:`vision.recognition.choose_threshold` and, as
+the baseline in the same run on the same images, the rule before issue 14's fix (twins'
+scores kept among the impostors: the top threshold at the genuine level); the wrong
+decisions with the own-model top score against its bar and the side scores.
+Rendering is the slow part: ``--cache DIR`` keeps the images for a rerun.
 """
 
 from __future__ import annotations
@@ -31,6 +35,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rich.console import Console
+from rich.table import Table
 
 TWINS = {"wheel-5spoke": "wheel-5spoke-redband", "wheel-5spoke-redband": "wheel-5spoke"}
 
@@ -64,6 +70,7 @@ def run(
     seed: int = 0,
     names: list[str] | None = None,
     untrained: list[str] | None = None,
+    baseline: bool = True,
 ) -> dict[str, Any]:
     """Teach, choose the threshold and inspect (module docstring); ``names`` and
     ``untrained`` replace the catalogue's trainable (first ``objects``) and untrained
@@ -100,7 +107,9 @@ def run(
 
         backgrounds = _cached(cache, "backgrounds", empty)
         index = ViewIndex("sift", feature_options=FEATURE_OPTIONS.get("sift", {}))
-        yaws = [math.remainder(2 * math.pi * k / teach_yaws, 2 * math.pi) for k in range(teach_yaws)]
+        yaws = [
+            math.remainder(2 * math.pi * k / teach_yaws, 2 * math.pi) for k in range(teach_yaws)
+        ]
         t0 = time.perf_counter()
         for k, name in enumerate(names):
             _log(f"  teaching {k + 1}/{len(names)}: {name}")
@@ -123,6 +132,8 @@ def run(
         t1 = time.perf_counter()
         choice = choose_threshold(index)
         choose_s = time.perf_counter() - t1
+        # Baseline in the same run: the rule before the fix (twins' scores kept in).
+        before = choose_threshold(index, exclude_twins=False) if baseline else None
         top = shots[0]
         rows: list[dict[str, Any]] = []
         pool = [(n, True) for n in names] + [(n, False) for n in untrained]
@@ -132,7 +143,9 @@ def run(
                 ds, dl = (float(v) for v in rng.uniform(-0.004, 0.004, size=2))
                 key = f"query-{name}-{yaw:.6f}-{ds:.6f}-{dl:.6f}"
 
-                def shoot(name: str = name, yaw: float = yaw, ds: float = ds, dl: float = dl) -> Any:
+                def shoot(
+                    name: str = name, yaw: float = yaw, ds: float = ds, dl: float = dl
+                ) -> Any:
                     engine.clear_objects()
                     engine.spawn(name, s_m=belt.station_s_m + ds, lateral_m=dl, yaw_rad=yaw)
                     rgb = capture(engine, top.q).rgb
@@ -156,6 +169,14 @@ def run(
                 t2 = time.perf_counter()
                 res = asyncio.run(recognise_views(look, index, policy=policy, threshold=choice))
                 dt = time.perf_counter() - t2
+                ok_before = None
+                if before is not None:
+                    old = asyncio.run(recognise_views(look, index, policy=policy, threshold=before))
+                    ok_before = (
+                        old.decision == "recognized" and old.model == name
+                        if trainable
+                        else old.decision != "recognized"
+                    )
                 top_r = res.views[0]
                 at1 = choice.at(1)
                 own = float(top_r.scores.get(name, 0.0))
@@ -172,6 +193,7 @@ def run(
                         "decision": res.decision,
                         "model": res.model,
                         "ok": ok,
+                        "ok_before": ok_before,
                         "views": res.n_views,
                         "own_top": round(own, 3),
                         "own_top_bar": round(at1.per_model.get(name, at1.threshold), 3),
@@ -210,6 +232,13 @@ def run(
                 float(np.median(choice.impostor)),
                 float(np.percentile(choice.impostor, 99)),
             ],
+            "threshold_before": None if before is None else before.per_viewpoint,
+            "named_pct_before": None
+            if before is None
+            else 100.0 * sum(bool(r["ok_before"]) for r in tr) / max(1, len(tr)),
+            "unknown_pct_before": None
+            if before is None
+            else 100.0 * sum(bool(r["ok_before"]) for r in un) / max(1, len(un)),
             "named_pct": 100.0 * sum(r["ok"] for r in tr) / max(1, len(tr)),
             "unknown_pct": 100.0 * sum(r["ok"] for r in un) / max(1, len(un)),
             "mean_views": float(np.mean([r["views"] for r in rows])),
@@ -227,23 +256,42 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--teach-yaws", type=int, default=4, help="object yaws taught (1..12)")
     ap.add_argument("--policy", default="two-views")
     ap.add_argument("--cache", type=Path, default=None, help="folder caching the rendered images")
+    ap.add_argument("--no-baseline", action="store_true", help="skip the rule before the fix")
     args = ap.parse_args(argv)
     if not 1 <= args.objects <= 12 or not 1 <= args.queries <= 50 or not 1 <= args.teach_yaws <= 12:
         ap.error("--objects 1..12, --queries 1..50, --teach-yaws 1..12")
     out = run(
-        objects=args.objects, queries=args.queries, teach_yaws=args.teach_yaws, policy=args.policy, cache=args.cache
+        objects=args.objects,
+        queries=args.queries,
+        teach_yaws=args.teach_yaws,
+        policy=args.policy,
+        cache=args.cache,
+        baseline=not args.no_baseline,
     )
-    print(
-        f"views {out['views']}  threshold {out['threshold']:.3f}  per viewpoint "
-        f"{ {k: round(v, 3) for k, v in out['per_viewpoint'].items()} }  candidate "
-        f"{ {k: round(v, 3) for k, v in out['candidate_viewpoint'].items()} }"
+    table = Table(
+        title=f"Recognition at random yaw ({args.policy}): {len(out['rows'])} inspections, "
+        f"{out['views']} trained views ({out['teach_yaws']} object yaws)"
     )
+    for col in ("thresholds", "top / side 2 / side 3", "trained named %", "untrained unknown %"):
+        table.add_column(col)
+
+    def vps(d: dict | None) -> str:
+        return "-" if not d else " / ".join(f"{d[k]:.3f}" for k in sorted(d))
+
+    if out["named_pct_before"] is not None:
+        table.add_row("twins kept in (before, baseline)", vps(out["threshold_before"]),
+                      f"{out['named_pct_before']:.1f}", f"{out['unknown_pct_before']:.1f}")  # fmt: skip
+    table.add_row("twins left out (now)", vps(out["per_viewpoint"]),
+                  f"{out['named_pct']:.1f}", f"{out['unknown_pct']:.1f}")  # fmt: skip
+    Console().print(table)
     print(f"genuine p10/p50 {out['genuine_p10_p50']}  impostor p50/p99 {out['impostor_p50_p99']}")
     print(
-        f"named {out['named_pct']:.1f} %  unknown {out['unknown_pct']:.1f} %  "
-        f"mean views {out['mean_views']:.2f}  (teach {out['teach_s']:.0f} s, "
-        f"choose {out['choose_s']:.0f} s)"
+        f"mean views {out['mean_views']:.2f} (teach {out['teach_s']:.0f} s, choose {out['choose_s']:.0f} s)"
     )
+    for r in out["rows"]:
+        if not r["ok"]:
+            print(f"  wrong: {r['name']} yaw {r['yaw_deg']} -> {r['decision']} {r['model']} "
+                  f"(top {r['own_top']} vs {r['own_top_bar']}, side {r['side']})")  # fmt: skip
     if args.json:
         print(json.dumps(out, default=str))
     return out

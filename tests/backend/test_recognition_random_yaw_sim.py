@@ -24,6 +24,7 @@ def test_taught_models_are_named_at_random_yaw_with_the_automatic_threshold():
         queries=2,
         teach_yaws=2,
         seed=3,
+        baseline=False,
     )
     rows = out["rows"]
     wrong = [r for r in rows if not r["ok"]]

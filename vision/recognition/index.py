@@ -341,9 +341,7 @@ class ViewIndex:
         key = (vps, excl)
         if key not in self._searchers:
             views = [
-                v
-                for v in self.views
-                if (vps is None or v.viewpoint in vps) and v.model not in excl
+                v for v in self.views if (vps is None or v.viewpoint in vps) and v.model not in excl
             ]
             if not views:
                 return None

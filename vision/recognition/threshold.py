@@ -178,6 +178,7 @@ def choose_threshold(
     target_far: float = 0.01,
     rule: str = "conformal-far",
     progress: Callable[[int, int], None] | None = None,
+    exclude_twins: bool = True,
 ) -> ThresholdChoice:
     """Choose global and per-model thresholds from the trained views (module docstring).
 
@@ -193,6 +194,9 @@ def choose_threshold(
     rule : {"conformal-far", "youden"}
     progress : callable(done, total), optional
         Called after each held-out query.
+    exclude_twins : bool
+        Leave the twins' scores out of the thresholds (default; module docstring).
+        ``False`` keeps them in: the rule before issue 14's fix, for comparison only.
 
     Returns
     -------
@@ -208,6 +212,8 @@ def choose_threshold(
         raise ValueError(f"index must be a ViewIndex, got {type(index).__name__}")
     if rule not in RULES:
         raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
+    if not isinstance(exclude_twins, bool):
+        raise ValueError(f"exclude_twins must be true or false, got {exclude_twins!r}")
     target_far = _check_far(target_far)
     models = index.models
     if len(models) < 2:
@@ -278,7 +284,7 @@ def choose_threshold(
         scores, *_ = evaluate(
             index, v.features, viewpoint=search_of(v.viewpoint), exclude_models=[v.model]
         )
-        add_impostor(scores, v.viewpoint, twins.get(v.view_id, set()))
+        add_impostor(scores, v.viewpoint, twins.get(v.view_id, set()) if exclude_twins else set())
         tick()
     for f in neg_feats:
         for vp in viewpoints:
