@@ -305,8 +305,7 @@ async def recognise_views(
         side = await see(vp, vp, models)
         fused, (decision, model, cont) = fused_decision(models)
         if decision == "recognized" and (
-            (named_from_top and model == top.model)
-            or side.scores.get(model, 0.0) > bar(model, vp)
+            (named_from_top and model == top.model) or side.scores.get(model, 0.0) > bar(model, vp)
         ):
             return result(decision, model, fused, cont)
         if cont:
