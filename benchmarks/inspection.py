@@ -2,7 +2,9 @@
 
 The twelve trainable catalogue entries are taught through the services the API calls
 (``backend.recognition.teach``: 3d models, the top view at three camera rolls and both side
-views, each object at the station at yaw 0), then objects (random catalogue entry, the two
+views, each object at the station at yaw 0 and then at ``--teach-yaws`` - 1 further object
+yaws, the operator turning it between rounds; the automatic threshold is chosen once, after
+the last round of the last model, over every view), then objects (random catalogue entry, the two
 untrained ones mixed in; random yaw, a few mm of lateral and along-belt jitter) are
 inspected with :func:`backend.inspection.service.inspect_object`, what continuous operation
 runs for each object:
