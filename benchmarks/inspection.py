@@ -2,7 +2,9 @@
 
 The twelve trainable catalogue entries are taught through the services the API calls
 (``backend.recognition.teach``: 3d models, the top view at three camera rolls and both side
-views, each object at the station at yaw 0), then objects (random catalogue entry, the two
+views, each object at the station at yaw 0 and then at ``--teach-yaws`` - 1 further object
+yaws, the operator turning it between rounds; the automatic threshold is chosen once, after
+the last round of the last model, over every view), then objects (random catalogue entry, the two
 untrained ones mixed in; random yaw, a few mm of lateral and along-belt jitter) are
 inspected with :func:`backend.inspection.service.inspect_object`, what continuous operation
 runs for each object:
@@ -65,7 +67,9 @@ def _settings(tmp: Path, time_scale: float) -> Any:
     )
 
 
-async def _teach_all(rt: Any, names: list[str], yaws_deg: tuple[float, ...] = (0.0,)) -> float:
+async def _teach_all(
+    rt: Any, names: list[str], yaws_deg: tuple[float, ...] = (0.0,)
+) -> tuple[float, dict[str, Any]]:
     """Teach every model through the teach service, one round per object yaw (the operator
     turns the object on the belt between rounds; the first round is at yaw 0)."""
     from backend.recognition import models as msvc
@@ -94,7 +98,11 @@ async def _teach_all(rt: Any, names: list[str], yaws_deg: tuple[float, ...] = (0
                 live=rt.live_index,
                 model_id=row.id,
                 options=tsvc.TeachOptions(
-                    background="grab" if first else "stored", wait_s=60.0, yaw_rad=yaw
+                    background="grab" if first else "stored",
+                    wait_s=60.0,
+                    yaw_rad=yaw,
+                    # one choice over every view, after the last round of the last model
+                    threshold=k == len(names) - 1 and r == len(yaws_deg) - 1,
                 ),
                 store=rt.teach_backgrounds,
             )
@@ -105,9 +113,10 @@ async def _teach_all(rt: Any, names: list[str], yaws_deg: tuple[float, ...] = (0
             await rt.jobs.wait(job)
             if job.state.value != "done":
                 raise RuntimeError(f"teaching {name} {job.state.value}: {job.error}")
+            last = job.result["threshold"]
         err.print(f"[teach {k + 1}/{len(names)}] {name}: {len(yaws_deg)} rounds")
     engine.clear_objects()
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, last
 
 
 def _errors(row: dict[str, Any], part: str) -> tuple[float | None, float | None]:
@@ -181,7 +190,8 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
         spec = engine.config.layout.conveyor
         yaws = tuple(360.0 * k / args.teach_yaws for k in range(args.teach_yaws))
         yaws = tuple(y - 360.0 if y > 180.0 else y for y in yaws)
-        teach_s = await _teach_all(rt, trained, yaws)
+        teach_s, threshold = await _teach_all(rt, trained, yaws)
+        err.print(f"threshold: {threshold}")
         ctx = await service.context(rt)
 
         def pick_name() -> str:
@@ -258,7 +268,7 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
         await service.grab_background(rt)
         for _ in range(args.objects_sort):
             await index_object("sort", ("two-views",), sort=True)
-    return {"teach_s": teach_s, "rows": rows, "n_models": len(trained)}
+    return {"teach_s": teach_s, "rows": rows, "n_models": len(trained), "threshold": threshold}
 
 
 def _pct(x: list[bool]) -> float | None:
@@ -360,6 +370,9 @@ def main(argv: list[str] | None = None) -> None:
     out.print(table)
     for s in summary:
         out.print(f"{s['condition']:>12} {s['policy']:>10} stages (mean s): {s['stages_mean_s']}")
+    th = res["threshold"]
+    out.print(f"automatic threshold after the last teach: {th['threshold']} ({th['reason']})")
+    out.print(f"confusable from the top: {th['confusable_from_top'] or 'none'}")
     wrong = [r for r in res["rows"] if not r["correct"]]
     for r in wrong[:20]:
         out.print(
@@ -367,6 +380,7 @@ def main(argv: list[str] | None = None) -> None:
         )
     if args.json:
         print(json.dumps({"summary": summary, "teach_s": res["teach_s"], "wall_s": time.perf_counter() - t0,
+                          "threshold": res["threshold"],
                           "wrong": wrong}, default=str))  # fmt: skip
 
 

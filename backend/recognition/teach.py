@@ -96,6 +96,11 @@ class TeachOptions:
         With ``background="grab"``: longest wait for the object, seconds.
     replace : bool
         Delete the model's earlier views (in the same transaction as storing the new ones).
+    threshold : bool
+        Recompute the automatic threshold after storing (default).  ``False`` when more
+        rounds of the same teach follow at once (the object turned by hand between rounds):
+        the last round recomputes, so the choice is made once over all of them instead of
+        after each (it re-runs recognition on every trained view).
     """
 
     viewpoints: tuple[int, ...] | None = None
@@ -106,8 +111,11 @@ class TeachOptions:
     speed: float | None = None
     wait_s: float = 120.0
     replace: bool = False
+    threshold: bool = True
 
     def __post_init__(self) -> None:
+        if not isinstance(self.threshold, bool):
+            raise InvalidInput(f"threshold must be true or false, got {self.threshold!r}")
         if self.viewpoints is not None:
             vps = tuple(self.viewpoints)
             if (
@@ -338,8 +346,11 @@ async def run_teach(
         done += 1
     job.report(done / steps, "storing the views")
     rows = await add_views(db, live, model_id, inputs, replace=options.replace, by=by)
-    job.report(1.0, "choosing the threshold")
-    outcome = await thresholds.recompute(db, live)
+    if options.threshold:
+        job.report(1.0, "choosing the threshold")
+        outcome = await thresholds.recompute(db, live)
+    else:
+        outcome = await thresholds.deferred(db)
     return {
         "model": {"id": model_id, "name": name, "kind": kind},
         "views": [view_public(r) for r in rows],

@@ -35,6 +35,7 @@ __all__ = [
     "choice_from_detail",
     "confusable_pairs",
     "current_choice",
+    "deferred",
     "latest_settings",
     "recompute",
     "settings_audit_value",
@@ -198,6 +199,16 @@ async def current_choice(session: AsyncSession) -> ThresholdChoice:
 def _choose(snapshot: bytes, target_far: float) -> tuple[ThresholdChoice, int]:
     index = ViewIndex.from_bytes(snapshot)
     return choose_threshold(index, target_far=target_far), len(index)
+
+
+async def deferred(db: Database) -> ThresholdOutcome:
+    """What a teach that leaves the choice to a later round reports: the threshold in force."""
+    async with db.session() as session:
+        row = await latest_settings(session)
+    in_force = DEFAULT_THRESHOLD if row is None else row.global_threshold
+    return ThresholdOutcome(
+        False, None, in_force, "not chosen: deferred to the last round of this teach", ()
+    )
 
 
 async def recompute(

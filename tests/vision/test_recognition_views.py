@@ -188,14 +188,16 @@ def twin_choice(twin_index):
     return choose_threshold(twin_index, target_far=0.1)
 
 
-def test_twins_raise_the_top_threshold_not_the_candidate_bar(twin_choice):
+def test_twins_do_not_raise_the_top_threshold_and_are_reported(twin_choice):
     ch = twin_choice
     assert set(ch.per_viewpoint) == {1, 2, 3}
-    # A's top view explains B's as well as B's own: an untrained look-alike would pass
-    assert ch.per_viewpoint[1] > 0.5
+    # A's top view explains B's as well as B's own (a near-genuine impostor score) ...
+    assert ch.impostor.max() > 0.5
+    # ... but twins are left out of the thresholds (issue 14: kept in, the top threshold
+    # rose beyond every genuine score); the side views tell them apart.
+    assert ch.per_viewpoint[1] < 0.2
     assert ch.per_viewpoint[2] < 0.2 and ch.per_viewpoint[3] < 0.2
-    # ... but without the twins, impostors score low: the bar for asking a side view
-    assert ch.candidate_viewpoint[1] < 0.2 and ch.candidate <= ch.threshold
+    assert ch.candidate_viewpoint[1] <= ch.per_viewpoint[1] and ch.candidate <= ch.threshold
     assert ch.confusion[1]["A"]["B"] == 1.0 and ch.confusion[1]["A"]["C"] == 0.0
     assert ch.confusion[2]["A"]["B"] == 0.0
     top = ch.at(1)

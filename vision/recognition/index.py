@@ -93,6 +93,15 @@ def check_image(image: object, mask: object = None) -> tuple[np.ndarray, np.ndar
     return image, m.astype(np.uint8)
 
 
+def _viewpoints(viewpoint: int | tuple[int, ...]) -> tuple[int, ...]:
+    """One viewpoint or a non-empty tuple of them, checked."""
+    if isinstance(viewpoint, tuple):
+        if not viewpoint or len(viewpoint) > len(VIEWPOINTS):
+            raise ValueError(f"viewpoints must be 1 to 3 of {VIEWPOINTS}, got {viewpoint!r}")
+        return tuple(check_viewpoint(v) for v in viewpoint)
+    return (check_viewpoint(viewpoint),)
+
+
 class ViewIndex:
     """Trained views of every model, with cached approximate-nearest-neighbour searchers.
 
@@ -323,17 +332,16 @@ class ViewIndex:
 
     # ----------------------------------------------------------------- search
     def searcher(
-        self, *, viewpoint: int | None, exclude_models: Iterable[str] = ()
+        self, *, viewpoint: int | tuple[int, ...] | None, exclude_models: Iterable[str] = ()
     ) -> Searcher | None:
-        """The cached ANN searcher over the views of ``viewpoint`` (``None`` = all), leaving
-        out ``exclude_models``; ``None`` when no view is left."""
+        """The cached ANN searcher over the views of ``viewpoint`` (one viewpoint, several, or
+        ``None`` = all), leaving out ``exclude_models``; ``None`` when no view is left."""
         excl = frozenset(exclude_models)
-        key = (viewpoint, excl)
+        vps = None if viewpoint is None else frozenset(_viewpoints(viewpoint))
+        key = (vps, excl)
         if key not in self._searchers:
             views = [
-                v
-                for v in self.views
-                if (viewpoint is None or v.viewpoint == viewpoint) and v.model not in excl
+                v for v in self.views if (vps is None or v.viewpoint in vps) and v.model not in excl
             ]
             if not views:
                 return None

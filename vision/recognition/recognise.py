@@ -54,12 +54,14 @@ __all__ = [
     "DECISIONS",
     "DEFAULT_MARGIN",
     "DEFAULT_THRESHOLD",
+    "SIDE_VIEWPOINTS",
     "Candidate",
     "Recognition",
     "decide",
     "decide_with",
     "recognise",
     "resolve_threshold",
+    "search_of",
 ]
 
 DECISIONS = ("recognized", "ambiguous", "unknown")
@@ -71,6 +73,17 @@ DEFAULT_MARGIN = 0.2
 #: Inlier threshold of the verification, pixels (MAGSAC++ marginalises the noise scale below
 #: it, so the value is not critical; Barath et al. 2020).
 REPROJ_PX = 3.0
+#: Side viewpoints, searched together: with the arm's two side azimuths (inner and outer,
+#: section 4.1), the inner view of an object turned by 180 degrees is its outer view, so a
+#: side query at any object yaw finds twice the taught yaws to compare with.
+SIDE_VIEWPOINTS = (2, 3)
+
+
+def search_of(viewpoint: int) -> tuple[int, ...]:
+    """Trained viewpoints a query of ``viewpoint`` is compared with (sides pooled)."""
+    return SIDE_VIEWPOINTS if viewpoint in SIDE_VIEWPOINTS else (viewpoint,)
+
+
 #: Views reach verification only with at least this many votes, and at least this share of
 #: the best view's votes (fewer than 2 agreeing descriptors cannot fix an affine map).
 MIN_VOTES = 2.0
@@ -304,7 +317,7 @@ def evaluate(
     index: ViewIndex,
     query: Features,
     *,
-    viewpoint: int | None = 1,
+    viewpoint: int | tuple[int, ...] | None = 1,
     models: Sequence[str] | None = None,
     exclude_view: int | None = None,
     exclude_models: Sequence[str] = (),
@@ -370,6 +383,7 @@ def recognise(
     models: Sequence[str] | None = None,
     max_models: int = 4,
     views_per_model: int = 2,
+    search: tuple[int, ...] | None = None,
 ) -> Recognition:
     """Recognise the object in ``image`` among the trained views of ``viewpoint``.
 
@@ -395,6 +409,10 @@ def recognise(
         Only consider these models (the side-view check of section 3.5.3).
     max_models, views_per_model : int
         Verification budget: best-voted models (1..16) and views per model (1..8).
+    search : tuple of int, optional
+        Viewpoints whose trained views are compared (default: ``viewpoint`` alone; the
+        thresholds stay those of ``viewpoint``). The side policies search both side
+        viewpoints: the inner view of an object turned by 180 degrees is its outer view.
 
     Returns
     -------
@@ -423,11 +441,19 @@ def recognise(
         isinstance(models, str) or not all(isinstance(m, str) for m in models)
     ):
         raise ValueError(f"models must be a sequence of model names, got {models!r}")
+    if search is not None:
+        if viewpoint is None or not isinstance(search, tuple) or viewpoint not in search:
+            raise ValueError(
+                f"search must be a tuple of viewpoints including viewpoint {viewpoint!r}, "
+                f"got {search!r}"
+            )
+        for v in search:
+            check_viewpoint(v)
     query = index.features(image, mask=mask)
     scores, cands, t_r, t_v = evaluate(
         index,
         query,
-        viewpoint=viewpoint,
+        viewpoint=viewpoint if search is None else search,
         models=models,
         max_models=max_models,
         views_per_model=views_per_model,

@@ -4,11 +4,17 @@ threshold").
 
 Score distributions, from the trained views alone
     *Genuine*: every trained view is held out in turn and recognised against the others of
-    its viewpoint (leave-one-view-out); its own model's score is a genuine score.
+    its viewpoint (leave-one-view-out; side views against the views of both sides, as
+    :func:`recognise_views` searches them); its own model's score is a genuine score.
     *Impostor*: every model is held out in turn and each of its views is recognised against
     the remaining models (leave-one-model-out): the best score any other model gets is what
     an untrained object would score. Negative images (nothing trained in them), when given,
-    add impostor scores against every model.
+    add impostor scores against every model. Scores of the held-out view's *twins* (below)
+    are left out of the thresholds: a twin explains the view as well as its own model
+    because the two look alike from there (a part on two bases, two wheels with the same
+    face), which the decision's ambiguity margin and the side views resolve; kept in, one
+    pair of look-alikes among twelve models puts the largest impostor score, and so the
+    conformal threshold, at the genuine level (issue 14: every trained object unknown).
 
 Rules
     ``"conformal-far"`` (default): the global threshold ``t`` is the ``k``-th smallest of the
@@ -25,21 +31,21 @@ Rules
 
 Per-model thresholds
     ``per_model[m] = max(global, the same rule on the scores model m gave to other models'
-    views)``: a model that attracts impostors gets a higher bar; no model gets a lower one,
-    so the false-accept rate of the whole decision stays that of the global rule.
+    views, its twins' views left out)``: a model that attracts impostors gets a higher bar;
+    no model gets a lower one, so the false-accept rate of the whole decision stays that of
+    the global rule.
 
 Per viewpoint
     The same rule on the scores of each viewpoint alone gives ``per_viewpoint[vp]`` and
     ``per_model_viewpoint[vp][m]``; :meth:`ThresholdChoice.at` returns the choice for one
-    viewpoint, which :func:`recognise` applies when it searches one viewpoint. Models alike
-    from the top (a part on two bases, two parts with the same top face) push the top
-    viewpoint's threshold up, as they should: the top view cannot tell them apart, a side
-    view must. ``candidate`` is the lower bar for *considering* a model worth a side view:
-    the same rule on the impostor scores without *twins*, the other models that explained a
-    held-out view about as well as its own model did (within the ambiguity margin
-    :data:`DEFAULT_MARGIN`, or better) in the leave-one-view-out run (they
-    are indistinguishable from it at that viewpoint, so their scores say nothing about an
-    untrained object); at most ``threshold``.
+    viewpoint, which :func:`recognise` applies when it searches one viewpoint. *Twins* are
+    the other models that explained a held-out view about as well as its own model did
+    (within the ambiguity margin :data:`DEFAULT_MARGIN`, or better) in the leave-one-view-out
+    run: indistinguishable from it at that viewpoint, so their scores say nothing about an
+    untrained object, and they are left out of every threshold (see *Impostor*). Models
+    alike from the top then both pass there and the top view is ``ambiguous``: a side view
+    must decide. ``candidate`` is the bar for *considering* a model worth a side view (the
+    same rule on the twin-free scores, so now equal to ``threshold``; kept for the policies).
 
 Confusability
     ``confusion[viewpoint][a][b]``: share of model ``a``'s held-out views of that viewpoint on
@@ -60,7 +66,7 @@ from numpy.typing import ArrayLike
 from vision.features import Features
 from vision.recognition.choice import ThresholdChoice, roc_curve
 from vision.recognition.index import ViewIndex
-from vision.recognition.recognise import DEFAULT_MARGIN, evaluate
+from vision.recognition.recognise import DEFAULT_MARGIN, evaluate, search_of
 
 __all__ = [
     "RULES",
@@ -172,6 +178,7 @@ def choose_threshold(
     target_far: float = 0.01,
     rule: str = "conformal-far",
     progress: Callable[[int, int], None] | None = None,
+    exclude_twins: bool = True,
 ) -> ThresholdChoice:
     """Choose global and per-model thresholds from the trained views (module docstring).
 
@@ -187,6 +194,9 @@ def choose_threshold(
     rule : {"conformal-far", "youden"}
     progress : callable(done, total), optional
         Called after each held-out query.
+    exclude_twins : bool
+        Leave the twins' scores out of the thresholds (default; module docstring).
+        ``False`` keeps them in: the rule before issue 14's fix, for comparison only.
 
     Returns
     -------
@@ -202,6 +212,8 @@ def choose_threshold(
         raise ValueError(f"index must be a ViewIndex, got {type(index).__name__}")
     if rule not in RULES:
         raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
+    if not isinstance(exclude_twins, bool):
+        raise ValueError(f"exclude_twins must be true or false, got {exclude_twins!r}")
     target_far = _check_far(target_far)
     models = index.models
     if len(models) < 2:
@@ -228,9 +240,10 @@ def choose_threshold(
     twins: dict[int, set[str]] = {}
     lovo: list[tuple[int, str, dict[str, float]]] = []
     for v in views:
-        others = [w for w in index.views_of(v.model, viewpoint=v.viewpoint) if w is not v]
+        pool = search_of(v.viewpoint)  # as recognise_views searches (the sides pooled)
+        others = [w for w in index.views_of(v.model) if w.viewpoint in pool and w is not v]
         if others:
-            scores, *_ = evaluate(index, v.features, viewpoint=v.viewpoint, exclude_view=v.view_id)
+            scores, *_ = evaluate(index, v.features, viewpoint=pool, exclude_view=v.view_id)
             genuine.append(scores.get(v.model, 0.0))
             genuine_models.append(v.model)
             genuine_vps.append(v.viewpoint)
@@ -262,20 +275,27 @@ def choose_threshold(
         distinct.append(max((s for m, s in scores.items() if m not in twin), default=0.0))
         impostor_vps.append(vp)
         for m, s in scores.items():
+            if m in twin:  # a look-alike of the held-out model: not an untrained object's score
+                continue
             per_model_imp[m].append(s)
             per_model_imp_vp[m].append((s, vp))
 
     for v in views:
-        scores, *_ = evaluate(index, v.features, viewpoint=v.viewpoint, exclude_models=[v.model])
-        add_impostor(scores, v.viewpoint, twins.get(v.view_id, set()))
+        scores, *_ = evaluate(
+            index, v.features, viewpoint=search_of(v.viewpoint), exclude_models=[v.model]
+        )
+        add_impostor(scores, v.viewpoint, twins.get(v.view_id, set()) if exclude_twins else set())
         tick()
     for f in neg_feats:
         for vp in viewpoints:
-            scores, *_ = evaluate(index, f, viewpoint=vp)
+            scores, *_ = evaluate(index, f, viewpoint=search_of(vp))
             add_impostor(scores, vp)
             tick()
+    # Acceptance thresholds from the impostor scores without twins (module docstring): a
+    # twin's score says the two models look alike there, which the ambiguity margin and the
+    # side views handle, not how high an untrained object scores.
     t, bound, text, per_model = _rule(
-        genuine, impostor, per_model_imp, models, rule=rule, target_far=target_far
+        genuine, distinct, per_model_imp, models, rule=rule, target_far=target_far
     )
     cand = _candidate(genuine, distinct, rule=rule, target_far=target_far, cap=t)
     per_vp: dict[int, float] = {}
@@ -288,7 +308,7 @@ def choose_threshold(
             continue
         d_vp = [s for s, v in zip(distinct, impostor_vps, strict=True) if v == vp]
         imp_vp = {m: [s for s, v in per_model_imp_vp[m] if v == vp] for m in models}
-        tv, _, _, pm = _rule(g_vp, i_vp, imp_vp, models, rule=rule, target_far=target_far)
+        tv, _, _, pm = _rule(g_vp, d_vp, imp_vp, models, rule=rule, target_far=target_far)
         per_vp[vp], per_model_vp[vp] = tv, pm
         cand_vp[vp] = _candidate(g_vp, d_vp, rule=rule, target_far=target_far, cap=tv)
     g = np.asarray(genuine)
@@ -312,7 +332,7 @@ def choose_threshold(
         rule_id=rule,
         target_far=target_far if rule == "conformal-far" else None,
         far_bound=bound,
-        far=float(np.mean(i > t)),
+        far=float(np.mean(np.asarray(distinct) > t)),
         frr=float(np.mean(g <= t)),
         genuine=g,
         impostor=i,

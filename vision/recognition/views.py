@@ -14,9 +14,13 @@ Policies
     ``two-views`` (section 3.5.3, the chapter's choice): top view against the top views of
     every model; its contenders (the passing best and the models within the margin of it,
     or, when no model passes, every model above the choice's candidate bar) are verified
-    with side view 2 against the side views of the contenders only, and with view 3 if still
-    uncertain (the fused decision is not a recognition, or the winner's own side score does
-    not pass); fail after three. Nothing above the candidate bar from the top: unknown
+    with side view 2 against the side views of the contenders only (those of both side
+    viewpoints: the arm sees an object from two azimuths only, and the inner view of an
+    object turned by 180 degrees is its outer view), and with view 3 if still
+    uncertain (the fused decision is not a recognition, or, when the top view could not
+    choose among several, the winner's own side score does not pass: a model the top view
+    named alone needs only the fused decision, since side views at an object yaw never
+    taught may verify little); fail after three. Nothing above the candidate bar from the top: unknown
     after one view.
     ``best-next`` (beyond the chapter): like ``two-views``, but a model recognised from the
     top that no other model is confused with from the top (confusion table of
@@ -52,6 +56,7 @@ from vision.recognition.recognise import (
     decide_with,
     recognise,
     resolve_threshold,
+    search_of,
 )
 from vision.recognition.threshold import ThresholdChoice
 
@@ -236,6 +241,7 @@ async def recognise_views(
             threshold=at(vp),
             margin=margin,
             models=models,
+            search=None if viewpoint is None else search_of(viewpoint),
         )
         visited.append(vp)
         views.append(r)
@@ -289,19 +295,25 @@ async def recognise_views(
             return single(top)
         contenders = (top.model, *alike)
     models = list(contenders)
+    # A model the top view named on its own (no look-alike passed within the margin) needs
+    # the side views' fused support only; when the top view could not choose, the side view
+    # is what decides, so the winner must pass there on its own too.
+    named_from_top = top.decision == "recognized" and not skip_top
     for vp in _side_order(index, contenders, choice, smart=policy == "best-next"):
         if len(visited) >= max_views:
             break
         side = await see(vp, vp, models)
         fused, (decision, model, cont) = fused_decision(models)
-        if decision == "recognized" and side.scores.get(model, 0.0) > bar(model, vp):
+        if decision == "recognized" and (
+            (named_from_top and model == top.model) or side.scores.get(model, 0.0) > bar(model, vp)
+        ):
             return result(decision, model, fused, cont)
         if cont:
             models = list(cont)
     if len(visited) == 1:  # no contender has side views: the top view is all there is
         return single(top)
     fused, (decision, model, cont) = fused_decision(models)
-    if decision == "recognized":
+    if decision == "recognized" and not (named_from_top and model == top.model):
         # The side check did not confirm the winner on its own view: report the doubt.
         decision, model, cont = "ambiguous", None, cont
     return result(decision, model, fused, cont)
