@@ -656,6 +656,8 @@ async def kill_campaign(args: argparse.Namespace, progress: Any) -> KindResult:
                 if p.poll() is not None:
                     raise RuntimeError(f"serve ended with {p.returncode}: see {tmp / 'serve.log'}")
                 await asyncio.sleep(0.1)
+        p.kill()  # never leave a server behind
+        p.wait(30)
         raise RuntimeError("serve did not answer /api/health within 240 s")
 
     async def markers() -> list[Any]:
