@@ -38,6 +38,7 @@ import argparse
 import asyncio
 import contextlib
 import json
+import math
 import os
 import shutil
 import signal
@@ -164,7 +165,8 @@ class Feeder:
         eng.clear_objects()
         name = self.names[self._k % len(self.names)]
         self._k += 1
-        o = eng.spawn(name, s_m=eng.config.layout.conveyor.station_s_m, yaw_rad=0.3 * self._k)
+        yaw = math.remainder(0.3 * self._k, 2 * math.pi)  # turned a little more each time
+        o = eng.spawn(name, s_m=eng.config.layout.conveyor.station_s_m, yaw_rad=yaw)
         self.current = int(o.id)
         self.presented.append(self.current)
 
@@ -242,9 +244,18 @@ def _ended(run: Any) -> Any:
     return lambda: run.job.task.done()
 
 
+#: Helper tasks (the feeder) whose death must end the campaign, not stall it.
+WATCHED: list[asyncio.Task[Any]] = []
+
+
 async def wait_until(pred: Any, timeout_s: float, what: str) -> None:
     t0 = time.monotonic()
     while not pred():
+        for t in WATCHED:
+            if t.done() and not t.cancelled() and t.exception() is not None:
+                raise RuntimeError(
+                    f"a helper task died while waiting for {what}"
+                ) from t.exception()
         if time.monotonic() - t0 > timeout_s:
             raise TimeoutError(f"{what} did not happen within {timeout_s:g} s")
         await asyncio.sleep(0.05)
@@ -406,6 +417,7 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgCluster | None,
             watch_truths(rt, feeder)
             feeder.start()
             feed_task = asyncio.create_task(feeder.run())
+            WATCHED[:] = [feed_task]
             stack.callback(feed_task.cancel)
             run = await start_run(rt)
             dbf = DbFault(url, pg)
@@ -637,14 +649,16 @@ async def kill_campaign(args: argparse.Namespace, progress: Any) -> KindResult:
     async def launch() -> subprocess.Popen[bytes]:
         p = subprocess.Popen([str(exe), "serve"], env=env, stdout=log, stderr=log)
         async with httpx.AsyncClient(timeout=2.0) as c:
-            for _ in range(600):
+            for _ in range(2400):  # a loaded machine takes a while to start MuJoCo
                 with contextlib.suppress(httpx.HTTPError):
                     if (await c.get(f"{base}/health")).status_code == 200:
                         return p
                 if p.poll() is not None:
                     raise RuntimeError(f"serve ended with {p.returncode}: see {tmp / 'serve.log'}")
                 await asyncio.sleep(0.1)
-        raise RuntimeError("serve did not answer /api/health within 60 s")
+        p.kill()  # never leave a server behind
+        p.wait(30)
+        raise RuntimeError("serve did not answer /api/health within 240 s")
 
     async def markers() -> list[Any]:
         from sqlalchemy import select
@@ -766,7 +780,12 @@ async def campaign(args: argparse.Namespace, progress: Any) -> dict[str, Any]:
         if pg is not None:
             pg.destroy()
     if "kill" in args.kinds:
-        res["kill"] = await kill_campaign(args, progress)
+        try:
+            res["kill"] = await kill_campaign(args, progress)
+        except Exception as exc:  # report what was measured before, and why this part ended
+            res["kill"] = KindResult(
+                "kill", note=f"the kill part ended: {type(exc).__name__}: {exc}"
+            )
     rows = [r.summary() for r in res.values()]
     base = res.get("baseline")
     return {

@@ -138,6 +138,8 @@ async def soak(args: argparse.Namespace, progress: Any) -> dict[str, Any]:
         guard = asyncio.create_task(budget())
         await rt.jobs.wait(run.job)
         guard.cancel()
+        if task.done() and not task.cancelled() and task.exception() is not None:
+            raise RuntimeError("the feeder died during the soak") from task.exception()
         wall = time.monotonic() - t0
         task.cancel()
         if run.job.state.value != "done":

@@ -38,7 +38,7 @@ DEMAND_S = 2.0
 #: Longest wait for one fresh frame, seconds.
 MAX_WAIT_S = 120.0
 #: Longest time one ``grab()`` may take before the camera counts as stalled, seconds.
-GRAB_TIMEOUT_S = 3.0
+GRAB_TIMEOUT_S = 10.0
 
 
 class CameraFeed:

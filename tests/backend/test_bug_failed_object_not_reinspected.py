@@ -1,0 +1,76 @@
+"""Bug (fault campaign): in index mode a continuous run waited, before every object but the
+first, for the station to empty.  After a ``failed`` inspection (camera stall, link drop)
+the object is still there, so the run waited ``wait_s``, stored a second failure and the
+object was never inspected.  Now the run looks at the station again after a failure, and
+holds (no motion) while the camera or the arm's link is down or the database is away."""
+
+from __future__ import annotations
+
+import asyncio
+from types import SimpleNamespace
+
+from backend.cell.events import CameraStatus
+from backend.inspection import service
+from backend.jobs import JobManager
+
+
+class _Cell:
+    def __init__(self) -> None:
+        self.camera_ok = True
+        self.connected = True
+
+    def check_can_move(self) -> None:
+        pass
+
+    def camera_status(self) -> CameraStatus:
+        return CameraStatus(name="cam", ok=self.camera_ok, frames=1, fps=1.0,
+                            error="" if self.camera_ok else "camera stalled", retries=0)  # fmt: skip
+
+    @property
+    def state(self):
+        return SimpleNamespace(connected=self.connected, fault="")
+
+
+class _Db:
+    def __init__(self) -> None:
+        self.down = 0
+
+    async def ping(self) -> bool:
+        if self.down:
+            self.down -= 1
+            return False
+        return True
+
+
+async def test_the_run_looks_again_after_a_failure_and_holds_while_not_ready(monkeypatch):
+    cell, db = _Cell(), _Db()
+    rt = SimpleNamespace(cell=cell, jobs=JobManager(), live_index=[1], sim=None,
+                         database=db, inspection_run=None)  # fmt: skip
+    seen: list[tuple[bool, bool]] = []
+    decisions = iter(["unknown", "failed", "unknown", "failed", "recognized"])
+
+    async def fake_context(rt):
+        return SimpleNamespace()
+
+    async def fake_inspect(ctx, opts, job=None, *, clear_first=False, db_wait_s=None):
+        seen.append((clear_first, cell.camera_ok))
+        d = next(decisions)
+        if d == "failed":  # the fault: the camera fails, the database goes for 2 checks
+            cell.camera_ok = False
+            db.down = 2
+            asyncio.get_running_loop().call_later(0.3, setattr, cell, "camera_ok", True)
+        return {"id": len(seen), "decision": d, "model": None}
+
+    monkeypatch.setattr(service, "context", fake_context)
+    monkeypatch.setattr(service, "inspect_object", fake_inspect)
+    messages: list[str] = []
+    run = service.start_run(rt, service.InspectOptions(), 5)
+    run.job.on_report = lambda j: messages.append(j.message)
+    await rt.jobs.wait(run.job)
+    assert run.job.state.value == "done", run.job.error
+    # first object: nothing to clear; after a complete one: wait for it to leave; after a
+    # failed one: look at the same object again (no clearing)
+    assert [c for c, _ in seen] == [False, True, False, True, False]
+    assert all(ok for _, ok in seen)  # never started while the camera was failing
+    assert any("holding: camera cam: camera stalled" in m for m in messages)
+    assert any("database unavailable" in m for m in messages)

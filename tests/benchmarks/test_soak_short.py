@@ -1,0 +1,26 @@
+"""Short soak (issue 16, part 5): 30 inspections in the simulated cell with resources
+sampled after each; the run completes every one, and open files and database connections
+do not grow after the warm-up (the long run in ``benchmarks/soak.py`` fits the slopes)."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+
+import pytest
+
+from benchmarks import soak
+
+pytestmark = pytest.mark.slow
+
+
+def test_thirty_inspections_leak_no_files_or_connections(tmp_path, monkeypatch):
+    monkeypatch.setattr(soak, "OUT_DIR", tmp_path)
+    args = argparse.Namespace(inspections=30, warmup=10, taught_every=6, policy="top-only",
+                              time_scale=20.0, idle_s=1.0, max_wall_s=3600.0, docs=False)  # fmt: skip
+    r = asyncio.run(soak.soak(args, lambda msg: None))
+    assert r["inspections"] == 30 and sum(r["decisions"].values()) == 30
+    files, conns = r["series"]["open_files"], r["series"]["db_connections"]
+    assert files["end"] <= files["after_warmup"] + 1, files
+    assert conns["max"] <= 5 and conns["end"] <= conns["after_warmup"] + 1, conns
+    assert r["series"]["rss_mb"]["max"] > 0 and (tmp_path / "soak.png").exists()
