@@ -50,6 +50,8 @@ REPORT_INDEXES = (
     "ix_inspections_report_model_score",
     "ix_inspections_report_duration",
     "ix_inspection_stages_stage_seconds",
+    "ix_inspection_stages_stage_cell_time",
+    "ix_inspection_stages_stage_model",
 )
 
 

@@ -389,7 +389,12 @@ class InspectionStage(Base):
     model_name: Mapped[str | None] = mapped_column(String(64), default=None)
     policy: Mapped[str] = mapped_column(String(16))
 
-    __table_args__ = (Index("ix_inspection_stages_stage_seconds", "stage", "seconds"),)
+    __table_args__ = (
+        # Unfiltered percentiles walk the first; filtered ones seek the others (migration 0007).
+        Index("ix_inspection_stages_stage_seconds", "stage", "seconds"),
+        Index("ix_inspection_stages_stage_cell_time", "stage", "cell_id", "started_at"),
+        Index("ix_inspection_stages_stage_model", "stage", "model_name", "seconds"),
+    )
 
 
 class InspectionScene(Base):

@@ -86,6 +86,14 @@ def upgrade() -> None:
     )
     _backfill()
     op.create_index("ix_inspection_stages_stage_seconds", "inspection_stages", ["stage", "seconds"])
+    op.create_index(
+        "ix_inspection_stages_stage_cell_time",
+        "inspection_stages",
+        ["stage", "cell_id", "started_at"],
+    )
+    op.create_index(
+        "ix_inspection_stages_stage_model", "inspection_stages", ["stage", "model_name", "seconds"]
+    )
     op.create_index("ix_inspections_report_duration", "inspections", ["duration_s"])
     op.create_index("ix_inspections_report_model_score", "inspections", ["model_name", "score"])
     op.create_index("ix_inspections_report_cell_time", "inspections", ["cell_id", "started_at"])
@@ -112,6 +120,8 @@ def downgrade() -> None:
     op.drop_index("ix_inspections_report_cell_time", table_name="inspections")
     op.drop_index("ix_inspections_report_model_score", table_name="inspections")
     op.drop_index("ix_inspections_report_duration", table_name="inspections")
+    op.drop_index("ix_inspection_stages_stage_model", table_name="inspection_stages")
+    op.drop_index("ix_inspection_stages_stage_cell_time", table_name="inspection_stages")
     op.drop_index("ix_inspection_stages_stage_seconds", table_name="inspection_stages")
     op.drop_index(op.f("ix_inspection_stages_inspection_id"), table_name="inspection_stages")
     op.drop_table("inspection_stages")
