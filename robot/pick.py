@@ -49,6 +49,7 @@ __all__ = [
     "PickStep",
     "execute_pick_place",
     "plan_pick_place",
+    "plan_pick_place_at_roll",
     "tool_flange_pose",
 ]
 
@@ -198,7 +199,89 @@ def _check_path(
                 raise Unreachable(f"{what}: the held part comes near the floor")
 
 
+def _roll_candidates(T: NDArray[np.float64], g_obj: NDArray[np.float64], model: ArmModel) -> list[float]:
+    """Flange rolls to try for a grasp at ``g_obj`` (object frame) of the object at ``T``.
+
+    The camera and the flange sit on the ``+x_ee`` side of the cup (:data:`T_EE_SUCTION_CUP`),
+    so for a grasp off the footprint centre the tool is turned to put them *outward*, over
+    the side of the grasp point away from the rest of the part: ``x_ee`` along the grasp's
+    horizontal offset.  Pointing down (:func:`_R_down`), ``x_ee`` has the azimuth
+    ``q1 - q5 + pi``, so the wanted roll is ``q5 = q1 + pi - alpha`` (``alpha`` the offset's
+    azimuth, ``q1`` the azimuth of the grasp point seen from the base).  Then rolls ever
+    further from it, 30 degrees apart, within the joint range.  A centred grasp tries roll 0
+    first (the camera tangential to the column's plane).
+    """
+    off = T[:3, :3] @ np.array([g_obj[0], g_obj[1], 0.0])
+    grasp = T[:3, :3] @ g_obj + T[:3, 3]
+    if math.hypot(off[0], off[1]) < 0.005:
+        want = 0.0
+    else:
+        q1 = math.atan2(grasp[1], grasp[0])
+        want = math.remainder(q1 + math.pi - math.atan2(off[1], off[0]), 2 * math.pi)
+    lo, hi = float(model.lower[4]), float(model.upper[4])
+    out: list[float] = []
+    for k in (0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5, 6):
+        r = math.remainder(want + k * math.pi / 6, 2 * math.pi)
+        if lo <= r <= hi and all(abs(r - o) > 1e-6 for o in out):
+            out.append(r)
+    return out
+
+
 def plan_pick_place(
+    q_start: ArrayLike,
+    T_base_obj: ArrayLike,
+    object_height_m: float,
+    drop_point: ArrayLike,
+    *,
+    roll_rad: float | None = None,
+    grasp_obj: ArrayLike | None = None,
+    model: ArmModel = ASEA,
+    **options: object,
+) -> PickPlan:
+    """Plan picking the object at ``T_base_obj`` and dropping it at ``drop_point``.
+
+    With ``roll_rad`` given, that flange roll is used (:func:`plan_pick_place_at_roll`, whose
+    parameters this takes as well).  Without it (the default), the rolls of
+    :func:`_roll_candidates` are tried in turn (camera and flange turned away from the part
+    over an off-centre grasp point) and the first plan clearing every check is returned;
+    if none does, the :class:`~robot.errors.Unreachable` of the preferred roll is raised,
+    naming the rolls tried.
+    """
+    if roll_rad is not None:
+        return plan_pick_place_at_roll(q_start, T_base_obj, object_height_m, drop_point,
+                                       roll_rad=roll_rad, grasp_obj=grasp_obj, model=model,
+                                       **options)  # type: ignore[arg-type]  # fmt: skip
+    T = np.asarray(T_base_obj, dtype=np.float64)
+    if T.shape != (4, 4) or not np.isfinite(T).all():
+        raise ValueError(
+            f"T_base_obj must be a finite 4x4 matrix, got {np.asarray(T_base_obj).tolist()}"
+        )
+    h = object_height_m
+    if isinstance(h, bool) or not (isinstance(h, int | float) and 0.0 < h <= 0.5):
+        raise ValueError(f"object_height_m must be in (0, 0.5] m, got {h!r}")
+    g = (
+        np.array([0.0, 0.0, float(h)])
+        if grasp_obj is None
+        else np.asarray(grasp_obj, dtype=np.float64).reshape(3)
+    )
+    if not np.isfinite(g).all():
+        raise ValueError(f"grasp_obj must be 3 finite numbers, got {grasp_obj!r}")
+    first: Unreachable | None = None
+    rolls = _roll_candidates(T, g, model)
+    for r in rolls:
+        try:
+            return plan_pick_place_at_roll(q_start, T, h, drop_point, roll_rad=r,
+                                           grasp_obj=grasp_obj, model=model, **options)  # type: ignore[arg-type]  # fmt: skip
+        except Unreachable as exc:
+            first = first or exc
+    assert first is not None
+    msg = f"{first.detail} (preferred roll {math.degrees(rolls[0]):.0f} deg; {len(rolls)} rolls tried)"
+    if isinstance(first, JointLimitsBlock):
+        raise JointLimitsBlock(msg, first.joints) from first
+    raise type(first)(msg) from first
+
+
+def plan_pick_place_at_roll(
     q_start: ArrayLike,
     T_base_obj: ArrayLike,
     object_height_m: float,
@@ -219,7 +302,8 @@ def plan_pick_place(
     max_tilt_deg: float = 2.0,
     model: ArmModel = ASEA,
 ) -> PickPlan:
-    """Plan picking the object at ``T_base_obj`` and dropping it at ``drop_point``.
+    """Plan picking the object at ``T_base_obj`` and dropping it at ``drop_point`` with the
+    flange rolled by ``roll_rad``.
 
     Parameters
     ----------
