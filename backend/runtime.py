@@ -123,6 +123,8 @@ class CellRuntime:
         self._live_index: LiveIndex | None = None
         #: Empty-belt backgrounds grabbed by teaches, for later teaches of this cell.
         self.teach_backgrounds = BackgroundStore()
+        #: The top view's empty belt registered to its travel (inspection.grab_belt_background).
+        self.belt_background: Any = None
         #: The continuous inspection run, if one was started (``backend.inspection.service``).
         self.inspection_run: Any = None
         #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).

@@ -39,13 +39,29 @@ from rich.table import Table
 
 from backend.inspection.viewpoints import plan_viewpoints
 from robot.errors import Unreachable
-from robot.pick import execute_pick_place, plan_pick_place
+from robot.pick import execute_pick_place, execute_search_pick_place, plan_pick_place
 from robot.sim import CATALOGUE, SimDriver, SimEngine, suction_point
 from robot.sim.camera import DEFAULT_T_EE_CAM
 from robot.sim.obstacles import collision_world
 
 out = Console()
 err = Console(stderr=True)
+
+
+#: What the cell assumes of an object it cannot name: tallest, widest (metres).
+UNKNOWN_MAX_HEIGHT_M = 0.25
+UNKNOWN_RADIUS_M = 0.18
+
+
+async def _recover(driver: SimDriver, engine: SimEngine, ok: bool) -> None:
+    """After a miss: suction off and the arm back to ``q_ready`` for the next pick."""
+    if ok:
+        return
+    from robot.trajectory import plan_joint_move
+
+    await driver.grip(False)
+    q = np.asarray(driver.state.q, dtype=np.float64)
+    await driver.move(plan_joint_move(q, engine.arm_model.q_ready, speed=0.3))
 
 
 def _tool_clearance(engine: SimEngine, name: str, T_obj: np.ndarray, trajs: list) -> float:
@@ -111,6 +127,28 @@ async def _picks(repeats: int, error_mm: float, error_deg: float, seed: int) -> 
                     # A model's stored grasp point (its drawing, entered); unknown: top centre.
                     grasp = suction_point(name) if trained else None
                     t0 = time.perf_counter()
+                    if not trained:  # unknown: footprint centre only, a guarded descent
+                        drop = engine.config.layout.bin(bin_name).drop_point
+                        try:
+                            outcome, found_h = await execute_search_pick_place(
+                                driver, T, drop, max_height_m=UNKNOWN_MAX_HEIGHT_M,
+                                object_radius_m=UNKNOWN_RADIUS_M, world=world,
+                                q_return=engine.arm_model.q_ready,
+                            )  # fmt: skip
+                            reason = outcome.reason
+                        except Unreachable as exc:
+                            outcome, found_h, reason = None, None, str(exc)
+                        ok = outcome is not None and outcome.ok
+                        rows.append({"condition": cond, "name": name,
+                                     "ok": ok and truth.id in engine.bins()[bin_name],
+                                     "plan_s": None, "cycle_s": None if outcome is None else
+                                     sum(m.duration_s for m in outcome.moves),
+                                     "held_err_rad": None, "tool_gap_m": None,
+                                     "stage": "search" if outcome is None else outcome.stage,
+                                     "reason": reason, "found_height_m": found_h})  # fmt: skip
+                        await _recover(driver, engine, ok)
+                        err.print(f"[{len(rows)}/{total}] {cond}: {name} ok={rows[-1]['ok']}")
+                        continue
                     try:
                         plan = plan_pick_place(
                             driver.state.q,
@@ -127,6 +165,7 @@ async def _picks(repeats: int, error_mm: float, error_deg: float, seed: int) -> 
                                      "held_err_rad": None, "tool_gap_m": None,
                                      "stage": "planning", "reason": str(exc)})  # fmt: skip
                         engine.clear_objects()
+                        await _recover(driver, engine, False)
                         err.print(f"[{len(rows)}/{total}] {cond}: {name} not planned: {exc}")
                         continue
                     t_plan = time.perf_counter() - t0
@@ -150,8 +189,7 @@ async def _picks(repeats: int, error_mm: float, error_deg: float, seed: int) -> 
                             "reason": outcome.reason,
                         }
                     )
-                    if not outcome.ok:
-                        await driver.grip(False)  # a miss: let go of anything before the next
+                    await _recover(driver, engine, outcome.ok)
                     engine.clear_objects()
                     err.print(f"[{len(rows)}/{total}] {cond}: {name} ok={rows[-1]['ok']}")
     finally:
@@ -224,7 +262,9 @@ def main(argv: list[str] | None = None) -> int:
         s = {
             "picks": len(r),
             "right_bin": sum(x["ok"] for x in r),
-            "plan_s_median": statistics.median(x["plan_s"] for x in r),
+            "plan_s_median": statistics.median(
+                [x["plan_s"] for x in r if x["plan_s"] is not None] or [math.nan]
+            ),
             "cycle_s_median": statistics.median(
                 [x["cycle_s"] for x in r if x["cycle_s"] is not None] or [math.nan]
             ),
