@@ -7,7 +7,8 @@ turn the camera away from the part over an off-centre grasp point) and executed 
 :class:`robot.sim.SimDriver`; the simulator's truth says which bin it landed in.  The height
 and grasp point given to the planner are what a model stores (``height_m``, ``grasp_obj``:
 the part's drawing, as an engineer enters it); for the untrained parts the planner gets
-the bounding height and the top centre, what the cell knows of an unknown object.  Also
+only the footprint (centre and half-width, what the top view gives) and finds the height
+with a guarded descent (:func:`robot.pick.execute_search_pick_place`), as the cell does.  Also
 measured, from the simulator's truth (evaluation only): the smallest distance between the
 tool's collision capsules (camera, cup tube) and the part's own surface during the approach
 and the descent (negative would be a collision the planner did not see).  Two conditions in the same run: the planner given the true pose (the baseline)
@@ -48,9 +49,9 @@ out = Console()
 err = Console(stderr=True)
 
 
-#: What the cell assumes of an object it cannot name: tallest, widest (metres).
+#: What the cell assumes of an object it cannot name: the tallest the station admits (m);
+#: its half-width is the top view's footprint (here the drawing's, plus 1 cm).
 UNKNOWN_MAX_HEIGHT_M = 0.25
-UNKNOWN_RADIUS_M = 0.18
 
 
 async def _recover(driver: SimDriver, engine: SimEngine, ok: bool) -> None:
@@ -132,7 +133,8 @@ async def _picks(repeats: int, error_mm: float, error_deg: float, seed: int) -> 
                         try:
                             outcome, found_h = await execute_search_pick_place(
                                 driver, T, drop, max_height_m=UNKNOWN_MAX_HEIGHT_M,
-                                object_radius_m=UNKNOWN_RADIUS_M, world=world,
+                                object_radius_m=float(np.abs(b[:, :2]).max()) + 0.01,
+                                world=world,
                                 q_return=engine.arm_model.q_ready,
                             )  # fmt: skip
                             reason = outcome.reason

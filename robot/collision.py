@@ -96,10 +96,16 @@ class ToolCapsule:
     def __post_init__(self) -> None:
         a, b = np.asarray(self.a_ee, float), np.asarray(self.b_ee, float)
         r = self.radius_m
-        if a.shape != (3,) or b.shape != (3,) or not (np.isfinite(a).all() and np.isfinite(b).all()):
+        if (
+            a.shape != (3,)
+            or b.shape != (3,)
+            or not (np.isfinite(a).all() and np.isfinite(b).all())
+        ):
             raise ValueError(f"tool capsule {self.name!r}: end points must be 3 finite numbers")
         if not (isinstance(r, int | float) and math.isfinite(r) and 0.001 <= r <= 0.3):
-            raise ValueError(f"tool capsule {self.name!r}: radius_m must be in [0.001, 0.3], got {r!r}")
+            raise ValueError(
+                f"tool capsule {self.name!r}: radius_m must be in [0.001, 0.3], got {r!r}"
+            )
 
 
 #: The eye-in-hand camera and the suction cup on the flange (the drawn tools of

@@ -201,7 +201,9 @@ def _check_path(
                 raise Unreachable(f"{what}: the held part comes near the floor")
 
 
-def _roll_candidates(T: NDArray[np.float64], g_obj: NDArray[np.float64], model: ArmModel) -> list[float]:
+def _roll_candidates(
+    T: NDArray[np.float64], g_obj: NDArray[np.float64], model: ArmModel
+) -> list[float]:
     """Flange rolls to try for a grasp at ``g_obj`` (object frame) of the object at ``T``.
 
     The camera and the flange sit on the ``+x_ee`` side of the cup (:data:`T_EE_SUCTION_CUP`),
@@ -498,7 +500,9 @@ def plan_pick_place_at_roll(
         # as the arm gets in five steps towards the transit height; the part falls the rest.
         for z_try in np.linspace(z_drop, p_over[2], 6)[:-1]:
             try:
-                t_low = line(q_over, np.array([p_over[0], p_over[1], z_try]), "lowering into the bin")
+                t_low = line(
+                    q_over, np.array([p_over[0], p_over[1], z_try]), "lowering into the bin"
+                )
                 _check_path("lowering", t_low, obstacles, part=part)
             except Unreachable:
                 continue
@@ -598,7 +602,11 @@ async def execute_search_pick_place(
     model: ArmModel = ASEA,
     poll_s: float = 0.005,
     offsets_m: tuple[tuple[float, float], ...] = (
-        (0.0, 0.0), (0.03, 0.0), (0.0, 0.03), (-0.03, 0.0), (0.0, -0.03)
+        (0.0, 0.0),
+        (0.03, 0.0),
+        (0.0, 0.03),
+        (-0.03, 0.0),
+        (0.0, -0.03),
     ),
 ) -> tuple[PickOutcome, float | None]:
     """Pick an object of unknown height with a guarded descent, and drop it at ``drop_point``.
@@ -641,18 +649,17 @@ async def execute_search_pick_place(
     tried: list[str] = []
     planned = False
     for dx, dy in offsets_m:
-        T_try = T.copy()
-        T_try[:3, 3] = T[:3, :3] @ np.array([dx, dy, 0.0]) + T[:3, 3]
         q_now = np.asarray(driver.state.q, dtype=np.float64)
         try:
-            first = plan_pick_place(q_now, T_try, float(h_max), drop_point,
-                                    object_radius_m=object_radius_m + math.hypot(dx, dy),
-                                    world=obstacles, q_return=q_end, speed=speed, model=model,
+            first = plan_pick_place(q_now, T, float(h_max), drop_point,
+                                    object_radius_m=object_radius_m,
+                                    grasp_obj=(dx, dy, float(h_max)), world=obstacles,
+                                    q_return=q_end, speed=speed, model=model,
                                     press_m=0.0)  # fmt: skip
             t_app = first.steps[0].trajectory
             assert t_app is not None
             roll = float(t_app.goal[4])
-            lowest = T_try[:3, :3] @ np.array([0.0, 0.0, float(min_grasp_m)]) + T_try[:3, 3]
+            lowest = T[:3, :3] @ np.array([dx, dy, float(min_grasp_m)]) + T[:3, 3]
             t_down = plan_cartesian_line(
                 t_app.goal, tool_flange_pose(lowest, roll_rad=roll), roll=roll,
                 speed=0.2 * speed, model=model,
@@ -680,7 +687,9 @@ async def execute_search_pick_place(
         await driver.grip(False)
         if not (rep.completed or rep.reason == "stopped"):
             return PickOutcome(False, "descend", rep.reason, grip, tuple(moves)), None
-        back = plan_joint_move(np.asarray(driver.state.q, float), t_app.goal, speed=speed, model=model)
+        back = plan_joint_move(
+            np.asarray(driver.state.q, float), t_app.goal, speed=speed, model=model
+        )
         moves.append(await driver.move(back))
         tried.append(f"({dx * 1e3:+.0f}, {dy * 1e3:+.0f}) mm: nothing sealed on the way down")
     else:

@@ -188,7 +188,9 @@ class ObjectModel(Base):
         CheckConstraint(
             "threshold IS NULL OR (threshold >= 0 AND threshold <= 1)", name="threshold_range"
         ),
-        CheckConstraint("height_m IS NULL OR (height_m > 0 AND height_m <= 0.5)", name="height_range"),
+        CheckConstraint(
+            "height_m IS NULL OR (height_m > 0 AND height_m <= 0.5)", name="height_range"
+        ),
     )
 
 

@@ -153,9 +153,15 @@ def build_belt_background(
     geometry : BeltGeometry
     """
     if not MIN_FRAMES <= len(frames) <= MAX_FRAMES:
-        raise InvalidInput(f"a belt background needs {MIN_FRAMES}..{MAX_FRAMES} frames, got {len(frames)}")
+        raise InvalidInput(
+            f"a belt background needs {MIN_FRAMES}..{MAX_FRAMES} frames, got {len(frames)}"
+        )
     shape = frames[0][0].shape
-    if len(shape) != 3 or shape[2] != 3 or any(f.shape != shape or f.dtype != np.uint8 for f, _ in frames):
+    if (
+        len(shape) != 3
+        or shape[2] != 3
+        or any(f.shape != shape or f.dtype != np.uint8 for f, _ in frames)
+    ):
         raise InvalidInput("belt background frames must be HxWx3 uint8 images of one size")
     travels = [t for _, t in frames]
     if not all(isinstance(t, int | float) and math.isfinite(t) for t in travels):

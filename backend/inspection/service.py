@@ -328,14 +328,19 @@ def _geometry(live: Any, name: str | None) -> tuple[float | None, NDArray[np.flo
 
 
 def _footprint_radius(
-    mask: NDArray[np.bool_], camera: Any, T_cam: NDArray[np.float64], centre: NDArray[np.float64],
+    mask: NDArray[np.bool_],
+    camera: Any,
+    T_cam: NDArray[np.float64],
+    centre: NDArray[np.float64],
     z_m: float,
 ) -> float:
     """Half-width of the object's region seen from the top, on the plane ``z_m`` about
     ``centre`` (its obstacle box for the approach), metres, plus 1 cm."""
     ys, xs = np.nonzero(mask)
     step = max(1, len(xs) // 2000)
-    pts = plane_points(np.stack([xs[::step], ys[::step]], axis=1).astype(np.float64), camera, T_cam, z_m)
+    pts = plane_points(
+        np.stack([xs[::step], ys[::step]], axis=1).astype(np.float64), camera, T_cam, z_m
+    )
     return float(min(0.5, np.linalg.norm(pts[:, :2] - centre[:2], axis=1).max() + 0.01))
 
 
@@ -756,7 +761,9 @@ async def grab_belt_background(
             sim.configure_conveyor(running=False)
     finally:
         sim.configure_conveyor(running=before.running, mode=before.mode, speed_m_s=before.speed_m_s)
-    geo = BeltGeometry(spec.centre_x_m, spec.start_y_m, spec.width_m, spec.surface_z_m, spec.length_m)
+    geo = BeltGeometry(
+        spec.centre_x_m, spec.start_y_m, spec.width_m, spec.surface_z_m, spec.length_m
+    )
     bb = await asyncio.to_thread(build_belt_background, shots, camera=ctx.camera,
                                  T_base_cam=_T_cam(frame.robot_state.q, ctx.T_ee_cam), geometry=geo)  # fmt: skip
     rt.belt_background = bb

@@ -154,7 +154,9 @@ def check_geometry(
             or any(isinstance(v, bool) or not isinstance(v, int | float) for v in vals)
             or not all(math.isfinite(float(v)) for v in vals)
         ):
-            raise InvalidInput(f"grasp_obj must be 3 finite numbers (metres) or null, got {grasp_obj!r}")
+            raise InvalidInput(
+                f"grasp_obj must be 3 finite numbers (metres) or null, got {grasp_obj!r}"
+            )
         x, y, z = (float(v) for v in vals)
         if math.hypot(x, y) > MAX_GRASP_OFFSET_M or not 0.0 <= z <= MAX_HEIGHT_M:
             raise InvalidInput(

@@ -33,7 +33,8 @@ def upgrade() -> None:
             sa.Column("geometry_source", sa.String(length=16), nullable=False, server_default="")
         )
         batch_op.create_check_constraint(
-            op.f("ck_object_models_height_range"), "height_m IS NULL OR (height_m > 0 AND height_m <= 0.5)"
+            op.f("ck_object_models_height_range"),
+            "height_m IS NULL OR (height_m > 0 AND height_m <= 0.5)",
         )
 
 

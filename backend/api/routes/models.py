@@ -71,11 +71,16 @@ class ModelCreate(BaseModel):
     )
     description: str = Field("", max_length=2000)
     height_m: float | None = Field(
-        None, gt=0.0, le=0.5, allow_inf_nan=False,
+        None,
+        gt=0.0,
+        le=0.5,
+        allow_inf_nan=False,
         description="Height above the sitting base, metres (what the pick plans with)",
     )
     grasp_obj: list[Annotated[float, Field(ge=-0.5, le=0.5, allow_inf_nan=False)]] | None = Field(
-        None, min_length=3, max_length=3,
+        None,
+        min_length=3,
+        max_length=3,
         description="Suction point on the upper surface, object frame [x, y, z], metres",
     )
     reason: Reason = None
@@ -93,11 +98,16 @@ class ModelUpdate(BaseModel):
     threshold: float | None = Field(None, ge=0.0, le=1.0, allow_inf_nan=False)
     description: str | None = Field(None, max_length=2000)
     height_m: float | None = Field(
-        None, gt=0.0, le=0.5, allow_inf_nan=False,
+        None,
+        gt=0.0,
+        le=0.5,
+        allow_inf_nan=False,
         description="Height above the sitting base, metres (what the pick plans with)",
     )
     grasp_obj: list[Annotated[float, Field(ge=-0.5, le=0.5, allow_inf_nan=False)]] | None = Field(
-        None, min_length=3, max_length=3,
+        None,
+        min_length=3,
+        max_length=3,
         description="Suction point on the upper surface, object frame [x, y, z], metres",
     )
     reason: Reason = None
