@@ -377,7 +377,26 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
         code = getattr(exc, "code", "error")
         detail = getattr(exc, "detail", str(exc))
         state["reason"] = f"{code}: {detail}"
+        await _reject_failed(ctx, opts, state)
     return await _store(ctx, opts, started, durations, views, cams, state)
+
+
+async def _reject_failed(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any]) -> None:
+    """A failed inspection whose object was found on the belt (after the top view): with
+    ``sort``, into the reject bin (the guarded pick of an unknown object), once."""
+    found = state.get("_found")
+    if not opts.sort or found is None or state.get("pick") is not None or ctx.rt.cell.estopped:
+        return
+    if _belt(ctx.rt)[0] == "continuous":  # gone on with the belt: left to the belt's end
+        state["pick"] = {"sorted": True, "ok": False,
+                         "reason": "not rejected: the belt carried it on (constant speed)"}  # fmt: skip
+        return
+    try:
+        state["pick"] = await _pick_unknown(
+            ctx, opts, state, None, found, state.get("_radius", 0.18)
+        )
+    except (VisionCellError, ValueError) as exc:
+        state["pick"] = {"sorted": True, "ok": False, "reason": f"cannot reject: {exc}"}
 
 
 async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[str, float],
@@ -436,6 +455,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     z_mid = ctx.surface_z + AIM_HEIGHT_M / 2
     found = plane_points(np.array([[xs.mean(), ys.mean()]]), ctx.camera, T_cam_top, z_mid)[0]
     found[2] = ctx.surface_z
+    state["_found"] = found
     state["truth"] = _truth_near(rt, found, _belt(rt)[2] - travel0)
     frames: dict[int, tuple[Any, NDArray[np.bool_] | None, str]] = {
         1: (frame, region.mask, region.method)
@@ -516,6 +536,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     radius = await asyncio.to_thread(
         _footprint_radius, region.mask, ctx.camera, T_cam_top, found, ctx.surface_z + height
     )
+    state["_radius"] = radius
     if state["decision"] == "recognized":
         try:
             pose = await _pose(ctx, res, state["model"], T_cam_top, height)
@@ -768,6 +789,22 @@ async def grab_belt_background(
                                  T_base_cam=_T_cam(frame.robot_state.q, ctx.T_ee_cam), geometry=geo)  # fmt: skip
     rt.belt_background = bb
     return bb
+
+
+def start_belt_background(rt: Any) -> Any:
+    """Start a job grabbing the belt background (:func:`grab_belt_background`); 409 at once
+    when the arm is busy or e-stopped, or the cell has no conveyor it can jog."""
+    if rt.sim is None:
+        raise Conflict("a belt background needs a conveyor the cell can jog (the simulator's)")
+    rt.cell.check_can_move()
+    rt.jobs.check_arm_free()
+
+    async def body(job: Any) -> dict[str, Any]:
+        job.report(0.1, "jogging the empty belt round its loop")
+        bb = await grab_belt_background(rt)
+        return {"frames": bb.frames, "loop_m": bb.geometry.loop_m}
+
+    return rt.jobs.start("belt-background", body, motion=True, params={})
 
 
 def _check_ready(rt: Any) -> None:

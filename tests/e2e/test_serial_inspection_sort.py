@@ -49,7 +49,7 @@ def serial_sim(tmp_path, monkeypatch):
         box["stop"] = asyncio.Event()
         driver = SimDriver(engine)
         await driver.connect()
-        box["emu"] = emu = Emulator(driver, link=link)
+        box["emu"] = emu = Emulator(driver, link=link, watchdog_s=10.0)
         try:
             await emu.start()
             ready.set()
