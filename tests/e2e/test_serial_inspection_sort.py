@@ -158,7 +158,9 @@ def test_teach_inspect_and_sort_over_the_serial_link(tmp_path, serial_sim):
             )  # fmt: skip
             assert pick["bin"] == target and landed[name] == target, (name, pick, landed)
             assert any(i for i in bins[target]), bins
-        # The emulator's own count of GRIP commands: its gripper engaged for every pick
-        # (each GRIP 1 found a part under the cup) and let go over the bins.
+        # The emulator's own count of GRIP commands: it switched the cup on and off for each
+        # pick; the two model picks sealed at their GRIP 1 (the cup set down on the grasp
+        # point), the unknown one during the guarded descent after it (its landing in the
+        # reject bin, checked above, is that seal).
         stats = box["emu"].stats
-        assert stats.grips_holding >= 3 and stats.grips >= 6 and stats.grips_refused == 0
+        assert stats.grips_holding >= 2 and stats.grips >= 6 and stats.grips_refused == 0
