@@ -142,6 +142,8 @@ class CellRuntime:
         self.teach_backgrounds = BackgroundStore()
         #: Ids of the failed rows written at start-up for inspections left unfinished.
         self.interrupted_at_start: list[int] = []
+        #: The top view's empty belt registered to its travel (inspection.grab_belt_background).
+        self.belt_background: Any = None
         #: The continuous inspection run, if one was started (``backend.inspection.service``).
         self.inspection_run: Any = None
         #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).

@@ -82,9 +82,19 @@ async def _teach_all(
     engine.configure_conveyor(running=False, mode="index", dwell_s=None)
     t0 = time.perf_counter()
     for k, name in enumerate(names):
+        from robot.sim.gripper import suction_point
+
+        # Height and grasp point from the part's drawing, as an engineer enters them (the
+        # object frame is where it sat at the first teach round, yaw 0: the drawing's).
         row = await msvc.create_model(
-            rt.database, msvc.ModelFields(name=name, part=CATALOGUE[name].base_of, kind="3d")
-        )
+            rt.database,
+            msvc.ModelFields(
+                name=name, part=CATALOGUE[name].base_of, kind="3d",
+                height_m=float(CATALOGUE[name].geometry().bounds[1, 2]),
+                grasp_obj=tuple(float(v) for v in suction_point(name)),  # type: ignore[arg-type]
+                height_given=True, grasp_given=True,
+            ),
+        )  # fmt: skip
         rt.live_index.put_model(IndexedModel.of(row))
         for r, yaw_deg in enumerate(yaws_deg):
             yaw = math.radians(yaw_deg)
@@ -120,10 +130,16 @@ async def _teach_all(
 
 
 def _errors(row: dict[str, Any], part: str) -> tuple[float | None, float | None]:
+    """Position (mm) and yaw (deg) errors; at constant speed those of the pose predicted
+    forward by the belt's travel against the truth moved forward by the same travel."""
     if row["pose"] is None or row["truth"] is None:
         return None, None
     T = np.array(row["pose"]["at_exposure"])
     Tt = np.array(row["truth"]["T_base_obj"])
+    travel = row["pose"].get("predicted_travel_m")
+    if travel is not None:
+        T = np.array(row["pose"]["T_base_obj"])
+        Tt[1, 3] += float(travel)
     pos = float(np.linalg.norm(T[:2, 3] - Tt[:2, 3]) * 1e3)
     if part in SYMMETRIC:
         return pos, None
@@ -229,7 +245,12 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
 
         for _ in range(args.objects):
             await index_object("index", ("naive", "two-views", "best-next"))
-        # constant belt speed
+        # constant belt speed: the empty belt's background registered to its travel first
+        if args.objects_constant:
+            engine.clear_objects()
+            t_bg = time.perf_counter()
+            await service.grab_belt_background(rt)
+            err.print(f"[constant] belt background grabbed in {time.perf_counter() - t_bg:.0f} s")
         for _ in range(args.objects_constant):
             name = pick_name()
             engine.clear_objects()

@@ -1,10 +1,17 @@
 """Pick and sort in the simulator, and the viewpoint planner across the belt.
 
-Picks: every catalogue entry the suction cup can take (all but the pipe flange and the two
-bracket bases, whose sealing patches sit too low for the tool) is spawned at the station at
-a random yaw (index mode, belt stopped), planned with :func:`robot.pick.plan_pick_place`
-and executed with :class:`robot.sim.SimDriver`; the simulator's truth says which bin it
-landed in.  Two conditions in the same run: the planner given the true pose (the baseline)
+Picks: every catalogue entry (the twelve trainable ones into their part's bin, the two
+untrained ones into the reject bin) is spawned at the station at a random yaw (index mode,
+belt stopped), planned with :func:`robot.pick.plan_pick_place` (the flange's roll chosen to
+turn the camera away from the part over an off-centre grasp point) and executed with
+:class:`robot.sim.SimDriver`; the simulator's truth says which bin it landed in.  The height
+and grasp point given to the planner are what a model stores (``height_m``, ``grasp_obj``:
+the part's drawing, as an engineer enters it); for the untrained parts the planner gets
+only the footprint (centre and half-width, what the top view gives) and finds the height
+with a guarded descent (:func:`robot.pick.execute_search_pick_place`), as the cell does.  Also
+measured, from the simulator's truth (evaluation only): the smallest distance between the
+tool's collision capsules (camera, cup tube) and the part's own surface during the approach
+and the descent (negative would be a collision the planner did not see).  Two conditions in the same run: the planner given the true pose (the baseline)
 and the true pose perturbed by up to ``--error-mm`` in position and ``--error-deg`` in yaw
 (what pose estimation leaves).  Figures: picks landing in their part's bin, planning time
 (wall, median), cycle time (simulated seconds of motion, median), largest joint tracking
@@ -33,14 +40,53 @@ from rich.table import Table
 
 from backend.inspection.viewpoints import plan_viewpoints
 from robot.errors import Unreachable
-from robot.pick import execute_pick_place, plan_pick_place
+from robot.pick import execute_pick_place, execute_search_pick_place, plan_pick_place
 from robot.sim import CATALOGUE, SimDriver, SimEngine, suction_point
 from robot.sim.camera import DEFAULT_T_EE_CAM
 from robot.sim.obstacles import collision_world
 
 out = Console()
 err = Console(stderr=True)
-LOW_GRASP = {"pipe-flange", "bracket-upright", "bracket-flat"}
+
+
+#: What the cell assumes of an object it cannot name: the tallest the station admits (m);
+#: its half-width is the top view's footprint (here the drawing's, plus 1 cm).
+UNKNOWN_MAX_HEIGHT_M = 0.25
+
+
+async def _recover(driver: SimDriver, engine: SimEngine, ok: bool) -> None:
+    """After a miss: suction off and the arm back to ``q_ready`` for the next pick."""
+    if ok:
+        return
+    from robot.trajectory import plan_joint_move
+
+    await driver.grip(False)
+    q = np.asarray(driver.state.q, dtype=np.float64)
+    await driver.move(plan_joint_move(q, engine.arm_model.q_ready, speed=0.3))
+
+
+def _tool_clearance(engine: SimEngine, name: str, T_obj: np.ndarray, trajs: list) -> float:
+    """Smallest distance (m) from the tool capsules to the part's mesh vertices (truth)
+    along ``trajs`` (approach and descent), every few samples."""
+    from robot.collision import DEFAULT_TOOL_CAPSULES
+    from robot.kinematics import T_base_ee
+
+    verts = np.concatenate(
+        [np.asarray(p.mesh.vertices, float) for p in CATALOGUE[name].geometry().pieces]
+    )
+    v = verts @ T_obj[:3, :3].T + T_obj[:3, 3]
+    best = math.inf
+    for traj in trajs:
+        for q in traj.q[:: max(1, len(traj.q) // 40)]:
+            T = T_base_ee(q, engine.arm_model)
+            for cap in DEFAULT_TOOL_CAPSULES:
+                a = T[:3, :3] @ np.asarray(cap.a_ee) + T[:3, 3]
+                b = T[:3, :3] @ np.asarray(cap.b_ee) + T[:3, 3]
+                ab = b - a
+                t = np.clip(((v - a) @ ab) / float(ab @ ab), 0.0, 1.0)
+                d = np.linalg.norm(v - (a + t[:, None] * ab), axis=1) - cap.radius_m
+                best = min(best, float(d.min()))
+    return best
 
 
 def _bin_for(engine: SimEngine, name: str) -> str:
@@ -59,7 +105,7 @@ async def _picks(repeats: int, error_mm: float, error_deg: float, seed: int) -> 
     driver = SimDriver(engine, time_scale=50.0)
     await driver.connect()
     rng = np.random.default_rng(seed)
-    names = [n for n in CATALOGUE if n not in LOW_GRASP]
+    names = list(CATALOGUE)
     rows: list[dict] = []
     spec = engine.config.layout.conveyor
     try:
@@ -78,20 +124,58 @@ async def _picks(repeats: int, error_mm: float, error_deg: float, seed: int) -> 
                     T[:3, :3] = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ T[:3, :3]
                     b = CATALOGUE[name].geometry().bounds
                     bin_name = _bin_for(engine, name)
-                    grasp = suction_point(name)  # the model's drawing (cached), not planning
+                    trained = CATALOGUE[name].trainable
+                    # A model's stored grasp point (its drawing, entered); unknown: top centre.
+                    grasp = suction_point(name) if trained else None
                     t0 = time.perf_counter()
-                    plan = plan_pick_place(
-                        driver.state.q,
-                        T,
-                        float(b[1, 2]),
-                        engine.config.layout.bin(bin_name).drop_point,
-                        object_radius_m=float(np.abs(b[:, :2]).max()),
-                        grasp_obj=grasp,
-                        world=world,
-                    )
+                    if not trained:  # unknown: footprint centre only, a guarded descent
+                        drop = engine.config.layout.bin(bin_name).drop_point
+                        try:
+                            outcome, found_h = await execute_search_pick_place(
+                                driver, T, drop, max_height_m=UNKNOWN_MAX_HEIGHT_M,
+                                object_radius_m=float(np.abs(b[:, :2]).max()) + 0.01,
+                                world=world,
+                                q_return=engine.arm_model.q_ready,
+                            )  # fmt: skip
+                            reason = outcome.reason
+                        except Unreachable as exc:
+                            outcome, found_h, reason = None, None, str(exc)
+                        ok = outcome is not None and outcome.ok
+                        rows.append({"condition": cond, "name": name,
+                                     "ok": ok and truth.id in engine.bins()[bin_name],
+                                     "plan_s": None, "cycle_s": None if outcome is None else
+                                     sum(m.duration_s for m in outcome.moves),
+                                     "held_err_rad": None, "tool_gap_m": None,
+                                     "stage": "search" if outcome is None else outcome.stage,
+                                     "reason": reason, "found_height_m": found_h})  # fmt: skip
+                        await _recover(driver, engine, ok)
+                        err.print(f"[{len(rows)}/{total}] {cond}: {name} ok={rows[-1]['ok']}")
+                        continue
+                    try:
+                        plan = plan_pick_place(
+                            driver.state.q,
+                            T,
+                            float(b[1, 2]),
+                            engine.config.layout.bin(bin_name).drop_point,
+                            object_radius_m=float(np.abs(b[:, :2]).max()),
+                            grasp_obj=grasp,
+                            world=world,
+                        )
+                    except Unreachable as exc:
+                        rows.append({"condition": cond, "name": name, "ok": False,
+                                     "plan_s": time.perf_counter() - t0, "cycle_s": None,
+                                     "held_err_rad": None, "tool_gap_m": None,
+                                     "stage": "planning", "reason": str(exc)})  # fmt: skip
+                        engine.clear_objects()
+                        await _recover(driver, engine, False)
+                        err.print(f"[{len(rows)}/{total}] {cond}: {name} not planned: {exc}")
+                        continue
                     t_plan = time.perf_counter() - t0
                     outcome = await execute_pick_place(driver, plan)
                     held = outcome.moves[2:5]  # lift, transfer, lower: a part on the cup
+                    gap = _tool_clearance(
+                        engine, name, truth.T_base_obj, [st.trajectory for st in plan.steps[:2]]
+                    )
                     rows.append(
                         {
                             "condition": cond,
@@ -99,9 +183,15 @@ async def _picks(repeats: int, error_mm: float, error_deg: float, seed: int) -> 
                             "ok": outcome.ok and truth.id in engine.bins()[bin_name],
                             "plan_s": t_plan,
                             "cycle_s": sum(m.duration_s for m in outcome.moves),
-                            "held_err_rad": max(m.max_tracking_error_rad for m in held),
+                            "held_err_rad": max(
+                                (m.max_tracking_error_rad for m in held), default=0.0
+                            ),
+                            "tool_gap_m": gap,
+                            "stage": outcome.stage,
+                            "reason": outcome.reason,
                         }
                     )
+                    await _recover(driver, engine, outcome.ok)
                     engine.clear_objects()
                     err.print(f"[{len(rows)}/{total}] {cond}: {name} ok={rows[-1]['ok']}")
     finally:
@@ -165,6 +255,7 @@ def main(argv: list[str] | None = None) -> int:
         "plan s (median)",
         "cycle s (median)",
         "max err held, mrad",
+        "min tool-part gap, mm",
     ):
         table.add_column(col, justify="right")
     summary = {}
@@ -173,9 +264,17 @@ def main(argv: list[str] | None = None) -> int:
         s = {
             "picks": len(r),
             "right_bin": sum(x["ok"] for x in r),
-            "plan_s_median": statistics.median(x["plan_s"] for x in r),
-            "cycle_s_median": statistics.median(x["cycle_s"] for x in r),
-            "max_held_tracking_error_mrad": 1e3 * max(x["held_err_rad"] for x in r),
+            "plan_s_median": statistics.median(
+                [x["plan_s"] for x in r if x["plan_s"] is not None] or [math.nan]
+            ),
+            "cycle_s_median": statistics.median(
+                [x["cycle_s"] for x in r if x["cycle_s"] is not None] or [math.nan]
+            ),
+            "max_held_tracking_error_mrad": 1e3
+            * max((x["held_err_rad"] for x in r if x["held_err_rad"] is not None), default=0.0),
+            "min_tool_gap_mm": 1e3
+            * min((x["tool_gap_m"] for x in r if x["tool_gap_m"] is not None), default=math.nan),
+            "misses": [f"{x['name']}: {x['stage']}: {x['reason']}" for x in r if not x["ok"]],
         }
         summary[cond] = s
         table.add_row(
@@ -185,8 +284,12 @@ def main(argv: list[str] | None = None) -> int:
             f"{s['plan_s_median']:.2f}",
             f"{s['cycle_s_median']:.1f}",
             f"{s['max_held_tracking_error_mrad']:.2f}",
+            f"{s['min_tool_gap_mm']:.0f}",
         )
     out.print(table)
+    for cond, s in summary.items():
+        for m in s["misses"]:
+            out.print(f"miss ({cond}): {m}")
     vt = Table(title="Viewpoints across the belt (true camera mounting)")
     for col in (
         "objects",

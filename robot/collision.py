@@ -1,8 +1,9 @@
 """A simple collision check of the arm against the cell: link capsules against boxes and the floor.
 
 The arm is modelled as capsules round the segments of the kinematic chain
-(:func:`robot.kinematics.joint_positions`: column, upper arm, forearm, wrist) plus a sphere
-round the camera and tool on the flange; the cell as axis-aligned boxes (table, conveyor,
+(:func:`robot.kinematics.joint_positions`: column, upper arm, forearm, wrist) plus capsules
+fixed to the flange round the tools it carries (:class:`ToolCapsule`: the camera body and the
+suction cup's tube, see :data:`DEFAULT_TOOL_CAPSULES`); the cell as axis-aligned boxes (table, conveyor,
 a calibration board's slab) and the floor plane ``z = 0``.  A capsule is checked as a row
 of spheres along its axis spaced at most half its radius apart; their union falls short of
 the capsule's surface by at most ``r (1 - sqrt(1 - 1/16))``, about 3 % of the radius, which
@@ -23,7 +24,15 @@ from numpy.typing import ArrayLike, NDArray
 from robot.kinematics import T_base_ee, joint_positions
 from robot.model import ASEA, ArmModel
 
-__all__ = ["ArmCapsules", "Box", "CollisionWorld", "Contact", "box_distance"]
+__all__ = [
+    "DEFAULT_TOOL_CAPSULES",
+    "ArmCapsules",
+    "Box",
+    "CollisionWorld",
+    "Contact",
+    "ToolCapsule",
+    "box_distance",
+]
 
 
 @dataclass(frozen=True)
@@ -66,6 +75,54 @@ def box_distance(points: ArrayLike, box: Box) -> NDArray[np.float64]:
 
 
 @dataclass(frozen=True)
+class ToolCapsule:
+    """A capsule fixed to the flange round a tool (flange frame ``ee``, metres).
+
+    Attributes
+    ----------
+    name : str
+        Reported in :class:`Contact` (``"camera"``, ``"cup"``).
+    a_ee, b_ee : tuple of 3 floats
+        End points of its axis in the flange frame.
+    radius_m : float
+        Its radius.
+    """
+
+    name: str
+    a_ee: tuple[float, float, float]
+    b_ee: tuple[float, float, float]
+    radius_m: float
+
+    def __post_init__(self) -> None:
+        a, b = np.asarray(self.a_ee, float), np.asarray(self.b_ee, float)
+        r = self.radius_m
+        if (
+            a.shape != (3,)
+            or b.shape != (3,)
+            or not (np.isfinite(a).all() and np.isfinite(b).all())
+        ):
+            raise ValueError(f"tool capsule {self.name!r}: end points must be 3 finite numbers")
+        if not (isinstance(r, int | float) and math.isfinite(r) and 0.001 <= r <= 0.3):
+            raise ValueError(
+                f"tool capsule {self.name!r}: radius_m must be in [0.001, 0.3], got {r!r}"
+            )
+
+
+#: The eye-in-hand camera and the suction cup on the flange (the drawn tools of
+#: :mod:`robot.sim.mjcf`, each grown by a few millimetres): the camera body (56 x 56 x 48 mm
+#: box and its lens, 50 mm along ``+x_ee``) as a capsule of radius 42 mm along the approach
+#: axis; the cup's bracket, tube and bellows (50 mm along ``-x_ee``, 8-10.5 mm radius) as a
+#: capsule of radius 13 mm from the flange face to 25 mm short of the lip.  The last 25 mm
+#: (bellows' end and lip, 15 mm radius) are left out: they touch the part being picked, and
+#: the lip's own clearance to the furniture is the pick planner's (its ``press_m`` and grasp
+#: height), not the arm's.
+DEFAULT_TOOL_CAPSULES: tuple[ToolCapsule, ...] = (
+    ToolCapsule("camera", (0.05, 0.0, -0.03), (0.05, 0.0, 0.03), 0.042),
+    ToolCapsule("cup", (-0.05, 0.0, 0.0), (-0.05, 0.0, 0.095), 0.013),
+)
+
+
+@dataclass(frozen=True)
 class ArmCapsules:
     """Radii of the arm's collision shapes, metres (outer envelope of the ASEA-class links).
 
@@ -74,18 +131,15 @@ class ArmCapsules:
     column_m, upper_arm_m, forearm_m, wrist_m : float
         Capsule radii of the segments base-shoulder, shoulder-elbow, elbow-wrist and
         wrist-flange.
-    tool_m : float
-        Radius of the sphere round the camera and tool.
-    tool_offset_m : float
-        Its centre along the approach axis past the flange.
+    tools : tuple of ToolCapsule
+        Capsules round the tools on the flange (default: camera and suction cup).
     """
 
     column_m: float = 0.16
     upper_arm_m: float = 0.10
     forearm_m: float = 0.08
     wrist_m: float = 0.06
-    tool_m: float = 0.09
-    tool_offset_m: float = 0.04
+    tools: tuple[ToolCapsule, ...] = DEFAULT_TOOL_CAPSULES
 
     @property
     def radii(self) -> tuple[float, float, float, float]:
@@ -100,7 +154,8 @@ class Contact:
     Attributes
     ----------
     link : str
-        ``"column"``, ``"upper_arm"``, ``"forearm"``, ``"wrist"`` or ``"tool"``.
+        ``"column"``, ``"upper_arm"``, ``"forearm"``, ``"wrist"`` or a tool's name
+        (``"camera"``, ``"cup"``).
     obstacle : str
         The box's name or ``"floor"``.
     clearance_m : float
@@ -149,7 +204,7 @@ class CollisionWorld:
         )
 
     def _spheres(self, q: NDArray[np.float64]) -> list[tuple[str, NDArray[np.float64], float]]:
-        """Sample spheres covering each capsule (spacing <= radius / 2), then the tool."""
+        """Sample spheres covering each capsule (spacing <= radius / 2), then the tools'."""
         pts = joint_positions(q, self.model)
         out: list[tuple[str, NDArray[np.float64], float]] = []
         for k, (name, r) in enumerate(zip(_LINKS, self.shapes.radii, strict=True)):
@@ -158,8 +213,13 @@ class CollisionWorld:
             t = np.linspace(0.0, 1.0, n)[:, None]
             out.append((name, a + t * (b - a), r))
         T = T_base_ee(q, self.model)
-        tool = T[:3, 3] + self.shapes.tool_offset_m * T[:3, 2]
-        out.append(("tool", tool[None, :], self.shapes.tool_m))
+        for tool in self.shapes.tools:
+            a = T[:3, :3] @ np.asarray(tool.a_ee) + T[:3, 3]
+            b = T[:3, :3] @ np.asarray(tool.b_ee) + T[:3, 3]
+            r = tool.radius_m
+            n = max(2, math.ceil(float(np.linalg.norm(b - a)) / (0.5 * r)) + 1)
+            t = np.linspace(0.0, 1.0, n)[:, None]
+            out.append((tool.name, a + t * (b - a), r))
         return out
 
     def contacts(self, q: ArrayLike) -> list[Contact]:

@@ -28,6 +28,7 @@ a gripper, checking every move's report and that the part is held after gripping
 
 from __future__ import annotations
 
+import asyncio
 import math
 from dataclasses import dataclass, field
 
@@ -48,7 +49,9 @@ __all__ = [
     "PickPlan",
     "PickStep",
     "execute_pick_place",
+    "execute_search_pick_place",
     "plan_pick_place",
+    "plan_pick_place_at_roll",
     "tool_flange_pose",
 ]
 
@@ -198,7 +201,91 @@ def _check_path(
                 raise Unreachable(f"{what}: the held part comes near the floor")
 
 
+def _roll_candidates(
+    T: NDArray[np.float64], g_obj: NDArray[np.float64], model: ArmModel
+) -> list[float]:
+    """Flange rolls to try for a grasp at ``g_obj`` (object frame) of the object at ``T``.
+
+    The camera and the flange sit on the ``+x_ee`` side of the cup (:data:`T_EE_SUCTION_CUP`),
+    so for a grasp off the footprint centre the tool is turned to put them *outward*, over
+    the side of the grasp point away from the rest of the part: ``x_ee`` along the grasp's
+    horizontal offset.  Pointing down (:func:`_R_down`), ``x_ee`` has the azimuth
+    ``q1 - q5 + pi``, so the wanted roll is ``q5 = q1 + pi - alpha`` (``alpha`` the offset's
+    azimuth, ``q1`` the azimuth of the grasp point seen from the base).  Then rolls ever
+    further from it, 30 degrees apart, within the joint range.  A centred grasp tries roll 0
+    first (the camera tangential to the column's plane).
+    """
+    off = T[:3, :3] @ np.array([g_obj[0], g_obj[1], 0.0])
+    grasp = T[:3, :3] @ g_obj + T[:3, 3]
+    if math.hypot(off[0], off[1]) < 0.005:
+        want = 0.0
+    else:
+        q1 = math.atan2(grasp[1], grasp[0])
+        want = math.remainder(q1 + math.pi - math.atan2(off[1], off[0]), 2 * math.pi)
+    lo, hi = float(model.lower[4]), float(model.upper[4])
+    out: list[float] = []
+    for k in (0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5, 6):
+        r = math.remainder(want + k * math.pi / 6, 2 * math.pi)
+        if lo <= r <= hi and all(abs(r - o) > 1e-6 for o in out):
+            out.append(r)
+    return out
+
+
 def plan_pick_place(
+    q_start: ArrayLike,
+    T_base_obj: ArrayLike,
+    object_height_m: float,
+    drop_point: ArrayLike,
+    *,
+    roll_rad: float | None = None,
+    grasp_obj: ArrayLike | None = None,
+    model: ArmModel = ASEA,
+    **options: object,
+) -> PickPlan:
+    """Plan picking the object at ``T_base_obj`` and dropping it at ``drop_point``.
+
+    With ``roll_rad`` given, that flange roll is used (:func:`plan_pick_place_at_roll`, whose
+    parameters this takes as well).  Without it (the default), the rolls of
+    :func:`_roll_candidates` are tried in turn (camera and flange turned away from the part
+    over an off-centre grasp point) and the first plan clearing every check is returned;
+    if none does, the :class:`~robot.errors.Unreachable` of the preferred roll is raised,
+    naming the rolls tried.
+    """
+    if roll_rad is not None:
+        return plan_pick_place_at_roll(q_start, T_base_obj, object_height_m, drop_point,
+                                       roll_rad=roll_rad, grasp_obj=grasp_obj, model=model,
+                                       **options)  # type: ignore[arg-type]  # fmt: skip
+    T = np.asarray(T_base_obj, dtype=np.float64)
+    if T.shape != (4, 4) or not np.isfinite(T).all():
+        raise ValueError(
+            f"T_base_obj must be a finite 4x4 matrix, got {np.asarray(T_base_obj).tolist()}"
+        )
+    h = object_height_m
+    if isinstance(h, bool) or not (isinstance(h, int | float) and 0.0 < h <= 0.5):
+        raise ValueError(f"object_height_m must be in (0, 0.5] m, got {h!r}")
+    g = (
+        np.array([0.0, 0.0, float(h)])
+        if grasp_obj is None
+        else np.asarray(grasp_obj, dtype=np.float64).reshape(3)
+    )
+    if not np.isfinite(g).all():
+        raise ValueError(f"grasp_obj must be 3 finite numbers, got {grasp_obj!r}")
+    first: Unreachable | None = None
+    rolls = _roll_candidates(T, g, model)
+    for r in rolls:
+        try:
+            return plan_pick_place_at_roll(q_start, T, h, drop_point, roll_rad=r,
+                                           grasp_obj=grasp_obj, model=model, **options)  # type: ignore[arg-type]  # fmt: skip
+        except Unreachable as exc:
+            first = first or exc
+    assert first is not None
+    msg = f"{first.detail} (preferred roll {math.degrees(rolls[0]):.0f} deg; {len(rolls)} rolls tried)"
+    if isinstance(first, JointLimitsBlock):
+        raise JointLimitsBlock(msg, first.joints) from first
+    raise type(first)(msg) from first
+
+
+def plan_pick_place_at_roll(
     q_start: ArrayLike,
     T_base_obj: ArrayLike,
     object_height_m: float,
@@ -218,8 +305,14 @@ def plan_pick_place(
     speed: float = 0.5,
     max_tilt_deg: float = 2.0,
     model: ArmModel = ASEA,
+    from_grasp: bool = False,
 ) -> PickPlan:
-    """Plan picking the object at ``T_base_obj`` and dropping it at ``drop_point``.
+    """Plan picking the object at ``T_base_obj`` and dropping it at ``drop_point`` with the
+    flange rolled by ``roll_rad``.
+
+    ``from_grasp``: the arm is at the grasp already, the part held (``q_start``, e.g. after
+    the guarded descent of :func:`execute_search_pick_place`): the plan starts with the
+    lift (no approach, descent or grip step); ``q_return`` should then be given.
 
     Parameters
     ----------
@@ -359,22 +452,26 @@ def plan_pick_place(
             raise Unreachable(f"{stage}: {e.detail}") from None
 
     steps: list[PickStep] = []
-    # 1. approach (the object itself is an obstacle).
-    p_pre = grasp + np.array([0.0, 0.0, approach_m])
-    p_pre[2] = max(p_pre[2], float(p_obj[2]) + object_height_m + approach_m)
-    q_pre = solve(p_pre, qs, "pre-grasp pose")
-    t_app = plan_joint_move(qs, q_pre, speed=speed, model=model)
-    _check_path("approach", t_app, obstacles.with_boxes(obj_box), part=None)
-    steps.append(PickStep("approach", t_app))
-    # 2. descend (touching the object: it is not an obstacle now).
-    p_grasp = grasp - np.array([0.0, 0.0, press_m])
-    t_down = line(q_pre, p_grasp, "descent to the grasp")
-    _check_path("descent", t_down, obstacles, part=None)
-    q_grasp = t_down.goal
+    if from_grasp:
+        q_grasp = qs
+        p_grasp = (T_base_ee(qs, model) @ Tt)[:3, 3]
+    else:
+        # 1. approach (the object itself is an obstacle).
+        p_pre = grasp + np.array([0.0, 0.0, approach_m])
+        p_pre[2] = max(p_pre[2], float(p_obj[2]) + object_height_m + approach_m)
+        q_pre = solve(p_pre, qs, "pre-grasp pose")
+        t_app = plan_joint_move(qs, q_pre, speed=speed, model=model)
+        _check_path("approach", t_app, obstacles.with_boxes(obj_box), part=None)
+        steps.append(PickStep("approach", t_app))
+        # 2. descend (touching the object: it is not an obstacle now).
+        p_grasp = grasp - np.array([0.0, 0.0, press_m])
+        t_down = line(q_pre, p_grasp, "descent to the grasp")
+        _check_path("descent", t_down, obstacles, part=None)
+        q_grasp = t_down.goal
+        steps += [PickStep("descend", t_down), PickStep("grip", grip=True)]
     T_cup_grasp = T_base_ee(q_grasp, model) @ Tt
     centre_cup = T_cup_grasp[:3, :3].T @ (p_obj - T_cup_grasp[:3, 3])
     part = (Tt, _HeldPart(centre_cup, r_obj, float(object_height_m)))
-    steps += [PickStep("descend", t_down), PickStep("grip", grip=True)]
     # 3. lift to the transit height.
     p_lift = np.array([p_grasp[0], p_grasp[1], z_transit])
     t_up = line(q_grasp, p_lift, "lift")
@@ -397,15 +494,26 @@ def plan_pick_place(
     _check_path("transfer", t_tr, obstacles, part=part)
     steps.append(PickStep("transfer", t_tr))
     q_drop = q_over
+    lowered = False
     if z_drop < p_over[2] - 1e-6:
-        t_low = line(q_over, np.array([p_over[0], p_over[1], z_drop]), "lowering into the bin")
-        _check_path("lowering", t_low, obstacles, part=part)
-        steps.append(PickStep("lower", t_low))
-        q_drop = t_low.goal
+        # Down to the drop height, or (out of reach there: a far bin, a turned part) as low
+        # as the arm gets in five steps towards the transit height; the part falls the rest.
+        for z_try in np.linspace(z_drop, p_over[2], 6)[:-1]:
+            try:
+                t_low = line(
+                    q_over, np.array([p_over[0], p_over[1], z_try]), "lowering into the bin"
+                )
+                _check_path("lowering", t_low, obstacles, part=part)
+            except Unreachable:
+                continue
+            steps.append(PickStep("lower", t_low))
+            q_drop = t_low.goal
+            lowered = True
+            break
     steps.append(PickStep("release", grip=False))
     # 5. retreat and return.
     q_last = q_drop
-    if z_drop < p_over[2] - 1e-6:
+    if lowered:
         t_ret = line(q_drop, p_over, "retreat")
         _check_path("retreat", t_ret, obstacles, part=None)
         steps.append(PickStep("retreat", t_ret))
@@ -478,3 +586,131 @@ async def execute_pick_place(driver: RobotDriver, plan: PickPlan) -> PickOutcome
         else:
             await driver.grip(False)
     return PickOutcome(True, plan.steps[-1].name, "done", grip, tuple(moves))
+
+
+async def execute_search_pick_place(
+    driver: RobotDriver,
+    T_base_obj: ArrayLike,
+    drop_point: ArrayLike,
+    *,
+    max_height_m: float,
+    object_radius_m: float = 0.18,
+    world: CollisionWorld | None = None,
+    q_return: ArrayLike | None = None,
+    min_grasp_m: float = 0.01,
+    speed: float = 0.3,
+    model: ArmModel = ASEA,
+    poll_s: float = 0.005,
+    offsets_m: tuple[tuple[float, float], ...] = (
+        (0.0, 0.0),
+        (0.03, 0.0),
+        (0.0, 0.03),
+        (-0.03, 0.0),
+        (0.0, -0.03),
+    ),
+) -> tuple[PickOutcome, float | None]:
+    """Pick an object of unknown height with a guarded descent, and drop it at ``drop_point``.
+
+    What a cell does with a part it cannot name (the reject bin): its footprint centre is
+    known from the top view, its height is not.  The cup approaches above ``max_height_m``
+    (the tallest object the station admits; the object's box up to it is an obstacle), the
+    suction is switched on, and the cup comes straight down the object's axis towards
+    ``min_grasp_m`` above the support; the vacuum switch (``state.holding``) stops the
+    descent the moment the cup seals (a *search* or guarded move, as industrial controllers
+    run for stacks of unknown height).  Nothing sealing (a hole, a steep face), the suction is
+    switched off, the arm backs up and the next of ``offsets_m`` (object frame, from the
+    footprint centre) is tried.  The lift, transfer and release are then planned from where
+    the arm stopped, with the height found, and run as :func:`execute_pick_place` does.
+
+    Returns
+    -------
+    (PickOutcome, height)
+        The outcome (``stage`` "descend" with ``ok`` False when nothing sealed: the suction
+        is switched off and the arm backs up) and the height found (lip height above the
+        support at the seal), or None.
+
+    Raises
+    ------
+    Unreachable
+        The approach, the descent or the rest cannot be planned (nothing moved if it is the
+        approach or the descent).
+    """
+    T = np.asarray(T_base_obj, dtype=np.float64)
+    h_max = max_height_m
+    if isinstance(h_max, bool) or not (isinstance(h_max, int | float) and 0.0 < h_max <= 0.5):
+        raise ValueError(f"max_height_m must be in (0, 0.5] m, got {max_height_m!r}")
+    if not (isinstance(min_grasp_m, int | float) and 0.0 <= min_grasp_m < h_max):
+        raise ValueError(f"min_grasp_m must be in [0, max_height_m), got {min_grasp_m!r}")
+    q0 = np.asarray(driver.state.q, dtype=np.float64)
+    q_end = q0 if q_return is None else np.asarray(q_return, dtype=np.float64)
+    obstacles = world or CollisionWorld(model=model)
+    moves: list[MoveReport] = []
+    grip: GripReport | None = None
+    tried: list[str] = []
+    planned = False
+    for dx, dy in offsets_m:
+        q_now = np.asarray(driver.state.q, dtype=np.float64)
+        try:
+            first = plan_pick_place(q_now, T, float(h_max), drop_point,
+                                    object_radius_m=object_radius_m,
+                                    grasp_obj=(dx, dy, float(h_max)), world=obstacles,
+                                    q_return=q_end, speed=speed, model=model,
+                                    press_m=0.0)  # fmt: skip
+            t_app = first.steps[0].trajectory
+            assert t_app is not None
+            roll = float(t_app.goal[4])
+            lowest = T[:3, :3] @ np.array([dx, dy, float(min_grasp_m)]) + T[:3, 3]
+            t_down = plan_cartesian_line(
+                t_app.goal, tool_flange_pose(lowest, roll_rad=roll), roll=roll,
+                speed=0.2 * speed, model=model,
+            )  # fmt: skip
+            _check_path("search descent", t_down, obstacles, part=None)
+        except Unreachable as e:
+            tried.append(f"({dx * 1e3:+.0f}, {dy * 1e3:+.0f}) mm: {e.detail}")
+            continue
+        planned = True
+        rep = await driver.move(t_app)
+        moves.append(rep)
+        if not rep.completed:
+            return PickOutcome(False, "approach", rep.reason, None, tuple(moves)), None
+        grip = await driver.grip(True)
+        task = asyncio.ensure_future(driver.move(t_down))
+        while not task.done():
+            if driver.state.holding:
+                await driver.stop()
+                break
+            await asyncio.sleep(poll_s)
+        rep = await task
+        moves.append(rep)
+        if driver.state.holding:
+            break
+        await driver.grip(False)
+        if not (rep.completed or rep.reason == "stopped"):
+            return PickOutcome(False, "descend", rep.reason, grip, tuple(moves)), None
+        back = plan_joint_move(
+            np.asarray(driver.state.q, float), t_app.goal, speed=speed, model=model
+        )
+        moves.append(await driver.move(back))
+        tried.append(f"({dx * 1e3:+.0f}, {dy * 1e3:+.0f}) mm: nothing sealed on the way down")
+    else:
+        if not planned:
+            raise Unreachable("search pick: no grasp point could be planned: " + "; ".join(tried))
+        return PickOutcome(False, "descend", "no part held: " + "; ".join(tried), grip,
+                           tuple(moves)), None  # fmt: skip
+    grip = GripReport(True, True, detail="part held (sealed during the search descent)")
+    q_seal = np.asarray(driver.state.q, dtype=np.float64)
+    lip = (T_base_ee(q_seal, model) @ T_EE_SUCTION_CUP)[:3, 3]
+    height = float(np.clip(lip[2] - T[2, 3], 1e-3, h_max))
+    rest = plan_pick_place_at_roll(q_seal, T, height, drop_point, object_radius_m=object_radius_m,
+                                   grasp_obj=(lip - T[:3, 3]) @ T[:3, :3], world=obstacles,
+                                   roll_rad=float(q_seal[4]), q_return=q_end, speed=speed,
+                                   model=model, from_grasp=True, press_m=0.0)  # fmt: skip
+    for step in rest.steps:
+        if step.trajectory is not None:
+            rep = await driver.move(step.trajectory)
+            moves.append(rep)
+            if not rep.completed:
+                return PickOutcome(False, step.name, rep.reason, grip, tuple(moves)), height
+        elif step.grip is False:
+            await driver.grip(False)
+    return PickOutcome(True, rest.steps[-1].name, "done", grip, tuple(moves)), height

@@ -175,6 +175,14 @@ class ObjectModel(Base):
     threshold: Mapped[float | None] = mapped_column(Float, default=None)
     description: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    #: Height above the sitting base, metres (migration 0008): what the pick plans with.
+    height_m: Mapped[float | None] = mapped_column(Float, default=None)
+    #: The suction point on the upper surface, object frame, metres (all three or none).
+    grasp_x_m: Mapped[float | None] = mapped_column(Float, default=None)
+    grasp_y_m: Mapped[float | None] = mapped_column(Float, default=None)
+    grasp_z_m: Mapped[float | None] = mapped_column(Float, default=None)
+    #: Where height and grasp came from: ``measured`` (teach), ``entered`` (engineer) or "".
+    geometry_source: Mapped[str] = mapped_column(String(16), default="", server_default="")
 
     views: Mapped[list[TrainedView]] = relationship(
         back_populates="model", cascade="all, delete-orphan"
@@ -183,6 +191,9 @@ class ObjectModel(Base):
     __table_args__ = (
         CheckConstraint(
             "threshold IS NULL OR (threshold >= 0 AND threshold <= 1)", name="threshold_range"
+        ),
+        CheckConstraint(
+            "height_m IS NULL OR (height_m > 0 AND height_m <= 0.5)", name="height_range"
         ),
     )
 

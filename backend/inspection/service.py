@@ -238,9 +238,33 @@ def _look_times(frame: Any, durations: dict[str, float]) -> None:
         _add(durations, k, lk.get(f"{k}_s", 0.0))
 
 
+def _travel_of(frame: Any, rt: Any) -> float:
+    """The belt's travel at the frame's exposure: the encoder count latched with it
+    (``meta["belt_travel_m"]``), else the encoder read now."""
+    t = frame.meta.get("belt_travel_m")
+    if isinstance(t, int | float) and math.isfinite(t):
+        return float(t)
+    return _belt(rt)[2]
+
+
+def _background_for(ctx: _Ctx, frame: Any, bg: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """The empty-belt background for ``frame``: the belt background registered to the
+    belt's travel at its exposure (:mod:`backend.inspection.belt`) when one was grabbed
+    from this camera pose, else the still background ``bg`` (right while the belt stands
+    where it stood when ``bg`` was grabbed)."""
+    bb = getattr(ctx.rt, "belt_background", None)
+    if bb is None or frame.robot_state is None:
+        return bg
+    if not bb.matches(_T_cam(frame.robot_state.q, ctx.T_ee_cam)):
+        return bg
+    return bb.at(_travel_of(frame, ctx.rt))
+
+
 async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg: NDArray[np.uint8],
-                durations: dict[str, float], clear_first: bool = False) -> tuple[Any, float]:  # fmt: skip
-    """The top-view frame of an object at the station, and the belt travel at exposure."""
+                durations: dict[str, float], clear_first: bool = False
+                ) -> tuple[Any, float, NDArray[np.uint8]]:  # fmt: skip
+    """The top-view frame of an object at the station, the belt travel at its exposure and
+    the background it was found against."""
     cell = ctx.rt.cell
     deadline = time.monotonic() + opts.wait_s
     last = None
@@ -249,7 +273,7 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
     _look_times(frame, durations)
     while clear_first:  # a run: the previous object must have left the station first
         try:
-            await asyncio.to_thread(foreground_mask, frame.rgb, bg)
+            await asyncio.to_thread(foreground_mask, frame.rgb, _background_for(ctx, frame, bg))
         except SegmentationFailed:
             break
         if time.monotonic() >= deadline:
@@ -259,9 +283,10 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
         await asyncio.sleep(0.1)
         frame = await cell.look(None)
     while True:
-        mode, _, travel = _belt(ctx.rt)
+        mode, _, _ = _belt(ctx.rt)
+        bg_now = _background_for(ctx, frame, bg)
         try:
-            mask = await asyncio.to_thread(foreground_mask, frame.rgb, bg)
+            mask = await asyncio.to_thread(foreground_mask, frame.rgb, bg_now)
         except SegmentationFailed:
             mask = None
         if mask is not None:
@@ -283,24 +308,44 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
         "wait",
         time.monotonic() - t0 - sum(durations.get(k, 0) for k in ("move", "settle", "acquire")),
     )
-    return frame, travel
+    return frame, _travel_of(frame, ctx.rt), bg_now
 
 
 def _T_cam(q: Any, T_ee_cam: NDArray[np.float64]) -> NDArray[np.float64]:
     return T_base_ee(np.asarray(q, dtype=np.float64)) @ T_ee_cam
 
 
-def _geometry(name: str | None) -> tuple[float, float, NDArray[np.float64] | None]:
-    """Height, radius and suction point of a model from its drawing (the catalogue entry of
-    the same name in the simulator); (0.1 m, 0.18 m, None) when there is no drawing."""
-    from robot.sim.catalogue import CATALOGUE
+#: What the cell assumes of an object it cannot name (no stored height): the tallest the
+#: station admits (its viewpoints aim for objects up to this), metres.
+UNKNOWN_MAX_HEIGHT_M = 0.25
 
-    if name is None or name not in CATALOGUE:
-        return AIM_HEIGHT_M, 0.18, None
-    from robot.sim.gripper import suction_point
 
-    b = CATALOGUE[name].geometry().bounds
-    return float(b[1, 2]), float(np.abs(b[:, :2]).max()), suction_point(name)
+def _geometry(live: Any, name: str | None) -> tuple[float | None, NDArray[np.float64] | None]:
+    """Height and suction point of a recognised model, as stored with it (``height_m``,
+    ``grasp_obj``: measured at teach time or entered by an engineer); ``(None, None)`` for
+    an unknown object or a model without them.  Never the simulator's catalogue."""
+    m = None if name is None else live.model_of_name(name)
+    if m is None:
+        return None, None
+    g = None if m.grasp_obj is None else np.asarray(m.grasp_obj, dtype=np.float64)
+    return m.height_m, g
+
+
+def _footprint_radius(
+    mask: NDArray[np.bool_],
+    camera: Any,
+    T_cam: NDArray[np.float64],
+    centre: NDArray[np.float64],
+    z_m: float,
+) -> float:
+    """Half-width of the object's region seen from the top, on the plane ``z_m`` about
+    ``centre`` (its obstacle box for the approach), metres, plus 1 cm."""
+    ys, xs = np.nonzero(mask)
+    step = max(1, len(xs) // 2000)
+    pts = plane_points(
+        np.stack([xs[::step], ys[::step]], axis=1).astype(np.float64), camera, T_cam, z_m
+    )
+    return float(min(0.5, np.linalg.norm(pts[:, :2] - centre[:2], axis=1).max() + 0.01))
 
 
 async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
@@ -351,6 +396,7 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
         code = getattr(exc, "code", "error")
         detail = getattr(exc, "detail", str(exc))
         state["reason"] = f"{code}: {detail}"
+        await _reject_failed(ctx, opts, state)
     except Exception as exc:  # never a lost inspection: the cause goes into a failed row
         state["decision"] = "failed"
         if recovery.is_database_error(exc):
@@ -360,6 +406,24 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
             log.exception("inspection failed unexpectedly")
             state["reason"] = f"internal_error: {type(exc).__name__}: {str(exc)[:300]}"
     return await _store(ctx, opts, started, durations, views, cams, state, marker)
+
+
+async def _reject_failed(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any]) -> None:
+    """A failed inspection whose object was found on the belt (after the top view): with
+    ``sort``, into the reject bin (the guarded pick of an unknown object), once."""
+    found = state.get("_found")
+    if not opts.sort or found is None or state.get("pick") is not None or ctx.rt.cell.estopped:
+        return
+    if _belt(ctx.rt)[0] == "continuous":  # gone on with the belt: left to the belt's end
+        state["pick"] = {"sorted": True, "ok": False,
+                         "reason": "not rejected: the belt carried it on (constant speed)"}  # fmt: skip
+        return
+    try:
+        state["pick"] = await _pick_unknown(
+            ctx, opts, state, None, found, state.get("_radius", 0.18)
+        )
+    except (VisionCellError, ValueError) as exc:
+        state["pick"] = {"sorted": True, "ok": False, "reason": f"cannot reject: {exc}"}
 
 
 async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[str, float],
@@ -418,7 +482,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
         )
     state["stage"] = "finding the object"
     report(0.05, "waiting for an object at the station")
-    frame, travel0 = await _find(ctx, opts, top.q, bg, durations, clear_first)
+    frame, travel0, bg = await _find(ctx, opts, top.q, bg, durations, clear_first)
     mode, speed_m_s, _ = _belt(rt)
     T_cam_top = _T_cam(frame.robot_state.q, ctx.T_ee_cam)
     state["stage"] = "segmenting"
@@ -429,6 +493,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     z_mid = ctx.surface_z + AIM_HEIGHT_M / 2
     found = plane_points(np.array([[xs.mean(), ys.mean()]]), ctx.camera, T_cam_top, z_mid)[0]
     found[2] = ctx.surface_z
+    state["_found"] = found
     state["truth"] = _truth_near(rt, found, _belt(rt)[2] - travel0)
     frames: dict[int, tuple[Any, NDArray[np.bool_] | None, str]] = {
         1: (frame, region.mask, region.method)
@@ -504,12 +569,24 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     t = time.monotonic()
     pose_err = ""
     pose: ObjectPose | None = None
-    height, radius, grasp = _geometry(state["model"])
+    stored_h, grasp = _geometry(live, state["model"])
+    height = AIM_HEIGHT_M if stored_h is None else stored_h
+    radius = await asyncio.to_thread(
+        _footprint_radius, region.mask, ctx.camera, T_cam_top, found, ctx.surface_z + height
+    )
+    state["_radius"] = radius
     if state["decision"] == "recognized":
         try:
             pose = await _pose(ctx, res, state["model"], T_cam_top, height)
         except PoseFailed as exc:
             pose_err = exc.detail
+    belt_stopped = False
+    if mode == "continuous" and opts.sort and rt.sim is not None:
+        # Picking from a moving belt would need conveyor tracking the 5-DOF arm's controller
+        # has not: the cell stops the belt (the encoder then says where the object is: the
+        # prediction below is exact) and starts it again after the pick.
+        rt.sim.configure_conveyor(running=False)
+        belt_stopped = True
     if pose is not None:
         pub = pose.public()
         pub["at_exposure"] = pose.T_base_obj.tolist()
@@ -526,8 +603,29 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     # -- pick / approach ------------------------------------------------------------------
     state["stage"] = "pick"
     t = time.monotonic()
-    state["pick"] = await _pick(ctx, opts, state, pose, height, radius, grasp)
+    try:
+        await _pick_stage(ctx, opts, state, pose, stored_h, radius, grasp, found, mode, travel0)
+    finally:
+        if belt_stopped and rt.sim is not None and not cell.estopped:
+            with contextlib.suppress(Exception):
+                rt.sim.configure_conveyor(running=True, mode="continuous", speed_m_s=speed_m_s)
     _add(durations, "pick", time.monotonic() - t)
+
+
+async def _pick_stage(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: ObjectPose | None,
+                      stored_h: float | None, radius: float, grasp: NDArray[np.float64] | None,
+                      found: NDArray[np.float64], mode: str, travel0: float) -> None:  # fmt: skip
+    """The pick (or the approach) of the inspected object, by what the model stores."""
+    rt = ctx.rt
+    if pose is not None and (stored_h is not None or not opts.sort):
+        # Sorting off, no stored height: the approach pose above the tallest admitted object.
+        h_pick = UNKNOWN_MAX_HEIGHT_M if stored_h is None else stored_h
+        state["pick"] = await _pick(ctx, opts, state, pose, h_pick, radius, grasp)
+    else:
+        at = found.copy()
+        if mode == "continuous":
+            at[1] += _belt(rt)[2] - travel0
+        state["pick"] = await _pick_unknown(ctx, opts, state, pose, at, radius)
 
 
 async def _pose(
@@ -577,15 +675,46 @@ def _bin_for(rt: Any, part: str | None) -> Any:
     return next((b for b in bins if b.reject), None)
 
 
-async def _pick(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: ObjectPose | None,
+async def _pick_unknown(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any],
+                        pose: ObjectPose | None, at: NDArray[np.float64], radius: float) -> dict[str, Any]:  # fmt: skip
+    """An object the cell cannot pick as a model (unknown, failed, or a model without a
+    stored height): with ``sort``, into the reject bin by a guarded descent over its
+    footprint centre (:func:`robot.pick.execute_search_pick_place`: the height is found by
+    the vacuum switch); without ``sort``, left on the belt."""
+    from robot.pick import execute_search_pick_place
+
+    rt, cell = ctx.rt, ctx.rt.cell
+    if not opts.sort:
+        return {"sorted": False, "ok": False,
+                "reason": "not picked: no stored height for this object (sorting off)"}  # fmt: skip
+    b = _bin_for(rt, None)
+    if b is None:
+        return {"sorted": True, "ok": False, "reason": "no reject bin in this cell"}
+    T = np.eye(4)
+    if pose is not None:
+        T[:3, :3] = pose.T_base_obj[:3, :3]
+        T[:2, 3] = pose.T_base_obj[:2, 3]
+    else:
+        T[:2, 3] = at[:2]
+    T[2, 3] = ctx.surface_z
+    q0 = np.asarray(cell.driver.state.q, dtype=np.float64)
+    try:
+        with cell._arm("a pick"):  # the job holds the arm; this is its motion
+            out, h = await execute_search_pick_place(
+                cell.driver, T, np.asarray(b.drop_point), max_height_m=UNKNOWN_MAX_HEIGHT_M,
+                object_radius_m=radius, world=cell.world, q_return=q0,
+            )  # fmt: skip
+    except Unreachable as exc:
+        return {"sorted": True, "ok": False, "bin": b.name, "reason": f"cannot pick: {exc}"}
+    return {"sorted": True, "ok": out.ok, "bin": b.name, "stage": out.stage, "reason": out.reason,
+            "search": True, "found_height_m": h}  # fmt: skip
+
+
+async def _pick(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: ObjectPose,
                 height: float, radius: float, grasp: NDArray[np.float64] | None) -> dict[str, Any]:  # fmt: skip
     from robot.pick import execute_pick_place, plan_pick_place
 
     rt, cell = ctx.rt, ctx.rt.cell
-    if pose is None:
-        why = ("the object is not known: its height and grasp point are not known, so it is "
-               "left on the belt" if state["decision"] != "recognized" else "no pose")  # fmt: skip
-        return {"sorted": False, "ok": False, "reason": why}
     part = None
     m = rt.live_index.model_of_name(state["model"]) if state["model"] else None
     if m is not None:
@@ -640,6 +769,80 @@ async def grab_background(rt: Any, *, speed: float | None = None) -> None:
                                    object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
     frame = await rt.cell.look(top.q, speed=speed)
     rt.teach_backgrounds.put(top, frame.rgb)
+
+
+async def grab_belt_background(
+    rt: Any, *, speed: float | None = None, frames: int = 14, jog_m_s: float = 0.5
+) -> Any:
+    """Grab the empty-belt background of the top view at the station registered to the
+    belt's travel (:class:`backend.inspection.belt.BeltBackground`), for constant belt speed
+    and for a belt that moved since the still background was grabbed.
+
+    The station and the belt upstream must be empty.  The arm looks from the top view; the
+    belt is jogged round its whole loop in ``frames`` steps (at ``jog_m_s``), one still frame
+    after each, then left as it was.  Needs a conveyor the cell can jog and read (the
+    simulator's today: a :class:`~vision.errors.Conflict` otherwise).  Kept on the runtime
+    (``rt.belt_background``) until the next grab.
+    """
+    from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
+    from backend.inspection.belt import BeltGeometry, build_belt_background
+
+    sim = rt.sim
+    if sim is None:
+        raise Conflict("a belt background needs a conveyor the cell can jog (the simulator's)")
+    if isinstance(frames, bool) or not isinstance(frames, int) or not 5 <= frames <= 64:
+        raise InvalidInput(f"frames must be an integer in 5..64, got {frames!r}")
+    if not (isinstance(jog_m_s, int | float) and 0.01 <= jog_m_s <= 2.0):
+        raise InvalidInput(f"jog_m_s must be in [0.01, 2] m/s, got {jog_m_s!r}")
+    async with rt.database.session() as session:
+        T = (await active_camera_calibration(session, rt.cell_id)).T_ee_cam
+    T = np.asarray(NOMINAL_T_EE_CAM if T is None else T, dtype=np.float64)
+    ctx = await context(rt)
+    top = (await asyncio.to_thread(plan_shots, ctx.station, (1,), T_ee_cam=T,
+                                   object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
+    spec = sim.config.layout.conveyor
+    before = sim.conveyor_state
+    shots: list[tuple[NDArray[np.uint8], float]] = []
+    frame = await rt.cell.look(top.q, speed=speed)
+    step = spec.length_m / frames
+    try:
+        sim.configure_conveyor(running=False)
+        for _ in range(frames):
+            frame = await rt.cell.look(None)
+            shots.append((frame.rgb, _travel_of(frame, rt)))
+            start = sim.conveyor_state.travel_m
+            sim.configure_conveyor(running=True, mode="continuous", speed_m_s=float(jog_m_s))
+            deadline = time.monotonic() + 60.0
+            while sim.conveyor_state.travel_m - start < step:
+                if time.monotonic() > deadline:
+                    raise Conflict("the belt did not move while grabbing its background")
+                await asyncio.sleep(0.005)
+            sim.configure_conveyor(running=False)
+    finally:
+        sim.configure_conveyor(running=before.running, mode=before.mode, speed_m_s=before.speed_m_s)
+    geo = BeltGeometry(
+        spec.centre_x_m, spec.start_y_m, spec.width_m, spec.surface_z_m, spec.length_m
+    )
+    bb = await asyncio.to_thread(build_belt_background, shots, camera=ctx.camera,
+                                 T_base_cam=_T_cam(frame.robot_state.q, ctx.T_ee_cam), geometry=geo)  # fmt: skip
+    rt.belt_background = bb
+    return bb
+
+
+def start_belt_background(rt: Any) -> Any:
+    """Start a job grabbing the belt background (:func:`grab_belt_background`); 409 at once
+    when the arm is busy or e-stopped, or the cell has no conveyor it can jog."""
+    if rt.sim is None:
+        raise Conflict("a belt background needs a conveyor the cell can jog (the simulator's)")
+    rt.cell.check_can_move()
+    rt.jobs.check_arm_free()
+
+    async def body(job: Any) -> dict[str, Any]:
+        job.report(0.1, "jogging the empty belt round its loop")
+        bb = await grab_belt_background(rt)
+        return {"frames": bb.frames, "loop_m": bb.geometry.loop_m}
+
+    return rt.jobs.start("belt-background", body, motion=True, params={})
 
 
 def _check_ready(rt: Any) -> None:

@@ -67,10 +67,17 @@ class IndexedModel:
     kind: str
     threshold: float | None
     """The model's own threshold (engineer's override), None for the automatic one."""
+    height_m: float | None = None
+    """Height above the sitting base, metres (stored with the model; None: not known)."""
+    grasp_obj: tuple[float, float, float] | None = None
+    """Suction point on the upper surface, object frame, metres (None: not stored)."""
 
     @classmethod
     def of(cls, row: ObjectModel) -> IndexedModel:
-        return cls(row.id, row.name, row.part, row.sitting_base, row.kind.value, row.threshold)
+        from backend.recognition.models import grasp_of
+
+        return cls(row.id, row.name, row.part, row.sitting_base, row.kind.value, row.threshold,
+                   row.height_m, grasp_of(row))  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -29,15 +29,18 @@ __all__ = [
     "MAX_MODELS",
     "NAME_PATTERN",
     "ModelFields",
+    "check_geometry",
     "check_name",
     "check_threshold",
     "create_model",
     "delete_model",
     "get_model",
     "get_model_by_name",
+    "grasp_of",
     "list_models",
     "model_public",
     "parse_kind",
+    "set_measured_geometry",
     "update_model",
     "view_counts",
 ]
@@ -47,7 +50,11 @@ __all__ = [
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}$")
 #: Most models one database holds (a plant's catalogue; the index stays in memory).
 MAX_MODELS = 10_000
-_FIELDS = ("name", "part", "sitting_base", "kind", "threshold", "description")
+_FIELDS = ("name", "part", "sitting_base", "kind", "threshold", "description", "height_m",
+           "grasp_x_m", "grasp_y_m", "grasp_z_m", "geometry_source")  # fmt: skip
+#: Tallest object and farthest grasp point from the footprint centre a model may give, m.
+MAX_HEIGHT_M = 0.5
+MAX_GRASP_OFFSET_M = 0.5
 
 
 def _audit_value(row: ObjectModel) -> dict[str, Any]:
@@ -126,6 +133,48 @@ def parse_kind(value: object) -> ObjectKind:
     raise InvalidInput(f"kind must be '2d' or '3d', got {value!r}")
 
 
+def check_geometry(
+    height_m: object, grasp_obj: object
+) -> tuple[float | None, tuple[float, float, float] | None]:
+    """Validate a model's height (metres, in (0, 0.5]) and grasp point (3 metres, object
+    frame, its ``z`` within the height, ``x``/``y`` within 0.5 m); either may be None."""
+    h: float | None = None
+    if height_m is not None:
+        if isinstance(height_m, bool) or not isinstance(height_m, int | float):
+            raise InvalidInput(f"height_m must be a number of metres or null, got {height_m!r}")
+        h = float(height_m)
+        if not (math.isfinite(h) and 0.0 < h <= MAX_HEIGHT_M):
+            raise InvalidInput(f"height_m must be in (0, {MAX_HEIGHT_M:g}] m, got {height_m!r}")
+    g: tuple[float, float, float] | None = None
+    if grasp_obj is not None:
+        vals = list(grasp_obj) if isinstance(grasp_obj, list | tuple) else None
+        if (
+            vals is None
+            or len(vals) != 3
+            or any(isinstance(v, bool) or not isinstance(v, int | float) for v in vals)
+            or not all(math.isfinite(float(v)) for v in vals)
+        ):
+            raise InvalidInput(
+                f"grasp_obj must be 3 finite numbers (metres) or null, got {grasp_obj!r}"
+            )
+        x, y, z = (float(v) for v in vals)
+        if math.hypot(x, y) > MAX_GRASP_OFFSET_M or not 0.0 <= z <= MAX_HEIGHT_M:
+            raise InvalidInput(
+                f"grasp_obj must lie within {MAX_GRASP_OFFSET_M:g} m of the footprint centre "
+                f"and at a height in [0, {MAX_HEIGHT_M:g}] m, got {grasp_obj!r}"
+            )
+        if h is not None and z > h + 1e-9:
+            raise InvalidInput(f"grasp_obj's z ({z:g} m) must not exceed height_m ({h:g} m)")
+        g = (x, y, z)
+    return h, g
+
+
+def grasp_of(row: ObjectModel) -> tuple[float, float, float] | None:
+    """The stored grasp point of a model (object frame, metres), None if not stored."""
+    g = (row.grasp_x_m, row.grasp_y_m, row.grasp_z_m)
+    return None if any(v is None for v in g) else (float(g[0]), float(g[1]), float(g[2]))  # type: ignore[arg-type]
+
+
 @dataclass(frozen=True)
 class ModelFields:
     """Validated fields of a model (``None`` = not given, for updates)."""
@@ -138,8 +187,17 @@ class ModelFields:
     description: str | None = None
     threshold_given: bool = False
     """True when ``threshold`` was given (``None`` then clears it)."""
+    height_m: float | None = None
+    grasp_obj: tuple[float, float, float] | None = None
+    height_given: bool = False
+    """True when ``height_m`` was given (entered by an engineer; ``None`` clears it)."""
+    grasp_given: bool = False
+    """True when ``grasp_obj`` was given (entered by an engineer; ``None`` clears it)."""
 
     def __post_init__(self) -> None:
+        h, g = check_geometry(self.height_m, self.grasp_obj)
+        object.__setattr__(self, "height_m", h)
+        object.__setattr__(self, "grasp_obj", g)
         for what in ("name", "part", "sitting_base"):
             value = getattr(self, what)
             if value is not None:
@@ -179,6 +237,9 @@ def model_public(row: ObjectModel, counts: dict[int, int] | None = None) -> dict
         "kind": row.kind.value,
         "threshold": row.threshold,
         "description": row.description,
+        "height_m": row.height_m,
+        "grasp_obj": None if grasp_of(row) is None else list(grasp_of(row)),  # type: ignore[arg-type]
+        "geometry_source": row.geometry_source or "",
         "created_at": row.created_at.isoformat(),
         "views": sum(counts.values()),
         "views_per_viewpoint": {str(k): v for k, v in sorted(counts.items())},
@@ -241,6 +302,8 @@ async def create_model(
                 threshold=fields.threshold,
                 description=fields.description or "",
             )
+            if fields.height_given or fields.grasp_given:
+                _set_geometry(row, fields.height_m, fields.grasp_obj, "entered")
             session.add(row)
             await session.flush()
             _record(session, by, row, "create", None, row)
@@ -265,6 +328,11 @@ async def update_model(
                 threshold=row.threshold,
                 description=row.description,
                 created_at=row.created_at,
+                height_m=row.height_m,
+                grasp_x_m=row.grasp_x_m,
+                grasp_y_m=row.grasp_y_m,
+                grasp_z_m=row.grasp_z_m,
+                geometry_source=row.geometry_source,
             )
             if fields.name is not None and fields.name != row.name:
                 await _check_free_name(session, fields.name, not_id=row.id)
@@ -275,11 +343,45 @@ async def update_model(
                     setattr(row, what, value)
             if fields.threshold_given:
                 row.threshold = fields.threshold
+            if fields.height_given or fields.grasp_given:
+                h, g = check_geometry(
+                    fields.height_m if fields.height_given else row.height_m,
+                    fields.grasp_obj if fields.grasp_given else grasp_of(row),
+                )
+                _set_geometry(row, h, g, "entered")
             await session.flush()
             _record(session, by, row, "update", before, row)
     except IntegrityError as exc:
         raise Conflict(f"an object model named {fields.name!r} exists already") from exc
     return before, row
+
+
+def _set_geometry(row: ObjectModel, height_m: float | None,
+                  grasp: tuple[float, float, float] | None, source: str) -> None:  # fmt: skip
+    row.height_m = height_m
+    row.grasp_x_m, row.grasp_y_m, row.grasp_z_m = grasp if grasp is not None else (None,) * 3
+    row.geometry_source = source if height_m is not None or grasp is not None else ""
+
+
+async def set_measured_geometry(
+    db: Database, model_id: int, height_m: float, grasp: tuple[float, float, float] | None
+) -> ObjectModel | None:
+    """Store the height (and grasp point) measured at teach time, unless an engineer has
+    entered them (``geometry_source == "entered"``: an entry beats a measurement only when
+    the engineer says so).  Returns the row when it changed, else None."""
+    h, g = check_geometry(height_m, grasp)
+    async with db.session() as session:
+        row = await get_model(session, model_id)
+        if row.geometry_source == "entered":
+            return None
+        before = ObjectModel(id=row.id, name=row.name, part=row.part, sitting_base=row.sitting_base,
+                             kind=row.kind, threshold=row.threshold, description=row.description,
+                             height_m=row.height_m, grasp_x_m=row.grasp_x_m, grasp_y_m=row.grasp_y_m,
+                             grasp_z_m=row.grasp_z_m, geometry_source=row.geometry_source)  # fmt: skip
+        _set_geometry(row, h, g, "measured")
+        await session.flush()
+        _record(session, audit.By(), row, "update", before, row)
+    return row
 
 
 async def delete_model(db: Database, model_id: int, *, by: audit.By | None = None) -> ObjectModel:

@@ -294,6 +294,7 @@ class SimCamera:
             meta={
                 "source": "sim",
                 "sim_time_s": snap.t_s,
+                "belt_travel_m": snap.belt_travel_m,
                 "exposure_s": imager.spec.exposure_s,
                 "gain": imager.spec.gain,
             },

@@ -115,6 +115,8 @@ class Snapshot:
     ambient: float
     gripper_on: bool = False
     holding: bool = False
+    belt_travel_m: float = 0.0
+    """The conveyor's encoder (its travel, metres) at this instant."""
 
 
 def _quat_yaw(yaw: float) -> NDArray[np.float64]:
@@ -666,6 +668,7 @@ class SimEngine:
                 ambient,
                 self._suction,
                 self._held is not None,
+                float(self.conveyor.travel_m),
             )
 
     def renderer(self) -> RenderWorker:

@@ -30,14 +30,17 @@ def test_ready_pose_is_free_and_a_box_on_the_forearm_is_hit():
     assert "mm from the crate" in str(contacts[0])
 
 
-def test_a_raised_floor_is_hit_by_the_tool_first():
+def test_a_raised_floor_is_hit_by_the_tools_first():
     # The joint ranges keep the flange well above the real floor; raise the plane instead.
     # At q_ready the flange is at z = 1.0 m pointing down, the shoulder at 0.73 m.
-    world = CollisionWorld(floor_z_m=0.9)
+    world = CollisionWorld(floor_z_m=0.91)
     contacts = {c.link: c for c in world.contacts(ASEA.q_ready)}
-    assert set(contacts) == {"upper_arm", "tool"}
-    assert contacts["tool"].obstacle == "floor"
-    assert contacts["tool"].clearance_m == pytest.approx(1.0 - 0.04 - 0.09 - 0.9)
+    assert set(contacts) == {"upper_arm", "camera", "cup"}
+    assert contacts["cup"].obstacle == "floor"
+    # The cup's capsule ends 95 mm past the flange face (radius 13 mm), the camera's 30 mm
+    # (radius 42 mm).
+    assert contacts["cup"].clearance_m == pytest.approx(1.0 - 0.095 - 0.013 - 0.91, abs=1e-6)
+    assert contacts["camera"].clearance_m == pytest.approx(1.0 - 0.03 - 0.042 - 0.91, abs=1e-6)
     assert CollisionWorld(floor_z_m=0.5).contacts(ASEA.q_ready) == []
     assert world.path_contacts(ASEA.q_home, ASEA.q_ready)
     assert CollisionWorld().path_contacts(ASEA.q_home, ASEA.q_ready) == []

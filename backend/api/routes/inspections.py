@@ -13,7 +13,7 @@ from fastapi import APIRouter, Path, Query, status
 from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import OperatorUser, RuntimeDep, SessionDep, ViewerUser
+from backend.api.deps import EngineerUser, OperatorUser, RuntimeDep, SessionDep, ViewerUser
 from backend.api.types import DbId, Limit, Offset
 from backend.inspection import results, service
 
@@ -72,6 +72,18 @@ async def create_inspection(_: OperatorUser, rt: RuntimeDep, body: InspectIn) ->
 async def start_run(_: OperatorUser, rt: RuntimeDep, body: RunIn) -> dict[str, Any]:
     run = service.start_run(rt, body.options(), body.count)
     return {"job": run.job.public()}
+
+
+@router.post(
+    "/inspection/belt-background",
+    response_model=JobAccepted,
+    status_code=status.HTTP_202_ACCEPTED,
+    summary="Grab the empty belt's background registered to its travel (engineer; belt and "
+    "station empty): needed at constant belt speed",
+)
+async def grab_belt_background(_: EngineerUser, rt: RuntimeDep) -> dict[str, Any]:
+    job = service.start_belt_background(rt)
+    return {"job": job.public()}
 
 
 @router.post(

@@ -70,6 +70,19 @@ class ModelCreate(BaseModel):
         None, ge=0.0, le=1.0, allow_inf_nan=False, description="Own score threshold"
     )
     description: str = Field("", max_length=2000)
+    height_m: float | None = Field(
+        None,
+        gt=0.0,
+        le=0.5,
+        allow_inf_nan=False,
+        description="Height above the sitting base, metres (what the pick plans with)",
+    )
+    grasp_obj: list[Annotated[float, Field(ge=-0.5, le=0.5, allow_inf_nan=False)]] | None = Field(
+        None,
+        min_length=3,
+        max_length=3,
+        description="Suction point on the upper surface, object frame [x, y, z], metres",
+    )
     reason: Reason = None
 
 
@@ -84,6 +97,19 @@ class ModelUpdate(BaseModel):
     kind: Literal["2d", "3d"] | None = None
     threshold: float | None = Field(None, ge=0.0, le=1.0, allow_inf_nan=False)
     description: str | None = Field(None, max_length=2000)
+    height_m: float | None = Field(
+        None,
+        gt=0.0,
+        le=0.5,
+        allow_inf_nan=False,
+        description="Height above the sitting base, metres (what the pick plans with)",
+    )
+    grasp_obj: list[Annotated[float, Field(ge=-0.5, le=0.5, allow_inf_nan=False)]] | None = Field(
+        None,
+        min_length=3,
+        max_length=3,
+        description="Suction point on the upper surface, object frame [x, y, z], metres",
+    )
     reason: Reason = None
 
 
@@ -95,6 +121,9 @@ class ModelPublic(BaseModel):
     kind: str
     threshold: float | None
     description: str
+    height_m: float | None = Field(description="Height above the sitting base, metres")
+    grasp_obj: list[float] | None = Field(description="Suction point, object frame, metres")
+    geometry_source: str = Field(description="measured (teach), entered (engineer) or empty")
     created_at: datetime
     views: int
     views_per_viewpoint: dict[str, int]
@@ -174,7 +203,11 @@ async def read_models(
 async def create_model(
     user: EngineerUser, db: DatabaseDep, live: LiveIndexDep, body: ModelCreate
 ) -> dict[str, Any]:
-    fields = svc.ModelFields(**body.model_dump(exclude={"reason"}))
+    data = body.model_dump(exclude={"reason"})
+    given = body.model_fields_set
+    fields = svc.ModelFields(
+        **data, height_given="height_m" in given, grasp_given="grasp_obj" in given
+    )
     row = await svc.create_model(db, fields, by=_by(user, body.reason))
     live.put_model(IndexedModel.of(row))
     return _model_out(row, {}, live)
@@ -203,7 +236,10 @@ async def update_model(
         if key in given and getattr(body, key) is None:
             raise InvalidInput(f"{key} may not be null (leave it out to keep it)")
     fields = svc.ModelFields(
-        **{k: getattr(body, k) for k in given}, threshold_given="threshold" in given
+        **{k: getattr(body, k) for k in given},
+        threshold_given="threshold" in given,
+        height_given="height_m" in given,
+        grasp_given="grasp_obj" in given,
     )
     _before, row = await svc.update_model(db, model_id, fields, by=_by(user, body.reason))
     live.put_model(IndexedModel.of(row))

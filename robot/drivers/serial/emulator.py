@@ -67,7 +67,7 @@ from robot.drivers.serial.frames import (
 )
 from robot.drivers.serial.movetable import ExecutionRecord, MoveTable
 from robot.drivers.serial.ptyport import PtyPort
-from robot.errors import RobotBusy
+from robot.errors import DriverError, RobotBusy
 from robot.model import ASEA, ArmModel
 
 __all__ = ["Emulator", "EmulatorStats", "ExecutionRecord", "FaultConfig", "run_emulator"]
@@ -100,6 +100,12 @@ class EmulatorStats:
         Sessions opened (new session ids).
     watchdog_trips : int
         Moves stopped because the host fell silent.
+    grips : int
+        ``GRIP`` commands carried out (on and off).
+    grips_holding : int
+        ``GRIP 1`` answered with a part held (the vacuum switch made).
+    grips_refused : int
+        ``GRIP`` refused (emergency stop).
     faults : FaultStats
         Injected faults by kind.
     """
@@ -112,6 +118,9 @@ class EmulatorStats:
     events: int = 0
     sessions: int = 0
     watchdog_trips: int = 0
+    grips: int = 0
+    grips_holding: int = 0
+    grips_refused: int = 0
     faults: FaultStats = field(default_factory=FaultStats)
 
 
@@ -469,11 +478,15 @@ class Emulator:
         """Suction on/off, passed to the backing driver (its own book-keeping, or the
         simulator's suction cup); refused during an emergency stop."""
         if self._estopped:
+            self.stats.grips_refused += 1
             return Nak(cmd.seq, "ESTOP", "emergency stop active: the gripper keeps its state")
         try:
             report = await self.driver.grip(cmd.on)
-        except RobotBusy as exc:
+        except (RobotBusy, DriverError) as exc:
+            self.stats.grips_refused += 1
             return Nak(cmd.seq, "ESTOP", str(exc))
+        self.stats.grips += 1
+        self.stats.grips_holding += int(bool(cmd.on and report.holding))
         return Ack(cmd.seq, "GRIP", ("1" if report.on else "0", "1" if report.holding else "0"))
 
     def _on_move_done(self, session: str, outcome: MoveOutcome) -> None:
