@@ -127,8 +127,13 @@ class CameraFeed:
                     await self.camera.open()
                     opened = True
                 t0 = time.monotonic()
-                try:  # a grab that never returns is a stalled camera, not a slow one
-                    frame = await asyncio.wait_for(self.camera.grab(), GRAB_TIMEOUT_S)
+                # A grab that never returns is a stalled camera, not a slow one.  The
+                # ``asyncio.timeout`` block, not ``wait_for``: Python 3.11's wait_for can
+                # swallow a cancel that lands as the grab completes, and the feed then
+                # never stops (the e-stop conveyor test hung in cell.stop()).
+                try:
+                    async with asyncio.timeout(GRAB_TIMEOUT_S):
+                        frame = await self.camera.grab()
                 except TimeoutError:
                     raise CameraError(
                         f"camera stalled: no frame within {GRAB_TIMEOUT_S:g} s"
@@ -152,9 +157,8 @@ class CameraFeed:
                 period = 1.0 / (self.fps if busy else self.idle_fps)
                 self._wake.clear()
                 with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(
-                        self._wake.wait(), max(0.0, period - (time.monotonic() - t0))
-                    )
+                    async with asyncio.timeout(max(0.0, period - (time.monotonic() - t0))):
+                        await self._wake.wait()
             except asyncio.CancelledError:
                 raise
             except Exception as exc:  # the supervisor survives anything a driver raises

@@ -49,7 +49,14 @@ async def test_a_result_waits_out_a_locked_database(url):
         t.start()
         locked.wait(5)
         asyncio.get_running_loop().call_later(0.8, release.set)
-        ctx = SimpleNamespace(rt=SimpleNamespace(database=db, cell_id=cell, bus=EventBus()))
+        ctx = SimpleNamespace(
+            rt=SimpleNamespace(
+                database=db,
+                cell_id=cell,
+                bus=EventBus(),
+                settings=SimpleNamespace(image_retention="all"),
+            )
+        )
         state = {"decision": "unknown", "reason": "no model passed its threshold",
                  "truth": None, "scores": {}, "model": None, "model_id": None, "score": 0.1,
                  "pose": None, "viewpoints": (), "pick": None}  # fmt: skip
