@@ -15,6 +15,7 @@ from datetime import datetime, timedelta
 from typing import Any
 
 from sqlalchemy import or_, select, update
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import selectinload
 
@@ -146,8 +147,14 @@ async def create_user(
     if existing is not None:
         raise UserExists(f"user {name!r} already exists")
     user = User(name=name, role=role.name)
-    session.add(user)
-    await session.flush()
+    try:
+        # A savepoint: another request may create the same name between the check above
+        # and this insert; the unique index then refuses it, and that is a 409, not a 500.
+        async with session.begin_nested():
+            session.add(user)
+            await session.flush()
+    except IntegrityError:
+        raise UserExists(f"user {name!r} already exists") from None
     return user, await issue_token(session, user, secret, label=label, expires_at=expires_at)
 
 
