@@ -12,7 +12,7 @@ import pytest
 
 from benchmarks import faults
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]  # a campaign: minutes, not seconds
 
 
 def _args(**kw):

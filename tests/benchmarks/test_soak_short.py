@@ -11,7 +11,7 @@ import pytest
 
 from benchmarks import soak
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]  # a campaign: minutes, not seconds
 
 
 def test_thirty_inspections_leak_no_files_or_connections(tmp_path, monkeypatch):
