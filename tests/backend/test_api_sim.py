@@ -156,7 +156,14 @@ def test_conveyor_settings_and_objects_riding_it(sim, eng):
     ).json()["object"]
     try:
         sim.post("/api/sim/conveyor", json={"running": True}, headers=eng)
-        time.sleep(0.5)  # 0.1 m/s at time_scale 5: about 0.25 m
+        # 0.1 m/s at time_scale 5: about 0.25 m per wall second on an idle machine; a loaded
+        # one runs the simulator slower than that, so wait for the travel, within a bound.
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline:
+            time.sleep(0.1)
+            now = sim.get(f"/api/sim/objects/{obj['id']}", headers=eng).json()["object"]
+            if now["position_along_belt_m"] - obj["position_along_belt_m"] > 0.05:
+                break
         sim.post("/api/sim/conveyor", json={"running": False}, headers=eng)
         now = sim.get(f"/api/sim/objects/{obj['id']}", headers=eng).json()["object"]
         moved = now["position_along_belt_m"] - obj["position_along_belt_m"]
