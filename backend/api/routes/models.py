@@ -57,6 +57,20 @@ def get_live_index(runtime: RuntimeDep) -> LiveIndex:
 LiveIndexDep = Annotated[LiveIndex, Depends(get_live_index)]
 
 
+#: Height above the sitting base (what the pick plans with), shared by create and update.
+HeightM = Annotated[
+    float,
+    Field(gt=0.0, le=0.5, allow_inf_nan=False,
+          description="Height above the sitting base, metres (what the pick plans with)"),
+]  # fmt: skip
+#: Suction point on the part's upper surface in the object frame, shared by create and update.
+GraspObj = Annotated[
+    list[Annotated[float, Field(ge=-0.5, le=0.5, allow_inf_nan=False)]],
+    Field(min_length=3, max_length=3,
+          description="Suction point on the upper surface, object frame [x, y, z], metres"),
+]  # fmt: skip
+
+
 class ModelCreate(BaseModel):
     """A new object model."""
 
@@ -70,19 +84,8 @@ class ModelCreate(BaseModel):
         None, ge=0.0, le=1.0, allow_inf_nan=False, description="Own score threshold"
     )
     description: str = Field("", max_length=2000)
-    height_m: float | None = Field(
-        None,
-        gt=0.0,
-        le=0.5,
-        allow_inf_nan=False,
-        description="Height above the sitting base, metres (what the pick plans with)",
-    )
-    grasp_obj: list[Annotated[float, Field(ge=-0.5, le=0.5, allow_inf_nan=False)]] | None = Field(
-        None,
-        min_length=3,
-        max_length=3,
-        description="Suction point on the upper surface, object frame [x, y, z], metres",
-    )
+    height_m: HeightM | None = None
+    grasp_obj: GraspObj | None = None
     reason: Reason = None
 
 
@@ -97,19 +100,8 @@ class ModelUpdate(BaseModel):
     kind: Literal["2d", "3d"] | None = None
     threshold: float | None = Field(None, ge=0.0, le=1.0, allow_inf_nan=False)
     description: str | None = Field(None, max_length=2000)
-    height_m: float | None = Field(
-        None,
-        gt=0.0,
-        le=0.5,
-        allow_inf_nan=False,
-        description="Height above the sitting base, metres (what the pick plans with)",
-    )
-    grasp_obj: list[Annotated[float, Field(ge=-0.5, le=0.5, allow_inf_nan=False)]] | None = Field(
-        None,
-        min_length=3,
-        max_length=3,
-        description="Suction point on the upper surface, object frame [x, y, z], metres",
-    )
+    height_m: HeightM | None = None
+    grasp_obj: GraspObj | None = None
     reason: Reason = None
 
 
