@@ -148,11 +148,14 @@ async def create_user(
         raise UserExists(f"user {name!r} already exists")
     user = User(name=name, role=role.name)
     try:
-        # A savepoint: another request may create the same name between the check above
-        # and this insert; the unique index then refuses it, and that is a 409, not a 500.
-        async with session.begin_nested():
-            session.add(user)
-            await session.flush()
+        # Another request may create the same name between the check above and this insert;
+        # the unique index then refuses it, and that is a 409, not a 500. The session must
+        # then be rolled back as a whole (the caller's unit of work fails with the conflict).
+        # No savepoint here: pysqlite opens no transaction for a SELECT, so a SAVEPOINT
+        # becomes the outermost transaction and its RELEASE commits the row on its own,
+        # even when the caller later rolls back (a user created without its audit row).
+        session.add(user)
+        await session.flush()
     except IntegrityError:
         raise UserExists(f"user {name!r} already exists") from None
     return user, await issue_token(session, user, secret, label=label, expires_at=expires_at)
