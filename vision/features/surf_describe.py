@@ -222,12 +222,13 @@ def _descriptors(
     return out
 
 
-def _cell_weights() -> tuple[np.ndarray, np.ndarray]:
-    """Sub-regions (20, 2) and weights (20, 2) of the 20 samples along a side: each sample is
-    shared between the two nearest sub-region centres by linear interpolation (soft binning,
-    as SIFT's histograms do), so a sample drifting across a boundary changes the descriptor
-    smoothly; samples outside the outer centres keep only their inner share."""
-    pos = _DESC_T / 5.0 + 1.5  # in sub-region units: sub-region k is centred at k
+def _cell_weights(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sub-regions (n, 2) and weights (n, 2) of the samples at positions ``t`` (units of s)
+    along a side: each sample is shared between the two nearest sub-region centres by linear
+    interpolation (soft binning, as SIFT's histograms do), so a sample drifting across a
+    boundary changes the descriptor smoothly; samples outside the outer centres keep only
+    their inner share."""
+    pos = t / 5.0 + 1.5  # in sub-region units: sub-region k is centred at k
     i0 = np.floor(pos).astype(np.int64)
     frac = pos - i0
     idx = np.c_[i0, i0 + 1]
@@ -236,24 +237,12 @@ def _cell_weights() -> tuple[np.ndarray, np.ndarray]:
     return np.clip(idx, 0, 3), w
 
 
-_CELL, _CELL_W = _cell_weights()
+_CELL, _CELL_W = _cell_weights(_DESC_T)
 # Coarse grid: 10 x 10 samples spaced 2 s with Haar boxes of side 4 s, the same 20 s window,
 # sub-regions and Gaussian weight: a quarter of the work, for smooth signals (colour ratios).
 _COARSE_T = np.arange(10, dtype=np.float64) * 2.0 - 9.0
 _COARSE_W = np.exp(-(_COARSE_T[:, None] ** 2 + _COARSE_T[None, :] ** 2) / (2 * DESCRIPTOR_SIGMA**2))
-
-
-def _coarse_cell_weights() -> tuple[np.ndarray, np.ndarray]:
-    pos = _COARSE_T / 5.0 + 1.5
-    i0 = np.floor(pos).astype(np.int64)
-    frac = pos - i0
-    idx = np.c_[i0, i0 + 1]
-    w = np.c_[1.0 - frac, frac]
-    w[(idx < 0) | (idx > 3)] = 0.0
-    return np.clip(idx, 0, 3), w
-
-
-_COARSE_CELL, _COARSE_CELL_W = _coarse_cell_weights()
+_COARSE_CELL, _COARSE_CELL_W = _cell_weights(_COARSE_T)
 
 
 def _noise_floor(ii: np.ndarray) -> float:
