@@ -28,7 +28,7 @@ run: install
 	$(BIN)/visioncell serve
 
 test: install-dev
-	$(BIN)/python -m pytest -q -ra
+	$(BIN)/python -m pytest -q -ra -n 2 --dist loadfile
 
 # Lint and the type checker (mypy, configured in pyproject.toml) on robot/, vision/ and backend/.
 lint: install-dev
