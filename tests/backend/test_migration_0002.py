@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import asyncio
-import os
 
-import pytest
 from sqlalchemy import inspect, text
 
 from backend.db.migrate import downgrade, upgrade
 from backend.db.session import Database
-
-PG_URL = os.environ.get("VISIONCELL_TEST_POSTGRES_URL")
+from tests.utils.postgres import fresh_postgres_database
 
 
 def _sample_columns(url: str) -> set[str]:
@@ -85,9 +82,8 @@ def test_sqlite_0002_round_trip(tmp_path):
     _round_trip(f"sqlite+aiosqlite:///{tmp_path / 'm.db'}")
 
 
-@pytest.mark.skipif(not PG_URL, reason="VISIONCELL_TEST_POSTGRES_URL is not set (CI sets it)")
 def test_postgresql_0002_round_trip():
-    assert PG_URL is not None
-    downgrade(PG_URL, "base")
-    _round_trip(PG_URL)
-    downgrade(PG_URL, "base")
+    # A database of its own: downgrading the shared one broke tests running beside this one.
+    with fresh_postgres_database("m0002", migrate=False) as url:
+        _round_trip(url)
+        downgrade(url, "base")

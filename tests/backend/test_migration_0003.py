@@ -4,15 +4,13 @@ down and keeps existing rows: old models get their own name as part, old views t
 from __future__ import annotations
 
 import asyncio
-import os
 
-import pytest
 from sqlalchemy import inspect, text
 
 from backend.db.migrate import downgrade, upgrade
 from backend.db.session import Database
+from tests.utils.postgres import fresh_postgres_database
 
-PG_URL = os.environ.get("VISIONCELL_TEST_POSTGRES_URL")
 NEW_VIEW_COLUMNS = {
     "mask_png",
     "thumbnail_jpeg",
@@ -99,8 +97,8 @@ def test_sqlite_0003_keeps_rows(tmp_path):
     _round_trip(f"sqlite+aiosqlite:///{tmp_path / 'm.db'}")
 
 
-@pytest.mark.skipif(not PG_URL, reason="VISIONCELL_TEST_POSTGRES_URL is not set (CI sets it)")
 def test_postgresql_0003_keeps_rows():
-    assert PG_URL is not None
-    _round_trip(PG_URL)
-    downgrade(PG_URL, "base")
+    # A database of its own: downgrading the shared one broke tests running beside this one.
+    with fresh_postgres_database("m0003", migrate=False) as url:
+        _round_trip(url)
+        downgrade(url, "base")

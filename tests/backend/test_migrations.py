@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import os
 from datetime import UTC, datetime, timedelta, timezone
 
 import pytest
@@ -13,8 +12,8 @@ from sqlalchemy.exc import IntegrityError
 from backend.db.migrate import downgrade, head_revision, upgrade
 from backend.db.models import Base, Calibration, CalibrationKind, Cell
 from backend.db.session import Database
+from tests.utils.postgres import fresh_postgres_database
 
-PG_URL = os.environ.get("VISIONCELL_TEST_POSTGRES_URL")
 EXPECTED = set(Base.metadata.tables)
 
 
@@ -94,10 +93,10 @@ def test_sqlite_migrations_round_trip(tmp_path):
     assert head_revision() is not None
 
 
-@pytest.mark.skipif(not PG_URL, reason="VISIONCELL_TEST_POSTGRES_URL is not set (CI sets it)")
 def test_postgresql_migrations_round_trip():
-    assert PG_URL is not None
-    upgrade(PG_URL)
-    _round_trip(PG_URL)
-    asyncio.run(_timestamps_and_active_flag(PG_URL))
-    downgrade(PG_URL, "base")
+    # A database of its own: downgrading the shared one broke tests running beside this one.
+    with fresh_postgres_database("migrations", migrate=False) as url:
+        upgrade(url)
+        _round_trip(url)
+        asyncio.run(_timestamps_and_active_flag(url))
+        downgrade(url, "base")

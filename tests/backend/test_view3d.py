@@ -57,7 +57,9 @@ async def test_view_starts_on_its_pinned_port_and_tracks_the_arm(cell):
         assert job.state.value == "done", job.public()
         assert view.updates > before + 2, (view.updates, before, job.result)
         ee = view._handles[-1]
-        np.testing.assert_allclose(ee.position, T_base_ee(ASEA.q_ready)[:3, 3], atol=1e-6)
+        # Drawn where the arm is: the move ends within its tolerance of the target (a few
+        # micrometres were seen on a loaded machine), so 0.1 mm, not 1e-6 m.
+        np.testing.assert_allclose(ee.position, T_base_ee(ASEA.q_ready)[:3, 3], atol=1e-4)
         # The panel's buttons are per client and follow roles: tests/backend/test_view3d_panel.py.
     finally:
         await view.stop()
