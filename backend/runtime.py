@@ -45,6 +45,7 @@ from backend.settings import Settings
 from backend.throttle import SignInThrottle
 
 if TYPE_CHECKING:
+    from backend.authsync import AuthSync
     from backend.recognition.sync import IndexSync
     from backend.view3d import View3D
     from robot.sim import SimEngine
@@ -149,6 +150,8 @@ class CellRuntime:
         #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).
         #: Successful sign-ins reused for 2 s (``backend.authcache``).
         self.auth_cache = AuthCache()
+        #: On PostgreSQL: drops the sign-ins other processes revoke (``backend.authsync``).
+        self.auth_sync: AuthSync | None = None
         self.signin_throttle = SignInThrottle(
             max_failures=settings.signin_max_failures,
             window_s=settings.signin_window_s,
@@ -240,6 +243,12 @@ class CellRuntime:
         )
         self.index_sync.start()
         stack.push_async_callback(self.index_sync.stop)
+        if s.auth_listen and db.url.startswith("postgresql"):
+            from backend.authsync import AuthSync
+
+            self.auth_sync = AuthSync(db.url, self.auth_cache)
+            self.auth_sync.start()
+            stack.push_async_callback(self.auth_sync.stop)
         # Inspections a previous process left unfinished (killed mid-inspection) become
         # complete failed rows before this one inspects; the stored backgrounds come back.
         self.interrupted_at_start = await recovery.mark_interrupted(db, self.cell_id)
