@@ -59,6 +59,12 @@ class StartupError(RuntimeError):
     """The cell cannot start; the message says what to do."""
 
 
+def _arm_owner(cell: Cell) -> str | None:
+    """Who holds the cell's motion lock now (None: nobody)."""
+    holder = cell.jobs.arm_holder
+    return None if holder is None else str(holder.owner)
+
+
 async def check_database(db: Database) -> None:
     """Raise :class:`StartupError` unless ``db`` answers and is at the head revision."""
     try:
@@ -275,9 +281,17 @@ class CellRuntime:
 
             world = collision_world(hardware.sim.config.layout, model=hardware.sim.arm_model)
             conveyors.append(SimConveyor(hardware.sim))
-        cell = Cell(
-            s, hardware.driver, hardware.camera, world=world, conveyors=conveyors, bus=self.bus
-        )
+        driver: Any = hardware.driver
+        logged = None
+        if s.motion_log is not None:  # the audit sits between the cell and its driver
+            from backend.cell.motionlog import LoggedDriver, MotionLog
+
+            motion_log = MotionLog(s.motion_log)
+            stack.callback(motion_log.close)
+            driver = logged = LoggedDriver(driver, motion_log)
+        cell = Cell(s, driver, hardware.camera, world=world, conveyors=conveyors, bus=self.bus)
+        if logged is not None:
+            logged.holder = lambda: _arm_owner(cell)
         cell.db_id = self.cell_id
         await cell.start()
         stack.push_async_callback(cell.stop)
