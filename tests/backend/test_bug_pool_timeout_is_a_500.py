@@ -10,6 +10,7 @@ import socket
 import time
 
 from fastapi.testclient import TestClient
+from sqlalchemy.engine import make_url
 
 import backend.db.session as session_mod
 from backend.app import create_app
@@ -102,3 +103,27 @@ def test_locked_sqlite_file_is_a_503(tmp_path, headers, settings, monkeypatch):
             lock.execute("ROLLBACK")
             lock.close()
         assert client.get("/api/models", headers=headers["viewer"]).status_code == 200
+
+
+def test_postgres_cut_off_is_a_503_and_comes_back(tmp_path):
+    from benchmarks.faultkit import TcpProxy
+    from tests.utils.factories import make_settings, make_tokens
+    from tests.utils.postgres import fresh_postgres_database
+
+    with fresh_postgres_database("pool503") as url:
+        u = make_url(url)
+        proxy = TcpProxy(u.host or "127.0.0.1", u.port or 5432)
+        port = proxy.start()
+        try:
+            via = u.set(host="127.0.0.1", port=port).render_as_string(hide_password=False)
+            settings = make_settings(tmp_path, database_url=via)
+            hdr = {"Authorization": f"Bearer {make_tokens(settings)['viewer']}"}
+            with TestClient(create_app(settings)) as client:
+                assert client.get("/api/models", headers=hdr).status_code == 200
+                proxy.cut()  # the server away: open connections dropped, new ones refused
+                client.app.state.runtime.auth_cache.clear()
+                _assert_503(client.get("/api/models", headers=hdr), "database_unavailable")
+                proxy.restore()
+                assert client.get("/api/models", headers=hdr).status_code == 200
+        finally:
+            proxy.stop()
