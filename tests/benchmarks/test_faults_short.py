@@ -16,7 +16,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]  # a campaign: minute
 
 
 def _args(**kw):
-    base = dict(per_kind=1, baseline=1, fault_s=14.0, time_scale=5.0, kinds=faults.KINDS,
+    base = dict(per_kind=1, baseline=1, fault_s=11.0, time_scale=5.0, kinds=faults.KINDS,
                 postgres=False, postgres_url="", json=False)  # fmt: skip
     base.update(kw)
     return argparse.Namespace(**base)
