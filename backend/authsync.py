@@ -23,6 +23,7 @@ from typing import Any
 from sqlalchemy.engine import make_url
 
 from backend.authcache import AUTH_CHANNEL, AuthCache, parse_payload
+from backend.taskutil import cancel_and_wait
 from robot.backoff import Backoff
 
 __all__ = ["KEEPALIVE_S", "AuthSync", "AuthSyncStats"]
@@ -83,9 +84,7 @@ class AuthSync:
         """Stop the task and close the connection."""
         task, self._task = self._task, None
         if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+            await cancel_and_wait(task)  # not a bare cancel: wait_for may swallow one
         await self._close()
 
     async def _run(self) -> None:

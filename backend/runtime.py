@@ -42,6 +42,7 @@ from backend.jobs import JobManager
 from backend.recognition.index import LiveIndex, load_live_index
 from backend.recognition.teach import BackgroundStore
 from backend.settings import Settings
+from backend.taskutil import cancel_and_wait
 from backend.throttle import SignInThrottle
 
 if TYPE_CHECKING:
@@ -99,9 +100,7 @@ async def ensure_cell_row(db: Database, name: str, *, description: str = "") -> 
 
 
 async def _cancel(task: asyncio.Task[None]) -> None:
-    task.cancel()
-    with contextlib.suppress(asyncio.CancelledError):
-        await task
+    await cancel_and_wait(task)
 
 
 class CellRuntime:
