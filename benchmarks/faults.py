@@ -120,21 +120,26 @@ class MotionWatch:
 
 
 def apply_motion_audit(res: dict[str, KindResult], log_path: Path,
-                       windows: list[FaultWindow], kinds: list[str]) -> list[str]:  # fmt: skip
-    """Judge every motion of ``log_path`` against ``windows``; add each kind's audited,
-    unsafe and during-fault counts (motions outside every fault go to the baseline, or to
-    the first kind of the part).  Returns the unsafe motions' descriptions."""
+                       windows: list[FaultWindow], spans: list[FaultWindow]) -> list[str]:  # fmt: skip
+    """Judge every motion of ``log_path`` against the fault ``windows``; add each kind's
+    audited, unsafe and during-fault counts.  A motion belongs to the kind whose ``span``
+    (that kind's part of the run, in order) it was commanded in; one before the first span
+    (the teach) to the first, one after the last to the last.  Returns the unsafe motions'
+    descriptions."""
     from backend.cell.motionlog import read_motion_log
 
-    judged = judge_motions(read_motion_log(log_path), windows)
     detail: list[str] = []
-    for kind, r in judged.items():
-        target = kind if kind in kinds else ("baseline" if "baseline" in kinds else kinds[0])
-        k = res.setdefault(target, KindResult(target))
-        k.audited += r["audited"]
-        k.unsafe += len(r["unsafe"])
-        k.during_fault += r["during_fault"]
-        detail += r["unsafe"]
+    moves = read_motion_log(log_path)
+    for i, span in enumerate(spans):
+        lo = -math.inf if i == 0 else span.start
+        hi = math.inf if i == len(spans) - 1 else span.end
+        mine = [m for m in moves if lo <= float(m.get("t", 0.0)) < hi]
+        k = res.setdefault(span.kind, KindResult(span.kind))
+        for r in judge_motions(mine, windows).values():
+            k.audited += r["audited"]
+            k.unsafe += len(r["unsafe"])
+            k.during_fault += r["during_fault"]
+            detail += r["unsafe"]
     return detail
 
 
@@ -434,8 +439,12 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgDatabase | None,
             stack.callback(feed_task.cancel)
             run = await start_run(rt)
             dbf = DbFault(url, pg)
+            spans: list[FaultWindow] = []  # each kind's part of the run, for the audit
             for kind in todo:
                 res = results_.setdefault(kind, KindResult(kind))
+                spans.append(FaultWindow(kind, time.time(), math.inf))
+                if len(spans) > 1:
+                    spans[-2] = FaultWindow(spans[-2].kind, spans[-2].start, spans[-1].start)
                 since = len(feeder.done_times)
                 n = args.baseline if kind == "baseline" else args.per_kind
                 for k in range(n):
@@ -493,7 +502,7 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgDatabase | None,
             partial, markers, rows = await audit_rows(rt.database, rt.cell_id, first_id)
             assert settings.motion_log is not None
             info.setdefault("unsafe", []).extend(
-                apply_motion_audit(results_, Path(settings.motion_log), windows, todo)
+                apply_motion_audit(results_, Path(settings.motion_log), windows, spans)
             )
             Path(settings.motion_log).unlink(missing_ok=True)  # the next part's own log
             tally(results_, todo, feeder, partial, markers, rows)
@@ -726,12 +735,15 @@ async def kill_campaign(args: argparse.Namespace, progress: Any, taught_url: str
     # result if it finished in the instant between the read and the kill
     res.lost = sum(1 for t in killed if started.count(t) == 0) + left
     res.duplicated = sum(started.count(t) - 1 for t in killed if started.count(t) > 1)
+    from backend.cell.motionlog import read_motion_log
+
     judged: dict[str, KindResult] = {"kill": res}
-    unsafe = apply_motion_audit(judged, motion_log, windows, ["kill"])
+    unsafe = apply_motion_audit(judged, motion_log, windows, [FaultWindow("kill", 0, math.inf)])
     if info is not None:
         info.setdefault("unsafe", []).extend(unsafe)
+    children = len({m["pid"] for m in read_motion_log(motion_log)})
     res.note = (f"{interrupted} interrupted row(s) written at start-up; {res.audited} motions "
-                "of the serve children audited from their motion log")  # fmt: skip
+                f"of {children} serve processes audited from their motion log")  # fmt: skip
     shutil.rmtree(tmp, ignore_errors=True)
     return res
 
@@ -843,6 +855,8 @@ def main(argv: list[str] | None = None) -> int:
     for r in summary["kinds"]:
         if r["reasons"]:
             out.print(f"{r['kind']}: failed rows' reasons: " + " | ".join(r["reasons"]))
+        if r["note"]:
+            out.print(f"{r['kind']}: {r['note']}")
     if args.json:
         print(json.dumps(summary))
     return 0
