@@ -119,6 +119,13 @@ class MotionWatch:
         driver.move = move
 
 
+def keep_log(args: argparse.Namespace, path: Path, part: str) -> None:
+    """Copy a part's motion log to ``--keep-logs DIR`` (for reading it afterwards)."""
+    if getattr(args, "keep_logs", None) and path.exists():
+        Path(args.keep_logs).mkdir(parents=True, exist_ok=True)
+        shutil.copy(path, Path(args.keep_logs) / f"motion-{part}.jsonl")
+
+
 def apply_motion_audit(res: dict[str, KindResult], log_path: Path,
                        windows: list[FaultWindow], spans: list[FaultWindow]) -> list[str]:  # fmt: skip
     """Judge every motion of ``log_path`` against the fault ``windows``; add each kind's
@@ -504,6 +511,7 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgDatabase | None,
             info.setdefault("unsafe", []).extend(
                 apply_motion_audit(results_, Path(settings.motion_log), windows, spans)
             )
+            keep_log(args, Path(settings.motion_log), todo[-1])
             Path(settings.motion_log).unlink(missing_ok=True)  # the next part's own log
             tally(results_, todo, feeder, partial, markers, rows)
             feed_task.cancel()
@@ -739,6 +747,7 @@ async def kill_campaign(args: argparse.Namespace, progress: Any, taught_url: str
 
     judged: dict[str, KindResult] = {"kill": res}
     unsafe = apply_motion_audit(judged, motion_log, windows, [FaultWindow("kill", 0, math.inf)])
+    keep_log(args, motion_log, "kill")
     if info is not None:
         info.setdefault("unsafe", []).extend(unsafe)
     children = len({m["pid"] for m in read_motion_log(motion_log)})
@@ -834,6 +843,7 @@ def main(argv: list[str] | None = None) -> int:
         ),
         help="the server (any database on it; default: $VISIONCELL_TEST_POSTGRES_URL)",
     )
+    p.add_argument("--keep-logs", default=None, help="copy each part's motion log to this folder")
     p.add_argument("--json", action="store_true", help="one JSON line on the last line")
     args = p.parse_args(argv)
     for name, v, lo, hi in (("--per-kind", args.per_kind, 1, 50), ("--baseline", args.baseline, 1, 100),

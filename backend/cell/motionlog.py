@@ -19,6 +19,7 @@ import json
 import logging
 import os
 import time
+import uuid
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -110,6 +111,9 @@ class LoggedDriver:
         self._lo = np.asarray(model.lower, dtype=np.float64)
         self._hi = np.asarray(model.upper, dtype=np.float64)
         self._seq = 0
+        #: Tells this driver's moves from another one's of the same process (a runtime
+        #: started again in one process counts its moves from 1 again).
+        self.run = uuid.uuid4().hex[:12]
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._inner, name)
@@ -128,7 +132,7 @@ class LoggedDriver:
         holder = self.holder() if self.holder is not None else None
         self.motion_log.write(
             {
-                "ev": "move", "t": time.time(), "pid": os.getpid(), "seq": seq,
+                "ev": "move", "t": time.time(), "pid": os.getpid(), "run": self.run, "seq": seq,
                 "q0": _q(st.q), "goal": _q(q[-1]), "within_limits": within,
                 "estopped": bool(st.estopped), "connected": bool(st.connected),
                 "fault": str(st.fault)[:200], "lock": holder,
@@ -139,7 +143,7 @@ class LoggedDriver:
         except BaseException as exc:
             self.motion_log.write(
                 {
-                    "ev": "end", "t": time.time(), "pid": os.getpid(), "seq": seq,
+                    "ev": "end", "t": time.time(), "pid": os.getpid(), "run": self.run, "seq": seq,
                     "error": f"{type(exc).__name__}: {exc}"[:300],
                     "q": _q(self._inner.state.q),
                 }
@@ -147,7 +151,7 @@ class LoggedDriver:
             raise
         self.motion_log.write(
             {
-                "ev": "end", "t": time.time(), "pid": os.getpid(), "seq": seq,
+                "ev": "end", "t": time.time(), "pid": os.getpid(), "run": self.run, "seq": seq,
                 "completed": bool(report.completed), "reason": str(report.reason)[:200],
                 "q": _q(report.final_q),
             }
@@ -158,7 +162,7 @@ class LoggedDriver:
 def read_motion_log(path: Path | str) -> list[dict[str, Any]]:
     """Every move of the file, each with its ``end`` merged in (``"end": None`` for a move
     whose process died before it ended), in the order written."""
-    moves: dict[tuple[int, int], dict[str, Any]] = {}
+    moves: dict[tuple[int, str, int], dict[str, Any]] = {}
     p = Path(path)
     if not p.exists():
         return []
@@ -172,7 +176,7 @@ def read_motion_log(path: Path | str) -> list[dict[str, Any]]:
                 continue  # a line torn by a crash of the writer
             if not isinstance(rec, dict) or "pid" not in rec or "seq" not in rec:
                 continue
-            key = (int(rec["pid"]), int(rec["seq"]))
+            key = (int(rec["pid"]), str(rec.get("run", "")), int(rec["seq"]))
             if rec.get("ev") == "move":
                 moves[key] = {**rec, "end": None}
             elif rec.get("ev") == "end" and key in moves:

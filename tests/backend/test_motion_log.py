@@ -48,3 +48,31 @@ def test_torn_lines_and_moves_without_end_are_read(tmp_path):
     assert [m["seq"] for m in moves] == [1, 2]
     assert moves[0]["end"]["completed"] is True and moves[1]["end"] is None
     assert json.loads(path.read_text().splitlines()[0])["pid"] == 7
+
+
+def test_two_drivers_of_one_process_share_a_file_without_mixing(tmp_path):
+    """Bug found by the fault campaign: a runtime started again in the same process counted
+    its moves from 1 again and the reader merged them with the first runtime's (11 teach
+    moves vanished from the audit)."""
+    import asyncio
+
+    from backend.cell.motionlog import LoggedDriver
+    from robot.drivers.ideal import IdealDriver
+    from robot.trajectory import plan_joint_move
+
+    path = tmp_path / "m.jsonl"
+
+    async def one_runtime() -> None:
+        inner = IdealDriver(time_scale=50.0)
+        await inner.connect()
+        log = MotionLog(path)
+        drv = LoggedDriver(inner, log, holder=lambda: "test")
+        q0 = np.asarray(inner.state.q)
+        await drv.move(plan_joint_move(q0, ASEA.q_ready, speed=1.0))
+        await inner.close()
+        log.close()
+
+    asyncio.run(one_runtime())
+    asyncio.run(one_runtime())
+    moves = read_motion_log(path)
+    assert len(moves) == 2 and all(m["end"] is not None for m in moves), moves
