@@ -36,7 +36,8 @@ latched, the link down, without the motion lock or outside the limits, or comman
 an e-stop, link drop or kill and moving the arm.  Baseline: the same cell without faults (cycle time), in the
 same run.  Run::
 
-    nice -n 5 .venv/bin/python -m benchmarks.faults [--per-kind 3] [--kinds camera,estop,...] [--postgres] [--json]
+    nice -n 5 .venv/bin/python -m benchmarks.faults [--per-kind 3] [--kinds camera,estop,...]
+        [--postgres [--postgres-url URL]] [--keep-logs DIR] [--json]
 """
 
 from __future__ import annotations
