@@ -753,7 +753,8 @@ async def kill_campaign(args: argparse.Namespace, progress: Any, taught_url: str
         info.setdefault("unsafe", []).extend(unsafe)
     children = len({m["pid"] for m in read_motion_log(motion_log)})
     res.note = (f"{interrupted} interrupted row(s) written at start-up; {res.audited} motions "
-                f"of {children} serve processes audited from their motion log")  # fmt: skip
+                f"of {children} processes (the serve children, and the teach when it ran "
+                "here) audited from their motion log")  # fmt: skip
     shutil.rmtree(tmp, ignore_errors=True)
     return res
 
