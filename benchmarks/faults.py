@@ -738,6 +738,7 @@ async def kill_campaign(args: argparse.Namespace, progress: Any, taught_url: str
     res.inspections = len(rows)
     res.partial = partial
     res.reasons = [r["reason"].split(";")[0][:90] for r in rows if r["decision"] == "failed"]
+    res.failed = sum(1 for r in rows if r["decision"] == "failed")
     interrupted = sum(1 for r in rows if r["reason"].startswith("interrupted"))
     # every inspection in progress at a kill (its marker read just before) must have
     # exactly one row afterwards: the interrupted row written at start-up, or its own
