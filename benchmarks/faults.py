@@ -602,6 +602,7 @@ async def serial_hardware(settings: Any, stack: contextlib.AsyncExitStack) -> tu
     tmp = tempfile.mkdtemp(prefix="vc-faults-tty-")
     emu = Emulator(arm, link=f"{tmp}/tty", seed=3, start_tolerance_rad=0.05)
     await emu.start()
+    stack.callback(shutil.rmtree, tmp, True)  # the PTY's folder, after the emulator closed
     stack.push_async_callback(arm.close)
     stack.push_async_callback(emu.close)
     driver = SerialDriver(emu.path, state_rate_hz=settings.state_rate_hz)
