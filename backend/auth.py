@@ -19,6 +19,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import selectinload
 
+from backend.authcache import AUTH_USERS_OPTION
 from backend.db.models import ApiToken, Role, User
 from backend.db.types import utcnow
 from vision.errors import Conflict, InvalidInput
@@ -166,7 +167,9 @@ async def revoke_tokens(session: AsyncSession, user: User, *, label: str | None 
     stmt = update(ApiToken).where(ApiToken.user_id == user.id, ApiToken.revoked.is_(False))
     if label is not None:
         stmt = stmt.where(ApiToken.label == label)
-    result = await session.execute(stmt.values(revoked=True))
+    # names the user to the plant's sign-in caches (``backend.authcache``)
+    stmt = stmt.values(revoked=True).execution_options(**{AUTH_USERS_OPTION: (int(user.id),)})
+    result = await session.execute(stmt)
     return int(result.rowcount or 0)  # type: ignore[attr-defined]
 
 

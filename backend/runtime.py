@@ -42,9 +42,11 @@ from backend.jobs import JobManager
 from backend.recognition.index import LiveIndex, load_live_index
 from backend.recognition.teach import BackgroundStore
 from backend.settings import Settings
+from backend.taskutil import cancel_and_wait
 from backend.throttle import SignInThrottle
 
 if TYPE_CHECKING:
+    from backend.authsync import AuthSync
     from backend.recognition.sync import IndexSync
     from backend.view3d import View3D
     from robot.sim import SimEngine
@@ -56,6 +58,12 @@ log = logging.getLogger(__name__)
 
 class StartupError(RuntimeError):
     """The cell cannot start; the message says what to do."""
+
+
+def _arm_owner(cell: Cell) -> str | None:
+    """Who holds the cell's motion lock now (None: nobody)."""
+    holder = cell.jobs.arm_holder
+    return None if holder is None else str(holder.owner)
 
 
 async def check_database(db: Database) -> None:
@@ -92,9 +100,7 @@ async def ensure_cell_row(db: Database, name: str, *, description: str = "") -> 
 
 
 async def _cancel(task: asyncio.Task[None]) -> None:
-    task.cancel()
-    with contextlib.suppress(asyncio.CancelledError):
-        await task
+    await cancel_and_wait(task)
 
 
 class CellRuntime:
@@ -149,6 +155,8 @@ class CellRuntime:
         #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).
         #: Successful sign-ins reused for 2 s (``backend.authcache``).
         self.auth_cache = AuthCache()
+        #: On PostgreSQL: drops the sign-ins other processes revoke (``backend.authsync``).
+        self.auth_sync: AuthSync | None = None
         self.signin_throttle = SignInThrottle(
             max_failures=settings.signin_max_failures,
             window_s=settings.signin_window_s,
@@ -240,6 +248,12 @@ class CellRuntime:
         )
         self.index_sync.start()
         stack.push_async_callback(self.index_sync.stop)
+        if s.auth_listen and db.url.startswith("postgresql"):
+            from backend.authsync import AuthSync
+
+            self.auth_sync = AuthSync(db.url, self.auth_cache)
+            self.auth_sync.start()
+            stack.push_async_callback(self.auth_sync.stop)
         # Inspections a previous process left unfinished (killed mid-inspection) become
         # complete failed rows before this one inspects; the stored backgrounds come back.
         self.interrupted_at_start = await recovery.mark_interrupted(db, self.cell_id)
@@ -266,9 +280,17 @@ class CellRuntime:
 
             world = collision_world(hardware.sim.config.layout, model=hardware.sim.arm_model)
             conveyors.append(SimConveyor(hardware.sim))
-        cell = Cell(
-            s, hardware.driver, hardware.camera, world=world, conveyors=conveyors, bus=self.bus
-        )
+        driver: Any = hardware.driver
+        logged = None
+        if s.motion_log is not None:  # the audit sits between the cell and its driver
+            from backend.cell.motionlog import LoggedDriver, MotionLog
+
+            motion_log = MotionLog(s.motion_log)
+            stack.callback(motion_log.close)
+            driver = logged = LoggedDriver(driver, motion_log)
+        cell = Cell(s, driver, hardware.camera, world=world, conveyors=conveyors, bus=self.bus)
+        if logged is not None:
+            logged.holder = lambda: _arm_owner(cell)
         cell.db_id = self.cell_id
         await cell.start()
         stack.push_async_callback(cell.stop)

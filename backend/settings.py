@@ -182,6 +182,16 @@ class Settings(BaseSettings):
         description="On PostgreSQL, learn of other processes' model and view changes at once "
         "through LISTEN/NOTIFY (polling every index_poll_s otherwise).",
     )
+    motion_log: Path | None = Field(
+        None,
+        description="Append every motion command, with the e-stop, link and lock state that "
+        "allowed it, to this JSON-lines file (an audit; off by default).",
+    )
+    auth_listen: bool = Field(
+        True,
+        description="On PostgreSQL, drop sign-ins that another process revoked (a token, a "
+        "disabled user) at once through LISTEN/NOTIFY (after the 2 s sign-in cache otherwise).",
+    )
 
     @field_validator("http_host", "viser_host")
     @classmethod

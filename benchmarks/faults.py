@@ -13,7 +13,10 @@ under way:
   started again by the operator (the harness): resetting an e-stop never restarts motion
   by itself (ISO 13850);
 * ``database``: SQLite: another connection holds ``BEGIN EXCLUSIVE`` on the file for
-  ``--fault-s``; PostgreSQL (``--postgres``): the server is stopped and started again;
+  ``--fault-s``; PostgreSQL (``--postgres``): the cell's own database on the shared server,
+  reached through a TCP proxy that is cut (new connections refused, open ones dropped)
+  while every backend of that database is terminated (``pg_terminate_backend``), then
+  restored (``benchmarks/faultkit.py``; the server itself is never stopped);
 * ``serial``: the arm is the serial driver talking over a real
   pseudo-terminal to the controller emulator in front of the simulated arm; the port
   vanishes for ``--fault-s``;
@@ -22,14 +25,19 @@ under way:
 
 Measured per fault kind: faults injected, inspections lost (an object taken away or left at
 the end without a complete row, a marker left behind), duplicated (two complete rows for one
-object, or a marker with a row), partial rows, unsafe motions (a motion command issued while
-the e-stop is latched, while the link is down, without the motion lock, or with a joint
-target outside the limits), motion commands issued while the fault was active (the cell
-should hold), the failed rows' reasons, and the recovery time: from the fault's end to the
-next complete inspection.  Baseline: the same cell without faults (cycle time), in the
+object, or a marker with a row), partial rows, unsafe motions, motion commands issued while
+the fault was active (the cell should hold), the failed rows' reasons, and the recovery
+time: from the fault's end to the next complete inspection.  Motions are audited from the
+cell's motion log (``VISIONCELL_MOTION_LOG``, :mod:`backend.cell.motionlog`), which every
+cell of the campaign writes, the killed ``serve`` children included; after each part the
+log is read and each motion judged against the faults injected
+(:func:`benchmarks.faultkit.judge_motions`): unsafe is a motion commanded with the e-stop
+latched, the link down, without the motion lock or outside the limits, or commanded during
+an e-stop, link drop or kill and moving the arm.  Baseline: the same cell without faults (cycle time), in the
 same run.  Run::
 
-    nice -n 5 .venv/bin/python -m benchmarks.faults [--per-kind 3] [--kinds camera,estop,...] [--postgres] [--json]
+    nice -n 5 .venv/bin/python -m benchmarks.faults [--per-kind 3] [--kinds camera,estop,...]
+        [--postgres [--postgres-url URL]] [--keep-logs DIR] [--json]
 """
 
 from __future__ import annotations
@@ -58,6 +66,8 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from benchmarks.faultkit import FaultWindow, PgDatabase, judge_motions
+
 os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering, before MuJoCo loads
 
 out = Console(width=170)
@@ -77,11 +87,12 @@ def free_port() -> int:
 
 
 def settings_for(tmp: Path, url: str, *, time_scale: float, busy_s: float = 1.0, **kw: Any) -> Any:
-    """Settings of the campaign's cell (sim, no 3D view, no demo objects)."""
+    """Settings of the campaign's cell (sim, no 3D view, no demo objects, motion log)."""
     from backend.settings import Settings
 
     return Settings(
         database_url=url, var_dir=tmp / "var", driver=kw.pop("driver", "sim"), camera="sim",
+        motion_log=kw.pop("motion_log", tmp / "motion.jsonl"),
         sim_demo=False, time_scale=time_scale, secret_key="faults-secret-0123456789abcdef",
         view3d_enabled=False, bootstrap_operator=False, database_busy_timeout_s=busy_s, **kw,
     )  # fmt: skip
@@ -89,43 +100,55 @@ def settings_for(tmp: Path, url: str, *, time_scale: float, busy_s: float = 1.0,
 
 # -- what is measured -------------------------------------------------------------------------
 @dataclass
-class MotionAudit:
-    """Every motion command the cell hands its driver, judged when it is issued."""
+class MotionWatch:
+    """When the cell commands motions (the harness waits on it); whether they were safe is
+    judged from the motion log afterwards (:func:`apply_motion_audit`)."""
 
     rt: Any
-    fault: dict[str, Any]
     commands: int = 0
     times: list[float] = field(default_factory=list)
-    unsafe: list[str] = field(default_factory=list)
-    during_fault: int = 0
 
     def install(self) -> None:
-        from robot.model import ASEA
-
         driver = self.rt.cell.driver
         inner = driver.move
-        lo, hi = np.asarray(ASEA.lower), np.asarray(ASEA.upper)
 
         async def move(traj: Any) -> Any:
             self.commands += 1
             self.times.append(time.monotonic())
-            q = np.asarray(traj.q, dtype=np.float64)
-            why = []
-            if driver.state.estopped:
-                why.append("e-stop latched")
-            if not driver.state.connected:
-                why.append("link down")
-            if self.rt.jobs.arm_holder is None:
-                why.append("without the motion lock")
-            if np.any(q < lo - 1e-9) or np.any(q > hi + 1e-9):
-                why.append("joint target outside the limits")
-            if why:
-                self.unsafe.append(f"{self.fault.get('kind') or 'none'}: " + ", ".join(why))
-            if self.fault.get("active"):
-                self.during_fault += 1
             return await inner(traj)
 
-        driver.move = move  # the audit sits between the cell and its driver
+        driver.move = move
+
+
+def keep_log(args: argparse.Namespace, path: Path, part: str) -> None:
+    """Copy a part's motion log to ``--keep-logs DIR`` (for reading it afterwards)."""
+    if getattr(args, "keep_logs", None) and path.exists():
+        Path(args.keep_logs).mkdir(parents=True, exist_ok=True)
+        shutil.copy(path, Path(args.keep_logs) / f"motion-{part}.jsonl")
+
+
+def apply_motion_audit(res: dict[str, KindResult], log_path: Path,
+                       windows: list[FaultWindow], spans: list[FaultWindow]) -> list[str]:  # fmt: skip
+    """Judge every motion of ``log_path`` against the fault ``windows``; add each kind's
+    audited, unsafe and during-fault counts.  A motion belongs to the kind whose ``span``
+    (that kind's part of the run, in order) it was commanded in; one before the first span
+    (the teach) to the first, one after the last to the last.  Returns the unsafe motions'
+    descriptions."""
+    from backend.cell.motionlog import read_motion_log
+
+    detail: list[str] = []
+    moves = read_motion_log(log_path)
+    for i, span in enumerate(spans):
+        lo = -math.inf if i == 0 else span.start
+        hi = math.inf if i == len(spans) - 1 else span.end
+        mine = [m for m in moves if lo <= float(m.get("t", 0.0)) < hi]
+        k = res.setdefault(span.kind, KindResult(span.kind))
+        for r in judge_motions(mine, windows).values():
+            k.audited += r["audited"]
+            k.unsafe += len(r["unsafe"])
+            k.during_fault += r["during_fault"]
+            detail += r["unsafe"]
+    return detail
 
 
 @dataclass
@@ -274,6 +297,7 @@ class KindResult:
     partial: int = 0
     unsafe: int = 0
     during_fault: int = 0
+    audited: int = 0
     inspections: int = 0
     cycle_s: list[float] = field(default_factory=list)
     note: str = ""
@@ -283,7 +307,8 @@ class KindResult:
         return {
             "kind": self.kind, "injected": self.injected, "inspections": self.inspections,
             "lost": self.lost, "duplicated": self.duplicated, "partial": self.partial,
-            "unsafe_motions": self.unsafe, "moves_during_fault": self.during_fault,
+            "motions_audited": self.audited, "unsafe_motions": self.unsafe,
+            "moves_during_fault": self.during_fault,
             "failed_rows": self.failed,
             "resume_median_s": _med(self.resume_s), "resume_max_s": _max(self.resume_s),
             "recovery_median_s": round(statistics.median(r), 2) if r else None,
@@ -340,16 +365,17 @@ async def audit_rows(db: Any, cell_id: int, since_id: int) -> tuple[int, int, li
 
 # -- in-process faults -------------------------------------------------------------------------
 class DbFault:
-    """Make the database unavailable and bring it back (SQLite lock or PostgreSQL stop)."""
+    """Make the database unavailable and bring it back (SQLite lock, or the PostgreSQL
+    proxy cut with the database's backends terminated)."""
 
-    def __init__(self, url: str, pg: PgCluster | None) -> None:
+    def __init__(self, url: str, pg: PgDatabase | None) -> None:
         self.url, self.pg = url, pg
         self._release: threading.Event | None = None
         self._thread: threading.Thread | None = None
 
     async def down(self) -> None:
         if self.pg is not None:
-            await asyncio.to_thread(self.pg.stop)
+            await self.pg.down()
             return
         path = self.url.split(":///", 1)[1]
         self._release = threading.Event()
@@ -372,14 +398,14 @@ class DbFault:
 
     async def up(self) -> None:
         if self.pg is not None:
-            await asyncio.to_thread(self.pg.start)
+            await self.pg.up()
             return
         assert self._release is not None and self._thread is not None
         self._release.set()
         await asyncio.to_thread(self._thread.join, 30)
 
 
-async def in_process(args: argparse.Namespace, url: str, pg: PgCluster | None,
+async def in_process(args: argparse.Namespace, url: str, pg: PgDatabase | None,
                      progress: Any) -> tuple[dict[str, KindResult], dict[str, Any]]:  # fmt: skip
     """Baseline, then camera, e-stop, database (and serial) faults on one cell."""
     from backend.db.migrate import upgrade
@@ -410,8 +436,8 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgCluster | None,
             # object ids start again with each engine: audit only this cell's new rows
             _, _, before = await audit_rows(rt.database, rt.cell_id, 0)
             first_id = max((r["id"] for r in before), default=0)
-            fault: dict[str, Any] = {"kind": None, "active": False}
-            audit = MotionAudit(rt, fault)
+            windows: list[FaultWindow] = []
+            audit = MotionWatch(rt)
             audit.install()
             feeder = Feeder(rt, (TAUGHT, untrained_name()))
             watch_truths(rt, feeder)
@@ -421,10 +447,13 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgCluster | None,
             stack.callback(feed_task.cancel)
             run = await start_run(rt)
             dbf = DbFault(url, pg)
+            spans: list[FaultWindow] = []  # each kind's part of the run, for the audit
             for kind in todo:
                 res = results_.setdefault(kind, KindResult(kind))
+                spans.append(FaultWindow(kind, time.time(), math.inf))
+                if len(spans) > 1:
+                    spans[-2] = FaultWindow(spans[-2].kind, spans[-2].start, spans[-1].start)
                 since = len(feeder.done_times)
-                unsafe0, during0 = len(audit.unsafe), audit.during_fault
                 n = args.baseline if kind == "baseline" else args.per_kind
                 for k in range(n):
                     # wait for a fresh object and for its inspection to be moving the arm
@@ -438,7 +467,7 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgCluster | None,
                     await wait_until(lambda m0=m0: audit.commands > m0, 120,  # noqa: B023 (awaited in this iteration)
                                      f"{kind}: the next inspection to move the arm")  # fmt: skip
                     await asyncio.sleep(float(np.random.default_rng(k).uniform(0.05, 0.6)))
-                    fault.update(kind=kind, active=True)
+                    w_start = time.time()
                     res.injected += 1
                     progress(f"{kind} fault {k + 1}/{n}")
                     if kind == "camera":
@@ -458,7 +487,7 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgCluster | None,
                     elif kind == "serial":
                         assert emu is not None
                         await emu.vanish(args.fault_s)
-                    fault["active"] = False
+                    windows.append(FaultWindow(kind, w_start, time.time()))
                     t_clear = time.monotonic()
                     c1 = sum(1 for t, d in feeder.done_times if d != "failed" and t > t_clear)
                     await wait_until(
@@ -471,8 +500,6 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgCluster | None,
                     moved = [t for t in audit.times if t > t_clear]
                     if moved:
                         res.resume_s.append(moved[0] - t_clear)
-                res.unsafe = len(audit.unsafe) - unsafe0
-                res.during_fault = audit.during_fault - during0
                 res.inspections = len(feeder.done_times) - since
                 res.failed = sum(1 for _, d in feeder.done_times[since:] if d == "failed")
             from backend.inspection import service
@@ -481,7 +508,12 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgCluster | None,
                 service.stop_run(rt)
             await wait_until(_ended(run), 300, "the run to stop")
             partial, markers, rows = await audit_rows(rt.database, rt.cell_id, first_id)
-            info.setdefault("unsafe", []).extend(audit.unsafe)
+            assert settings.motion_log is not None
+            info.setdefault("unsafe", []).extend(
+                apply_motion_audit(results_, Path(settings.motion_log), windows, spans)
+            )
+            keep_log(args, Path(settings.motion_log), todo[-1])
+            Path(settings.motion_log).unlink(missing_ok=True)  # the next part's own log
             tally(results_, todo, feeder, partial, markers, rows)
             feed_task.cancel()
     from backend.inspection import results as results_mod
@@ -570,57 +602,19 @@ async def serial_hardware(settings: Any, stack: contextlib.AsyncExitStack) -> tu
     tmp = tempfile.mkdtemp(prefix="vc-faults-tty-")
     emu = Emulator(arm, link=f"{tmp}/tty", seed=3, start_tolerance_rad=0.05)
     await emu.start()
+    stack.callback(shutil.rmtree, tmp, True)  # the PTY's folder, after the emulator closed
     stack.push_async_callback(arm.close)
     stack.push_async_callback(emu.close)
     driver = SerialDriver(emu.path, state_rate_hz=settings.state_rate_hz)
     return Hardware(driver, SimCamera(engine), engine), emu
 
 
-# -- PostgreSQL ----------------------------------------------------------------------------
-class PgCluster:
-    """A throw-away PostgreSQL cluster in a temporary directory on a free port (the shared
-    server on 5432 is never touched); run as the ``postgres`` user when we are root."""
-
-    def __init__(self) -> None:
-        bins = sorted(Path("/usr/lib/postgresql").glob("*/bin/initdb"))
-        if not bins:
-            raise RuntimeError("no PostgreSQL server binaries in /usr/lib/postgresql/*/bin")
-        self.bin = bins[-1].parent
-        self.dir = Path(tempfile.mkdtemp(prefix="vc-faults-pg-"))
-        self.port = free_port()
-        self.user = "postgres" if os.geteuid() == 0 else None
-        if self.user:
-            shutil.chown(self.dir, self.user)
-        self.data = self.dir / "data"
-
-    def _run(self, *cmd: str) -> None:
-        argv = [str(self.bin / cmd[0]), *cmd[1:]]
-        if self.user:
-            argv = ["su", self.user, "-c", " ".join(argv)]
-        subprocess.run(argv, check=True, capture_output=True, timeout=120)
-
-    def init(self) -> str:
-        self._run("initdb", "-D", str(self.data), "-A", "trust", "-U", "postgres")
-        self.start()
-        self._run("createdb", "-h", "127.0.0.1", "-p", str(self.port), "-U", "postgres", "cell")
-        return f"postgresql+asyncpg://postgres@127.0.0.1:{self.port}/cell"
-
-    def start(self) -> None:
-        self._run("pg_ctl", "-D", str(self.data), "-w", "-l", str(self.dir / "log"),
-                  "-o", f"'-p {self.port} -k {self.dir} -c listen_addresses=127.0.0.1'", "start")  # fmt: skip
-
-    def stop(self) -> None:
-        self._run("pg_ctl", "-D", str(self.data), "-w", "-m", "fast", "stop")
-
-    def destroy(self) -> None:
-        with contextlib.suppress(Exception):
-            self.stop()
-        shutil.rmtree(self.dir, ignore_errors=True)
-
-
 # -- SIGKILL of the server -------------------------------------------------------------------
-async def kill_campaign(args: argparse.Namespace, progress: Any) -> KindResult:
-    """``visioncell serve`` killed with SIGKILL mid-inspection, then started again."""
+async def kill_campaign(args: argparse.Namespace, progress: Any, taught_url: str | None = None,
+                        info: dict[str, Any] | None = None) -> KindResult:  # fmt: skip
+    """``visioncell serve`` killed with SIGKILL mid-inspection, then started again, on
+    ``taught_url`` (a SQLite file with the model taught; None: a new one, taught here).
+    Every motion of the children is audited from their motion log after the last restart."""
     import httpx
 
     from backend.db.migrate import upgrade
@@ -629,18 +623,23 @@ async def kill_campaign(args: argparse.Namespace, progress: Any) -> KindResult:
 
     res = KindResult("kill")
     tmp = Path(tempfile.mkdtemp(prefix="vc-faults-kill-"))
-    url = f"sqlite+aiosqlite:///{tmp / 'cell.db'}"
-    await asyncio.to_thread(upgrade, url)
-    settings = settings_for(tmp, url, time_scale=args.time_scale)
-    async with CellRuntime(settings, view3d=False) as rt:
-        await teach_one(rt, TAUGHT)
+    motion_log = tmp / "motion.jsonl"
+    if taught_url is None:
+        url = f"sqlite+aiosqlite:///{tmp / 'cell.db'}"
+        await asyncio.to_thread(upgrade, url)
+        settings = settings_for(tmp, url, time_scale=args.time_scale, motion_log=motion_log)
+        async with CellRuntime(settings, view3d=False) as rt:
+            await teach_one(rt, TAUGHT)
+    else:
+        url = taught_url
     port = free_port()
     env = {**os.environ, "VISIONCELL_DATABASE_URL": url, "VISIONCELL_HTTP_PORT": str(port),
            "VISIONCELL_HTTP_HOST": "127.0.0.1", "VISIONCELL_VIEW3D_ENABLED": "false",
            "VISIONCELL_SIM_DEMO": "true", "VISIONCELL_TIME_SCALE": str(args.time_scale),
            "VISIONCELL_AUTH_ENABLED": "false", "VISIONCELL_VAR_DIR": str(tmp / "var"),
            "VISIONCELL_SECRET_KEY": "faults-secret-0123456789abcdef",
-           "VISIONCELL_BOOTSTRAP_OPERATOR": "false", "MUJOCO_GL": "egl"}  # fmt: skip
+           "VISIONCELL_BOOTSTRAP_OPERATOR": "false", "MUJOCO_GL": "egl",
+           "VISIONCELL_MOTION_LOG": str(motion_log)}  # fmt: skip
     exe = Path(sys.executable).with_name("visioncell")
     db = Database(url)
     base = f"http://127.0.0.1:{port}/api"
@@ -669,6 +668,9 @@ async def kill_campaign(args: argparse.Namespace, progress: Any) -> KindResult:
             return [m.started_at for m in (await s.scalars(select(InspectionInProgress))).all()]
 
     killed: list[Any] = []
+    windows: list[FaultWindow] = []
+    _, _, before = await audit_rows(db, 1, 0)
+    first_id = max((r["id"] for r in before), default=0)
 
     async def complete_after(iid: int) -> int:
         _, _, rows = await audit_rows(db, 1, iid)
@@ -682,8 +684,8 @@ async def kill_campaign(args: argparse.Namespace, progress: Any) -> KindResult:
             r.raise_for_status()
             for k in range(args.per_kind):
                 # a complete inspection first, then kill while the next one is in progress
-                _, _, rows = await audit_rows(db, 1, 0)
-                last = max((x["id"] for x in rows), default=0)
+                _, _, rows = await audit_rows(db, 1, first_id)
+                last = max((x["id"] for x in rows), default=first_id)
                 t0 = time.monotonic()
                 while await complete_after(last) == 0 or not await markers():
                     if time.monotonic() - t0 > 300:
@@ -693,16 +695,19 @@ async def kill_campaign(args: argparse.Namespace, progress: Any) -> KindResult:
                 while not (held := await markers()):
                     await asyncio.sleep(0.02)
                 progress(f"kill {k + 1}/{args.per_kind}")
+                w_start = time.time()
                 proc.send_signal(signal.SIGKILL)
                 proc.wait(30)
                 killed.extend(held)
                 res.injected += 1
                 t_clear = time.monotonic()
                 proc = await launch()
+                # from the kill until the new process serves: nobody may move the arm
+                windows.append(FaultWindow("kill", w_start, time.time()))
                 res.resume_s.append(time.monotonic() - t_clear)  # serving again
                 r = await c.post(f"{base}/inspection/run", json=body)
                 r.raise_for_status()
-                _, _, rows = await audit_rows(db, 1, 0)
+                _, _, rows = await audit_rows(db, 1, first_id)
                 last = max(x["id"] for x in rows)
                 while await complete_after(last) == 0:
                     if time.monotonic() - t0 > 600:
@@ -720,25 +725,38 @@ async def kill_campaign(args: argparse.Namespace, progress: Any) -> KindResult:
             proc.kill()
             proc.wait(10)
         log.close()
-    partial, left, rows = await audit_rows(db, 1, 0)
+    partial, left, rows = await audit_rows(db, 1, first_id)
     from sqlalchemy import select
 
     from backend.db.models import Inspection
 
     async with db.session() as s:
-        started = [r.started_at for r in (await s.scalars(select(Inspection))).all()]
+        started = [
+            r.started_at
+            for r in (await s.scalars(select(Inspection).where(Inspection.id > first_id))).all()
+        ]
     await db.dispose()
     res.inspections = len(rows)
     res.partial = partial
     res.reasons = [r["reason"].split(";")[0][:90] for r in rows if r["decision"] == "failed"]
+    res.failed = sum(1 for r in rows if r["decision"] == "failed")
     interrupted = sum(1 for r in rows if r["reason"].startswith("interrupted"))
     # every inspection in progress at a kill (its marker read just before) must have
     # exactly one row afterwards: the interrupted row written at start-up, or its own
     # result if it finished in the instant between the read and the kill
     res.lost = sum(1 for t in killed if started.count(t) == 0) + left
     res.duplicated = sum(started.count(t) - 1 for t in killed if started.count(t) > 1)
-    res.note = (f"{interrupted} interrupted row(s) written at start-up; unsafe motions not "
-                "audited in the child process")  # fmt: skip
+    from backend.cell.motionlog import read_motion_log
+
+    judged: dict[str, KindResult] = {"kill": res}
+    unsafe = apply_motion_audit(judged, motion_log, windows, [FaultWindow("kill", 0, math.inf)])
+    keep_log(args, motion_log, "kill")
+    if info is not None:
+        info.setdefault("unsafe", []).extend(unsafe)
+    children = len({m["pid"] for m in read_motion_log(motion_log)})
+    res.note = (f"{interrupted} interrupted row(s) written at start-up; {res.audited} motions "
+                f"of {children} processes (the serve children, and the teach when it ran "
+                "here) audited from their motion log")  # fmt: skip
     shutil.rmtree(tmp, ignore_errors=True)
     return res
 
@@ -747,13 +765,14 @@ async def kill_campaign(args: argparse.Namespace, progress: Any) -> KindResult:
 def table(rows: list[dict[str, Any]]) -> Table:
     t = Table(title="Fault campaign during continuous inspection (issue 16, part 1)")
     for col in ("fault", "injected", "inspections", "failed rows", "lost", "duplicated",
-                "partial", "unsafe", "moves in fault", "resume med/max s",
+                "partial", "motions audited", "unsafe", "moves in fault", "resume med/max s",
                 "next complete med/max s", "cycle s"):  # fmt: skip
         t.add_column(col, justify="right" if col != "fault" else "left")
     for r in rows:
         t.add_row(r["kind"], str(r["injected"]), str(r["inspections"]), str(r["failed_rows"]),
                   str(r["lost"]), str(r["duplicated"]), str(r["partial"]),
-                  str(r["unsafe_motions"]), str(r["moves_during_fault"]),
+                  str(r["motions_audited"]), str(r["unsafe_motions"]),
+                  str(r["moves_during_fault"]),
                   f"{_f(r['resume_median_s'])} / {_f(r['resume_max_s'])}",
                   f"{_f(r['recovery_median_s'])} / {_f(r['recovery_max_s'])}",
                   _f(r["cycle_median_s"]))  # fmt: skip
@@ -768,24 +787,27 @@ async def campaign(args: argparse.Namespace, progress: Any) -> dict[str, Any]:
     """The whole campaign; returns the JSON summary."""
     pg = None
     url = ""
+    tmp = Path(tempfile.mkdtemp(prefix="vc-faults-db-"))
     if args.postgres:
-        pg = PgCluster()
-        url = await asyncio.to_thread(pg.init)
+        pg = PgDatabase(args.postgres_url)
+        url = await pg.create()
+        progress(f"PostgreSQL: database {pg.name} behind a proxy on port {pg.proxy.port}")
     else:
-        tmp = Path(tempfile.mkdtemp(prefix="vc-faults-db-"))
         url = f"sqlite+aiosqlite:///{tmp / 'cell.db'}"
     try:
         res, info = await in_process(args, url, pg, progress)
     finally:
         if pg is not None:
-            pg.destroy()
+            await pg.drop()
     if "kill" in args.kinds:
         try:
-            res["kill"] = await kill_campaign(args, progress)
+            # on SQLite the child serves the database taught above (no second teach)
+            res["kill"] = await kill_campaign(args, progress, None if pg else url, info)
         except Exception as exc:  # report what was measured before, and why this part ended
             res["kill"] = KindResult(
                 "kill", note=f"the kill part ended: {type(exc).__name__}: {exc}"
             )
+    shutil.rmtree(tmp, ignore_errors=True)
     rows = [r.summary() for r in res.values()]
     base = res.get("baseline")
     return {
@@ -813,7 +835,19 @@ def main(argv: list[str] | None = None) -> int:
         default=",".join(KINDS),
         help=f"comma-separated fault kinds among {', '.join(KINDS)} (default: all)",
     )
-    p.add_argument("--postgres", action="store_true", help="a throw-away PostgreSQL cluster")
+    p.add_argument(
+        "--postgres",
+        action="store_true",
+        help="the cell on a database of its own on the PostgreSQL server of --postgres-url",
+    )
+    p.add_argument(
+        "--postgres-url",
+        default=os.environ.get(
+            "VISIONCELL_TEST_POSTGRES_URL", "postgresql+asyncpg://postgres@127.0.0.1:5432/test"
+        ),
+        help="the server (any database on it; default: $VISIONCELL_TEST_POSTGRES_URL)",
+    )
+    p.add_argument("--keep-logs", default=None, help="copy each part's motion log to this folder")
     p.add_argument("--json", action="store_true", help="one JSON line on the last line")
     args = p.parse_args(argv)
     for name, v, lo, hi in (("--per-kind", args.per_kind, 1, 50), ("--baseline", args.baseline, 1, 100),
@@ -835,6 +869,8 @@ def main(argv: list[str] | None = None) -> int:
     for r in summary["kinds"]:
         if r["reasons"]:
             out.print(f"{r['kind']}: failed rows' reasons: " + " | ".join(r["reasons"]))
+        if r["note"]:
+            out.print(f"{r['kind']}: {r['note']}")
     if args.json:
         print(json.dumps(summary))
     return 0

@@ -97,7 +97,7 @@ async def soak(args: argparse.Namespace, progress: Any) -> dict[str, Any]:
     tmp = Path(tempfile.mkdtemp(prefix="vc-soak-"))
     url = f"sqlite+aiosqlite:///{tmp / 'soak.db'}"
     await asyncio.to_thread(upgrade, url)
-    settings = settings_for(tmp, url, time_scale=args.time_scale, busy_s=30.0)
+    settings = settings_for(tmp, url, time_scale=args.time_scale, busy_s=30.0, motion_log=None)
     samples: list[dict[str, float]] = []
     idle: list[dict[str, float]] = []
     async with CellRuntime(settings, view3d=False) as rt:

@@ -126,7 +126,7 @@ def get_view3d(conn: HTTPConnection) -> View3D | None:
 async def get_session(
     db: Annotated[Database, Depends(get_database)],
 ) -> AsyncIterator[AsyncSession]:
-    async with db.api_slots, db.session() as session:  # leave connections for the cell
+    async with db.api_slot(), db.session() as session:  # leave connections for the cell
         yield session
 
 
@@ -155,7 +155,7 @@ async def _signed_in(
     if user is not None:
         return user
     generation = cache.generation
-    async with db.api_slots, db.session() as session:
+    async with db.api_slot(), db.session() as session:
         found = await authenticate_with_expiry(session, token, secret)
     if found is None:
         return None

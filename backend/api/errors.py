@@ -3,22 +3,36 @@
 The status comes from the exception's class, never from its message: domain errors
 (:class:`vision.errors.VisionCellError` and subclasses such as ``NotFound``, ``Conflict``,
 ``InvalidInput``) carry ``code`` and ``http_status``; :class:`ApiError` carries them for
-the HTTP layer's own refusals (401, 403, 503).  Anything else, including a bare
-``ValueError``, is a bug: a 500 with a log line and the same JSON body.
+the HTTP layer's own refusals (401, 403, 503).  A database that cannot serve the request
+now is a 503 with ``Retry-After`` (:func:`database_refusal`): every pooled connection busy
+(SQLAlchemy's pool ``TimeoutError``, :class:`~backend.db.session.DatabaseBusy`), or the
+server away (PEP 249 ``OperationalError`` / ``InterfaceError``: refused or lost connection,
+a locked SQLite file; a connection SQLAlchemy saw invalidated).  Anything else, including a
+bare ``ValueError``, is a bug: a 500 with a log line and the same JSON body.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from sqlalchemy import exc as sa_exc
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from backend.db.session import DatabaseBusy
 from vision.errors import VisionCellError
 
-__all__ = ["ApiError", "error_body", "install_error_handlers"]
+__all__ = [
+    "BUSY_RETRY_S",
+    "DOWN_RETRY_S",
+    "ApiError",
+    "database_refusal",
+    "error_body",
+    "install_error_handlers",
+]
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +62,44 @@ class ApiError(Exception):
         self.code = code
         self.detail = detail
         self.headers = headers
+
+
+#: ``Retry-After`` of a 503 when every connection was busy (a surge passes in seconds), s.
+BUSY_RETRY_S = 2
+#: ``Retry-After`` of a 503 when the database is away (a restart, a failover), s.
+DOWN_RETRY_S = 5
+#: Least time between two log lines about the database refusing requests, s.
+_LOG_EVERY_S = 10.0
+_last_log = [float("-inf")]
+
+
+def database_refusal(exc: BaseException) -> ApiError | None:
+    """The 503 answer to a database that cannot serve a request now, or None when ``exc``
+    is not such an error (a bug, answered 500).
+
+    The class decides, never the message: the pool's wait ran out (``TimeoutError`` of
+    SQLAlchemy, :class:`DatabaseBusy`), or the DB-API driver raised ``OperationalError``
+    or ``InterfaceError`` (PEP 249: errors of the database's operation, not of the
+    program), or SQLAlchemy found the connection invalidated (a disconnect).
+    """
+    if isinstance(exc, sa_exc.TimeoutError | DatabaseBusy):
+        return ApiError(
+            503,
+            "database_busy",
+            f"every database connection is busy ({exc}); try again shortly",
+            headers={"Retry-After": str(BUSY_RETRY_S)},
+        )
+    if isinstance(exc, sa_exc.OperationalError | sa_exc.InterfaceError) or (
+        isinstance(exc, sa_exc.DBAPIError) and exc.connection_invalidated
+    ):
+        orig = getattr(exc, "orig", None) or exc
+        return ApiError(
+            503,
+            "database_unavailable",
+            f"the database is unavailable ({type(orig).__name__}); try again shortly",
+            headers={"Retry-After": str(DOWN_RETRY_S)},
+        )
+    return None
 
 
 def error_body(code: str, detail: str) -> dict[str, str]:
@@ -121,6 +173,26 @@ def install_error_handlers(app: FastAPI) -> None:
         return JSONResponse(
             error_body(code, str(exc.detail)), status_code=exc.status_code, headers=exc.headers
         )
+
+    async def _database(request: Request, exc: Exception) -> JSONResponse:
+        refusal = database_refusal(exc)
+        if refusal is None:
+            return _internal(request, exc)
+        now = time.monotonic()
+        if now - _last_log[0] >= _LOG_EVERY_S:  # once per outage, not once per request
+            _last_log[0] = now
+            log.warning(
+                "database refused %s %s (503): %s: %s",
+                request.method, request.url.path, type(exc).__name__, str(exc)[:300],
+            )  # fmt: skip
+        return JSONResponse(
+            error_body(refusal.code, refusal.detail), status_code=503, headers=refusal.headers
+        )
+
+    # Registered per class so that Starlette's exception middleware answers them (the
+    # catch-all below is the server-error middleware's, which re-raises afterwards).
+    for cls in (sa_exc.TimeoutError, DatabaseBusy, sa_exc.DBAPIError):
+        app.add_exception_handler(cls, _database)
 
     # A ValueError (or any other exception) that reached the edge is a bug: the input
     # should have been refused by a schema or a domain error.  Registered for ValueError

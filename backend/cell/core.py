@@ -136,6 +136,7 @@ class Cell(CellMotion):
 
         async def body(job: Job) -> dict[str, Any]:
             job.report(0.0, f"moving for {traj.duration_s:.2f} s")
+            self.check_commandable()
             report = await self.driver.move(traj)
             job.report(1.0, report.reason)
             return _report_dict(report)

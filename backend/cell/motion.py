@@ -39,7 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from backend.cell.errors import MoveAborted, NotStill, PathBlocked
 from backend.jobs import current_job
-from robot.errors import RobotBusy
+from robot.errors import LinkDown, RobotBusy
 from robot.kinematics import ik
 from robot.model import check_joints
 from robot.trajectory import MIN_SPEED, JointTrajectory, plan_joint_move
@@ -208,9 +208,21 @@ class CellMotion:
         with self.jobs.reserve_arm(what):
             yield
 
+    def check_commandable(self) -> None:
+        """Refuse to command a motion the driver's own state says must not be made: the
+        e-stop latched (:class:`RobotBusy`) or the link to the controller down
+        (:class:`LinkDown`; the fault campaign's motion audit found an inspection under way
+        commanding its next move into a link already reported down)."""
+        st = self.driver.state
+        if st.estopped:
+            raise RobotBusy("emergency stop is active: reset before moving")
+        if not st.connected:
+            raise LinkDown(f"the arm's link is down ({st.fault or 'disconnected'}): not moving")
+
     async def execute(self, traj: JointTrajectory) -> MoveReport:
         """Run a planned trajectory (the caller holds the arm); :class:`MoveAborted` unless
-        it completes."""
+        it completes; nothing is commanded while :meth:`check_commandable` refuses."""
+        self.check_commandable()
         report = await self.driver.move(traj)
         if not report.completed:
             raise MoveAborted(f"the move ended with {report.reason!r} before its goal", report)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import Any
 
 from sqlalchemy import event
 from sqlalchemy.engine import make_url
@@ -15,7 +16,14 @@ from sqlalchemy.ext.asyncio import (
     create_async_engine,
 )
 
-__all__ = ["API_SLOTS", "POOL_OVERFLOW", "POOL_SIZE", "Database"]
+__all__ = [
+    "API_SLOTS",
+    "POOL_OVERFLOW",
+    "POOL_SIZE",
+    "POOL_TIMEOUT_S",
+    "Database",
+    "DatabaseBusy",
+]
 
 #: Pooled connections kept open, and how many more may be opened at busy times.
 POOL_SIZE = 5
@@ -25,6 +33,14 @@ POOL_OVERFLOW = 10
 #: starved machine the readers took all 15 and the inspection in progress waited for one
 #: (``benchmarks/load.py``, ``tests/backend/test_bug_readers_starve_the_cell_of_connections.py``).
 API_SLOTS = 10
+#: How long a session waits for a pooled connection (and a REST request for one of its
+#: :data:`API_SLOTS`) before giving up: the API then answers 503 with ``Retry-After``
+#: (``backend.api.errors``) instead of holding the client for SQLAlchemy's default 30 s.
+POOL_TIMEOUT_S = 10.0
+
+
+class DatabaseBusy(Exception):
+    """Every connection a REST request may hold is busy for longer than the pool's wait."""
 
 
 class Database:
@@ -34,16 +50,29 @@ class Database:
     the API and the cell tasks can share the file.
     """
 
-    def __init__(self, url: str, *, echo: bool = False, busy_timeout_s: float = 30.0) -> None:
+    def __init__(
+        self,
+        url: str,
+        *,
+        echo: bool = False,
+        busy_timeout_s: float = 30.0,
+        pool_timeout_s: float | None = None,
+    ) -> None:
         self.url = url
+        wait_s = POOL_TIMEOUT_S if pool_timeout_s is None else float(pool_timeout_s)
+        if not 0.0 < wait_s <= 300.0:
+            raise ValueError(f"pool_timeout_s must be within (0, 300] s, got {pool_timeout_s!r}")
+        #: How long a session waits for a connection (and a request for an API slot), s.
+        self.pool_timeout_s = wait_s
         kwargs: dict[str, object] = {"echo": echo, "pool_pre_ping": True}
         if make_url(url).database not in (None, "", ":memory:"):  # a pool of connections
-            kwargs.update(pool_size=POOL_SIZE, max_overflow=POOL_OVERFLOW)
+            kwargs.update(pool_size=POOL_SIZE, max_overflow=POOL_OVERFLOW, pool_timeout=wait_s)
         if url.startswith("sqlite"):
             kwargs["connect_args"] = {"timeout": float(busy_timeout_s)}
         self.engine: AsyncEngine = create_async_engine(url, **kwargs)
         if url.startswith("sqlite"):
             event.listen(self.engine.sync_engine, "connect", _sqlite_pragmas)
+        event.listen(self.engine.sync_engine, "do_connect", _connect_or_operational_error)
         if url.startswith("postgresql"):
             # Changes of models and views notify the plant's other processes (their indexes).
             from backend.db.changes import NotifyingSession
@@ -55,6 +84,22 @@ class Database:
             self.sessionmaker = async_sessionmaker(self.engine, expire_on_commit=False)
         #: Taken by every REST request's database session (see :data:`API_SLOTS`).
         self.api_slots = asyncio.Semaphore(API_SLOTS)
+
+    @asynccontextmanager
+    async def api_slot(self) -> AsyncIterator[None]:
+        """Hold one of :data:`API_SLOTS`; :class:`DatabaseBusy` when none frees up within
+        :attr:`pool_timeout_s` (the API answers 503, never a request hanging on)."""
+        try:
+            await asyncio.wait_for(self.api_slots.acquire(), self.pool_timeout_s)
+        except TimeoutError:
+            raise DatabaseBusy(
+                f"all {API_SLOTS} database connections of the API were busy for "
+                f"{self.pool_timeout_s:g} s"
+            ) from None
+        try:
+            yield
+        finally:
+            self.api_slots.release()
 
     @asynccontextmanager
     async def session(self) -> AsyncIterator[AsyncSession]:
@@ -81,6 +126,18 @@ class Database:
     async def dispose(self) -> None:
         """Close every pooled connection."""
         await self.engine.dispose()
+
+
+def _connect_or_operational_error(dialect: Any, _rec: Any, cargs: Any, cparams: Any) -> Any:
+    """Open a DB-API connection; a socket error of the attempt (refused, unreachable, reset,
+    timed out: ``OSError``) is raised as the driver's ``OperationalError``, as PEP 249 files
+    it, so SQLAlchemy wraps it like any other "database unavailable" (asyncpg raises the
+    bare ``OSError``, which would otherwise reach the API as a bug)."""
+    dbapi = dialect.loaded_dbapi
+    try:
+        return dbapi.connect(*cargs, **cparams)
+    except OSError as exc:
+        raise dbapi.OperationalError(f"cannot connect to the database: {exc}") from exc
 
 
 def _sqlite_pragmas(dbapi_conn, _record) -> None:

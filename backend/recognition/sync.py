@@ -38,6 +38,7 @@ from backend.db.changes import CHANNEL
 from backend.db.models import AuditEntry, ObjectModel, TrainedView
 from backend.db.session import Database
 from backend.recognition.index import IndexedModel, LiveIndex, ViewRow
+from backend.taskutil import cancel_and_wait
 
 __all__ = ["LISTEN_CHECK_S", "IndexSync", "SyncReport", "fingerprint"]
 
@@ -144,9 +145,7 @@ class IndexSync:
         """Stop the task and close the listening connection."""
         task, self._task = self._task, None
         if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+            await cancel_and_wait(task)  # not a bare cancel: wait_for may swallow one
         await self._close_conn()
 
     def poke(self) -> None:

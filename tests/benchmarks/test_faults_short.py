@@ -16,8 +16,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]  # a campaign: minute
 
 
 def _args(**kw):
-    base = dict(per_kind=1, baseline=1, fault_s=14.0, time_scale=5.0, kinds=faults.KINDS,
-                postgres=False, json=False)  # fmt: skip
+    base = dict(per_kind=1, baseline=1, fault_s=11.0, time_scale=5.0, kinds=faults.KINDS,
+                postgres=False, postgres_url="", json=False)  # fmt: skip
     base.update(kw)
     return argparse.Namespace(**base)
 
@@ -32,6 +32,9 @@ def test_one_fault_of_each_kind_loses_nothing():
         assert r["injected"] == 1, r
         # the cell went on: a complete inspection after the fault's end
         assert r["recovery_median_s"] is not None, r
+    # motions were audited from the motion log in every part, the killed children's too
+    assert kinds["baseline"]["motions_audited"] > 0, kinds["baseline"]
+    assert kinds["kill"]["motions_audited"] > 0, kinds["kill"]
     t = summary["totals"]
     assert (t["lost"], t["duplicated"], t["partial"], t["unsafe_motions"]) == (0, 0, 0, 0), summary
     # the e-stop cut an inspection short: a failed row with the reason
