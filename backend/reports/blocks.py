@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from sqlalchemy import select
+from sqlalchemy import select, update
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.ext.asyncio import AsyncSession
 
@@ -166,8 +166,8 @@ async def append(session: AsyncSession, rows: Sequence[dict[str, Any]]) -> None:
         ).one()
         new = encode(groups[(c, s)], ids)
         await session.execute(
-            tb.update()
-            .where(tb.c.id == bid)
+            update(ReportBlock)
+            .where(ReportBlock.id == bid)
             .values(n=int(n) + len(groups[(c, s)]), data=bytes(data) + new)
         )
 

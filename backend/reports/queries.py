@@ -185,12 +185,15 @@ async def confusion(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
     rs = await load(session, f)
     r = rs.rec[rs.rec["truth"] >= 0]
     names = rs.names
+    # One integer per (truth, model, decision): a 1-D unique, several times faster than rows.
+    nd, nm = len(DECISIONS), max(names, default=0) + 2
+    key = (r["truth"].astype(np.int64) * nm + r["model"] + 1) * nd + r["decision"]
+    keys, counts = np.unique(key, return_counts=True)
     cells: dict[tuple[str, str], int] = {}
-    keys, counts = np.unique(
-        np.stack([r["truth"], r["model"], r["decision"].astype(np.int32)], axis=1), axis=0,
-        return_counts=True,
-    ) if len(r) else (np.zeros((0, 3), dtype=np.int32), np.zeros(0, dtype=np.int64))  # fmt: skip
-    for (tr, mo, de), n in zip(keys.tolist(), counts.tolist(), strict=True):
+    for k, n in zip(keys.tolist(), counts.tolist(), strict=True):
+        tr, rest = divmod(k, nm * nd)
+        mo, de = divmod(rest, nd)
+        mo -= 1
         label = (names[mo] if mo >= 0 else "unknown") if de == _REC else DECISIONS[de]
         cells[(names[tr], label)] = cells.get((names[tr], label), 0) + int(n)
     truths = sorted({t for t, _ in cells})
