@@ -144,13 +144,16 @@ async def timeseries(session: AsyncSession, f: ReportFilters,
         idx = (b - b0).astype(np.intp)
         nb = int(idx.max()) + 1
         n = np.bincount(idx, minlength=nb)
-        per = [np.bincount(idx[r["decision"] == i], minlength=nb) for i in range(len(DECISIONS))]
+        nd = len(DECISIONS)
+        per = np.bincount(idx * nd + r["decision"], minlength=nb * nd).reshape(nb, nd).T
         med = _bucket_medians(idx, np.ascontiguousarray(r["cycle"]), nb)
+        counts, per_d = n.tolist(), per.tolist()
+        t0 = datetime_of(b0 * step_us)
         for k in range(nb):
             data.append({
-                "t": datetime_of((b0 + k) * step_us).isoformat(),
-                "count": int(n[k]),
-                **{d: int(per[i][k]) for i, d in enumerate(DECISIONS)},
+                "t": (t0 + k * BUCKETS[bucket]).isoformat(),
+                "count": counts[k],
+                **{d: per_d[i][k] for i, d in enumerate(DECISIONS)},
                 "cycle_p50": med[k],
             })  # fmt: skip
     return {"bucket": bucket, "data": data, "filters": f.echo()}
@@ -169,13 +172,19 @@ def _bucket_medians(idx: NDArray[np.intp], v: NDArray[np.float64], nb: int) -> l
     """Nearest-rank median of ``v`` (NaN = no value) within each bucket ``idx`` (0..nb-1)."""
     ok = ~np.isnan(v)
     i, x = idx[ok], v[ok]
-    order = np.lexsort((x, i))  # by bucket, then value
-    i, x = i[order], x[order]
+    # By value, then stably by bucket (a radix sort on the small bucket numbers), so that
+    # each bucket's values are contiguous and ascending.
+    o = np.argsort(x)
+    o = o[np.argsort(i[o].astype(np.uint16 if nb <= 65535 else np.int64), kind="stable")]
+    xs = x[o]
     n = np.bincount(i, minlength=nb)
     first = np.concatenate(([0], np.cumsum(n)[:-1]))
+    has = n > 0
+    # Rank ceil(50 n / 100) within the bucket (backend.reports.stats.nearest_rank).
+    at = first[has] + (50 * n[has] + 99) // 100 - 1
     out: list[float | None] = [None] * nb
-    for k in np.flatnonzero(n):
-        out[int(k)] = float(x[first[k] + nearest_rank(50, int(n[k])) - 1])
+    for k, val in zip(np.flatnonzero(has).tolist(), xs[at].tolist(), strict=True):
+        out[k] = val
     return out
 
 
