@@ -224,3 +224,29 @@ def test_a_deleted_cell_takes_its_blocks_along(tmp_path) -> None:
             await db.dispose()
 
     asyncio.run(run())
+
+
+def test_concurrent_writes_to_one_block_lose_no_record_postgres(postgres_url) -> None:
+    """Two cells' processes (here: tasks on their own connections) append to the same
+    blocks at once: the row lock serialises them, every record arrives."""
+
+    async def run() -> None:
+        dbs = [Database(postgres_url) for _ in range(4)]
+        try:
+            ids = await ensure_cells(dbs[0], ("cell-1", "cell-2"))
+            t = START.replace(minute=0, second=0, microsecond=0)
+            await asyncio.gather(*[
+                store(dbs[k % 4], ids[k % 2], _record(t + timedelta(seconds=k), model_name=f"m-{k % 3}"))
+                for k in range(24)
+            ])  # fmt: skip
+            blocks = await _blocks(dbs[0])
+            assert [(n, len(d)) for _, _, n, d in blocks] == [(12, 12 * RECORD.itemsize)] * 2
+            async with dbs[0].session() as s:
+                got = await summary(s, make_filters())
+                assert got["count"] == 24
+                assert got == await sql.summary(s, make_filters())
+        finally:
+            for db in dbs:
+                await db.dispose()
+
+    asyncio.run(run())
