@@ -19,6 +19,7 @@ model over up to a million stage rows for the SQL path.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from datetime import datetime, timedelta
 from typing import Any, Literal
 
@@ -42,10 +43,6 @@ def _r6(x: float | None) -> float | None:
     return None if x is None else round(float(x), 6)
 
 
-def _present(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    return v[~np.isnan(v)]
-
-
 def _pcts(v: NDArray[np.float64], ps: tuple[int, ...]) -> dict[int, float]:
     """Nearest-rank percentiles of the (NaN-free) values ``v``; empty for no values."""
     n = len(v)
@@ -56,9 +53,29 @@ def _pcts(v: NDArray[np.float64], ps: tuple[int, ...]) -> dict[int, float]:
     return {p: float(part[nearest_rank(p, n) - 1]) for p in ps}
 
 
-def _qsum(v: NDArray[np.float64]) -> int:
-    """Sum of ``v`` in whole units of :data:`QUANTUM` (exact integer arithmetic)."""
-    return int(np.rint(v * (1.0 / QUANTUM)).astype(np.int64).sum())
+@dataclass(frozen=True)
+class _Stats:
+    n: int
+    """Values present (not NaN)."""
+    pct: dict[int, float]
+    """Nearest-rank percentiles."""
+    qsum: int
+    """Sum in whole units of :data:`QUANTUM`."""
+    max: float | None
+
+
+def _stats(col: NDArray[np.float64], ps: tuple[int, ...]) -> _Stats:
+    """Count, percentiles, quantised sum and maximum of the values of ``col`` (a field of
+    the records; NaN = no value), with one copy of the column."""
+    c = np.asarray(col, dtype=np.float64)
+    v = c[~np.isnan(c)]  # an owned copy: partitioned in place below
+    n = len(v)
+    if n == 0:
+        return _Stats(0, {}, 0, None)
+    qsum = int(np.rint(v * (1.0 / QUANTUM)).astype(np.int64).sum())
+    vmax = float(v.max())
+    v.partition(sorted({nearest_rank(p, n) - 1 for p in ps}))
+    return _Stats(n, {p: float(v[nearest_rank(p, n) - 1]) for p in ps}, qsum, vmax)
 
 
 async def summary(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
@@ -69,25 +86,24 @@ async def summary(session: AsyncSession, f: ReportFilters) -> dict[str, Any]:
     count = len(r)
     by_dec = np.bincount(r["decision"].astype(np.intp), minlength=len(DECISIONS))
     by = {d: int(by_dec[i]) for i, d in enumerate(DECISIONS)}
-    cyc = _present(np.ascontiguousarray(r["cycle"]))
-    pc = _pcts(cyc, (50, 95, 99))
+    cyc = _stats(r["cycle"], (50, 95, 99))
     stages: dict[str, dict[str, float | None]] = {}
     for s in STAGES:
-        v = _present(np.ascontiguousarray(r[f"s_{s}"]))
-        if len(v):
-            p = _pcts(v, (50, 95))
-            stages[s] = {"mean": _r6(_qsum(v) * QUANTUM / len(v)), "p50": p[50], "p95": p[95]}
+        st = _stats(r[f"s_{s}"], (50, 95))
+        if st.n:
+            mean = _r6(st.qsum * QUANTUM / st.n)
+            stages[s] = {"mean": mean, "p50": st.pct[50], "p95": st.pct[95]}
     t = r["t_us"]
     return {
         "count": count,
         "by_decision": by,
         "yield": None if count == 0 else round(by["recognized"] / count, 6),
         "cycle_s": {
-            "p50": pc.get(50),
-            "p95": pc.get(95),
-            "p99": pc.get(99),
-            "mean": _r6(_qsum(cyc) * QUANTUM / len(cyc)) if len(cyc) else None,
-            "max": float(cyc.max()) if len(cyc) else None,
+            "p50": cyc.pct.get(50),
+            "p95": cyc.pct.get(95),
+            "p99": cyc.pct.get(99),
+            "mean": _r6(cyc.qsum * QUANTUM / cyc.n) if cyc.n else None,
+            "max": cyc.max,
         },
         "stages": stages,
         "views_mean": _r6(int(r["views"].astype(np.int64).sum()) / count) if count else None,
