@@ -2,12 +2,16 @@
 <= 200 ms p95 over 100,000 inspections on both engines).
 
 Generates ``--rows`` inspections (:mod:`benchmarks.reports_data`: three cells, six models,
-four policies, about seven weeks) plus ``--images`` small JPEG-sized blobs, into a fresh
-SQLite file and a fresh PostgreSQL database (``--postgres URL``, default
-``VISIONCELL_TEST_POSTGRES_URL``; skipped when neither is given), migrated to head.  Then each
-report route's query (the service function the route calls, on one session) is timed
-``--repeats`` times: with the indexes of migration 0007, and, as the baseline in the same run,
-after dropping them.  Prints p50 and p95 per route and engine and the ratio.
+four policies, about seven weeks; the loader writes the report blocks in each chunk's
+transaction, as the inspection service does) plus ``--images`` small JPEG-sized blobs,
+into a fresh SQLite file and a fresh PostgreSQL database (``--postgres URL``, default
+``VISIONCELL_TEST_POSTGRES_URL``; skipped when neither is given), migrated to head.  Then
+each report route's query (the service function the route calls, on one session) is timed
+``--repeats`` times, and, as the baseline in the same run, the same report computed by the
+SQL over the raw rows (:mod:`backend.reports.sql`, with the indexes of migration 0007);
+every baseline answer is checked equal to the route's.  Export and storage have no second
+path: their baseline column repeats the route.  Prints p50 and p95 per route and engine and
+the ratio.
 
 Run ``python -m benchmarks.reports [--rows N] [--repeats N] [--postgres URL] [--json]``.
 """
@@ -36,7 +40,15 @@ from sqlalchemy.engine import make_url
 from backend.db.migrate import upgrade
 from backend.db.models import Inspection, InspectionImage
 from backend.db.session import Database
-from backend.reports import check_export, confusion, make_filters, storage_used, summary, timeseries
+from backend.reports import (
+    check_export,
+    confusion,
+    make_filters,
+    sql,
+    storage_used,
+    summary,
+    timeseries,
+)
 from backend.reports.export import export_rows
 from benchmarks.reports_data import ensure_cells, generate_rows, insert_rows
 
@@ -44,21 +56,17 @@ out = Console()
 err = Console(stderr=True)
 
 START = datetime(2026, 9, 1, tzinfo=UTC)
-#: The indexes migration 0007 adds for the reports (dropped for the baseline).
-REPORT_INDEXES = (
-    "ix_inspections_report_cell_time",
-    "ix_inspections_report_model_score",
-    "ix_inspections_report_duration",
-    "ix_inspection_stages_stage_seconds",
-    "ix_inspection_stages_stage_cell_time",
-    "ix_inspection_stages_stage_model",
-)
 
 
-def _routes(t_last: datetime) -> list[tuple[str, Callable[[Any, Database], Awaitable[Any]]]]:
+Route = Callable[[Any, Database], Awaitable[Any]]
+
+
+def _routes(t_last: datetime) -> list[tuple[str, Route, Route | None]]:
+    """(name, the route's query, its raw-SQL baseline or None)."""
     week = make_filters(start=t_last - timedelta(days=7), end=t_last, cell="cell-1")
     day = make_filters(start=t_last - timedelta(days=1), end=t_last)
     every = make_filters()
+    model = make_filters(model="wheel-a")
 
     async def first_page(s: Any, db: Database) -> Any:
         await check_export(db, every)
@@ -70,15 +78,19 @@ def _routes(t_last: datetime) -> list[tuple[str, Callable[[Any, Database], Await
         return n
 
     return [
-        ("summary (all)", lambda s, db: summary(s, every)),
-        ("summary (cell, 7 days)", lambda s, db: summary(s, week)),
-        ("summary (model)", lambda s, db: summary(s, make_filters(model="wheel-a"))),
-        ("timeseries hour (all)", lambda s, db: timeseries(s, every, "hour")),
-        ("timeseries minute (1 day)", lambda s, db: timeseries(s, day, "minute")),
-        ("confusion (all)", lambda s, db: confusion(s, every)),
-        ("export first 1000 rows", first_page),
-        ("storage", lambda s, db: storage_used(s)),
-    ]
+        ("summary (all)", lambda s, db: summary(s, every), lambda s, db: sql.summary(s, every)),
+        ("summary (cell, 7 days)", lambda s, db: summary(s, week),
+         lambda s, db: sql.summary(s, week)),
+        ("summary (model)", lambda s, db: summary(s, model), lambda s, db: sql.summary(s, model)),
+        ("timeseries hour (all)", lambda s, db: timeseries(s, every, "hour"),
+         lambda s, db: sql.timeseries(s, every, "hour")),
+        ("timeseries minute (1 day)", lambda s, db: timeseries(s, day, "minute"),
+         lambda s, db: sql.timeseries(s, day, "minute")),
+        ("confusion (all)", lambda s, db: confusion(s, every),
+         lambda s, db: sql.confusion(s, every)),
+        ("export first 1000 rows", first_page, None),
+        ("storage", lambda s, db: storage_used(s), None),
+    ]  # fmt: skip
 
 
 async def _fill(db: Database, rows: int, images: int) -> datetime:
@@ -109,25 +121,14 @@ async def _fill(db: Database, rows: int, images: int) -> datetime:
     return last_t
 
 
-async def _time(db: Database, t_last: datetime, repeats: int) -> dict[str, list[float]]:
-    res: dict[str, list[float]] = {}
-    for name, fn in _routes(t_last):
-        times = []
-        for _ in range(repeats + 1):  # the first one warms caches and is dropped
-            async with db.session() as s:
-                t = time.perf_counter()
-                await fn(s, db)
-                times.append(time.perf_counter() - t)
-        res[name] = times[1:]
-        err.print(f"  {name}: p50 {1e3 * statistics.median(times[1:]):.1f} ms")
-    return res
-
-
-async def _drop_indexes(db: Database) -> None:
-    async with db.engine.begin() as conn:
-        for ix in REPORT_INDEXES:
-            await conn.execute(text(f"DROP INDEX IF EXISTS {ix}"))
-        await conn.execute(text("ANALYZE"))
+async def _time1(db: Database, fn: Route, repeats: int) -> tuple[list[float], Any]:
+    times, ans = [], None
+    for _ in range(repeats + 1):  # the first one warms caches and is dropped
+        async with db.session() as s:
+            t = time.perf_counter()
+            ans = await fn(s, db)
+            times.append(time.perf_counter() - t)
+    return times[1:], ans
 
 
 def _p95(v: list[float]) -> float:
@@ -138,24 +139,25 @@ def _p95(v: list[float]) -> float:
 async def _engine(url: str, rows: int, images: int, repeats: int) -> dict[str, Any]:
     await asyncio.to_thread(upgrade, url)
     db = Database(url)
+    res: dict[str, Any] = {}
     try:
         t_last = await _fill(db, rows, images)
-        err.print("  with the report indexes")
-        indexed = await _time(db, t_last, repeats)
-        await _drop_indexes(db)
-        err.print("  baseline: without them")
-        base = await _time(db, t_last, repeats)
+        for name, fn, base in _routes(t_last):
+            now, ans = await _time1(db, fn, repeats)
+            was, ref = (now, ans) if base is None else await _time1(db, base, repeats)
+            if ref != ans:
+                raise AssertionError(f"{name}: the baseline answers differently")
+            res[name] = {
+                "p50_ms": round(1e3 * statistics.median(now), 2),
+                "p95_ms": round(1e3 * _p95(now), 2),
+                "base_p50_ms": round(1e3 * statistics.median(was), 2),
+                "base_p95_ms": round(1e3 * _p95(was), 2),
+            }
+            err.print(f"  {name}: p50 {res[name]['p50_ms']:.1f} ms, "
+                      f"baseline {res[name]['base_p50_ms']:.1f} ms")  # fmt: skip
     finally:
         await db.dispose()
-    return {
-        name: {
-            "p50_ms": round(1e3 * statistics.median(indexed[name]), 2),
-            "p95_ms": round(1e3 * _p95(indexed[name]), 2),
-            "base_p50_ms": round(1e3 * statistics.median(base[name]), 2),
-            "base_p95_ms": round(1e3 * _p95(base[name]), 2),
-        }
-        for name in indexed
-    }
+    return res
 
 
 async def _admin(url: str, sql: str) -> None:
@@ -201,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         err.print("PostgreSQL skipped: give --postgres URL or set VISIONCELL_TEST_POSTGRES_URL")
     table = Table(title=f"Report queries over {a.rows} inspections ({a.repeats} repeats)")
-    for c in ("route", "engine", "p50 ms", "p95 ms", "baseline p50", "baseline p95", "p95 ratio"):
+    for c in ("route", "engine", "p50 ms", "p95 ms", "SQL p50", "SQL p95", "p95 ratio"):
         table.add_column(c, justify="left" if c in ("route", "engine") else "right")
     for eng, res in results.items():
         for name, r in res.items():

@@ -20,8 +20,8 @@ from sqlalchemy import insert, select
 
 from backend.db.models import Cell, Inspection, InspectionStage
 from backend.db.session import Database
-from backend.reports.queries import STAGES
-from backend.reports.stages import stage_rows
+from backend.reports.blocks import append as append_records
+from backend.reports.stages import STAGES, stage_rows
 
 __all__ = ["CELLS", "MODELS", "POLICIES", "ensure_cells", "generate_rows", "insert_rows"]
 
@@ -106,7 +106,8 @@ async def ensure_cells(db: Database, names: tuple[str, ...] = CELLS) -> list[int
 
 async def insert_rows(db: Database, rows: Iterator[dict[str, Any]], *, chunk: int = 5000,
                       progress: Any = None) -> int:  # fmt: skip
-    """Bulk-insert ``rows`` and their stage rows in chunks (one transaction each); sets each
+    """Bulk-insert ``rows``, their stage rows and their report records
+    (:func:`backend.reports.blocks.append`) in chunks (one transaction each); sets each
     row's ``id``; returns how many."""
     done = 0
     buf: list[dict[str, Any]] = []
@@ -124,6 +125,7 @@ async def insert_rows(db: Database, rows: Iterator[dict[str, Any]], *, chunk: in
                 await s.execute(insert(InspectionStage), stages[k : k + 20_000])
             for i, r in zip(ids, buf, strict=True):
                 r["id"] = i
+            await append_records(s, buf)
         done += len(buf)
         buf.clear()
         if progress is not None:

@@ -13,6 +13,7 @@ from typing import Any, ClassVar
 
 from sqlalchemy import (
     JSON,
+    BigInteger,
     Boolean,
     CheckConstraint,
     Enum,
@@ -49,6 +50,8 @@ __all__ = [
     "ObjectKind",
     "ObjectModel",
     "RecognitionSettings",
+    "ReportBlock",
+    "ReportName",
     "Role",
     "StationBackground",
     "TrainedView",
@@ -499,3 +502,30 @@ class StationBackground(Base):
     shot_key: Mapped[list[Any]] = mapped_column(JSON)
     image_png: Mapped[bytes] = mapped_column(LargeBinary)
     taken_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class ReportName(Base):
+    """A name the report blocks refer to by a small id (model, policy, true catalogue name)."""
+
+    __tablename__ = "report_names"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+
+
+class ReportBlock(Base):
+    """The packed report records of one cell's inspections started in one UTC hour
+    (:mod:`backend.reports.blocks`), appended in each inspection's own transaction."""
+
+    __tablename__ = "report_blocks"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    cell_id: Mapped[int] = mapped_column(ForeignKey("cells.id", ondelete="CASCADE"))
+    #: Start of the hour, seconds since 1970-01-01 UTC (a multiple of 3600).
+    start_s: Mapped[int] = mapped_column(BigInteger)
+    #: Number of records in ``data``.
+    n: Mapped[int] = mapped_column(Integer)
+    #: ``n`` records of :data:`backend.reports.blocks.RECORD`, concatenated.
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+
+    __table_args__ = (UniqueConstraint("cell_id", "start_s", name="uq_report_blocks_cell_start"),)

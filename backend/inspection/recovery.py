@@ -139,8 +139,11 @@ def _alive_elsewhere(owner: str) -> bool:
 
 async def mark_interrupted(db: Database, cell_id: int) -> list[int]:
     """Turn every marker of ``cell_id`` left by an earlier process into a complete ``failed``
-    row (reason ``interrupted: ...``), removing the markers in the same transaction.
+    row (reason ``interrupted: ...``) with its report record, removing the markers in the
+    same transaction.
     Returns the new inspection ids.  Run at start-up, before this process inspects."""
+    from backend.reports.blocks import append as append_records
+
     async with db.session() as session:
         markers = (
             await session.scalars(
@@ -172,6 +175,11 @@ async def mark_interrupted(db: Database, cell_id: int) -> list[int]:
             )
         await session.flush()
         ids = [int(r.id) for r in rows]
+        await append_records(session, [{
+            "cell_id": cell_id, "started_at": r.started_at, "decision": r.decision,
+            "model_name": None, "policy": r.policy, "duration_s": None, "score": None,
+            "durations": {}, "viewpoints_visited": [], "truth": None,
+        } for r in rows])  # fmt: skip
     if ids:
         log.warning("%d inspection(s) interrupted by the last shutdown marked failed: %s",
                     len(ids), ids)  # fmt: skip

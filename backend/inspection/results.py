@@ -74,8 +74,9 @@ async def store(
     scene: bytes | None = None,
     marker_id: int | None = None,
 ) -> int:
-    """Write the row, its images and its 3D scene recording in one transaction (all or
-    nothing); returns the inspection id.
+    """Write the row, its stage rows, its report record (:mod:`backend.reports.blocks`), its
+    images and its 3D scene recording in one transaction (all or nothing); returns the
+    inspection id.
 
     ``retention`` (``Settings.image_retention``) says whether this decision keeps its images
     and scene (:func:`backend.reports.keeps_images`).  ``marker_id``: the inspection's
@@ -83,6 +84,7 @@ async def store(
     transaction, so either the result is there or the marker is, never both and never
     neither.
     """
+    from backend.reports.blocks import append as append_records
     from backend.reports.retention import keeps_images
     from backend.reports.stages import stage_rows
 
@@ -133,6 +135,12 @@ async def store(
                                      "policy": rec.policy, "durations": rec.durations})  # fmt: skip
         if stages:
             await session.execute(insert(InspectionStage), stages)
+        await append_records(session, [{
+            "cell_id": cell_id, "started_at": rec.started_at, "decision": rec.decision,
+            "model_name": rec.model_name, "policy": rec.policy, "duration_s": row.duration_s,
+            "score": rec.score, "durations": rec.durations,
+            "viewpoints_visited": row.viewpoints_visited, "truth": rec.truth,
+        }])  # fmt: skip
         if keep and scene:
             session.add(InspectionScene(inspection_id=row.id, scene=scene, size_bytes=len(scene)))
             await session.flush()

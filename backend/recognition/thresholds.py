@@ -6,7 +6,9 @@ index (so inspections are not held up while it runs) and stores the choice (rule
 per-model thresholds, the score distributions and the confusion table) as a new settings row
 ``chosen_by="auto"``.  An engineer's manual global threshold (``PUT
 /api/recognition/settings``) is never overwritten: the automatic choice is then only
-reported.  A model's own ``threshold`` overrides the automatic per-model one.
+reported until the engineer hands the choice back (:func:`back_to_automatic`, ``PUT
+/api/recognition/settings`` with ``{"global_threshold": null}``).  A model's own
+``threshold`` overrides the automatic per-model one.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ __all__ = [
     "DEFAULT_TARGET_FAR",
     "DEFAULT_THRESHOLD",
     "ThresholdOutcome",
+    "back_to_automatic",
     "choice_from_detail",
     "confusable_pairs",
     "current_choice",
@@ -89,6 +92,37 @@ def settings_audit_value(row: RecognitionSettings) -> dict[str, Any]:
     if row.chosen_by == "auto":
         out["per_model"] = dict(row.detail.get("per_model", {}))
     return out
+
+
+async def back_to_automatic(session: AsyncSession) -> tuple[RecognitionSettings | None, RecognitionSettings | None]:  # fmt: skip
+    """End a manual global threshold: ``(before, after)`` settings rows.
+
+    When the row in force is ``manual``, a new row is added in ``session`` (the caller's
+    transaction, with its audit row) that puts the automatic choice back in force: a copy
+    of the newest ``auto`` row (its threshold, per-model thresholds and figures, which the
+    next teach recomputes from the live index as usual), or the default threshold
+    (``chosen_by="default"``) when none was ever chosen.  Otherwise nothing is written and
+    ``after`` is ``before`` (already automatic).
+    """
+    before = await latest_settings(session)
+    if before is None or before.chosen_by != "manual":
+        return before, before
+    auto = await session.scalar(
+        select(RecognitionSettings)
+        .where(RecognitionSettings.chosen_by == "auto")
+        .order_by(RecognitionSettings.id.desc())
+        .limit(1)
+    )
+    if auto is None:
+        row = RecognitionSettings(
+            global_threshold=DEFAULT_THRESHOLD, chosen_by="default", detail={}
+        )
+    else:
+        row = RecognitionSettings(global_threshold=auto.global_threshold, chosen_by="auto",
+                                  detail=dict(auto.detail))  # fmt: skip
+    session.add(row)
+    await session.flush()
+    return before, row
 
 
 def confusable_pairs(

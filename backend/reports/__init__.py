@@ -1,6 +1,8 @@
-"""Reports over the stored inspections (issue 15, parts 4 and 6): aggregations in SQL that
-answer the same on SQLite and PostgreSQL, streamed exports, plots, image retention and the
-3D scene recordings of inspections."""
+"""Reports over the stored inspections (issue 15, parts 4 and 6): exact aggregations over
+the packed report blocks (:mod:`backend.reports.blocks`, :mod:`backend.reports.queries`;
+the raw-row SQL in :mod:`backend.reports.sql`) that answer the same on SQLite and
+PostgreSQL, streamed exports, plots, image retention and the 3D scene recordings of
+inspections."""
 
 from backend.reports.export import FIELDS, check_export, export_csv, export_jsonl, export_rows
 from backend.reports.filters import ReportFilters, make_filters

@@ -6,7 +6,11 @@ from __future__ import annotations
 import math
 from typing import Any
 
-__all__ = ["MAX_STAGES", "stage_rows"]
+__all__ = ["MAX_STAGES", "STAGES", "stage_rows"]
+
+#: Stages of an inspection as ``backend.inspection.service`` times them (``durations`` keys).
+STAGES = ("wait", "move", "settle", "acquire", "segment", "features", "match", "plan", "decide",
+          "pose", "pick")  # fmt: skip
 
 #: At most this many stages of one inspection are stored as rows.
 MAX_STAGES = 16

@@ -240,6 +240,50 @@ def test_global_threshold_by_hand_and_automatic(client, headers, settings):
     assert not asyncio.run(recompute()).stored
     assert len(_rows(settings, kind="threshold", entity_id="global")) == 2
 
+    # Null hands the threshold back to the automatic rule: the last automatic choice is in
+    # force again (audited), and the next recompute writes a new automatic row.
+    for bad in ({}, {"global_threshold": "auto"}, {"global_threshold": -0.1}):
+        r = client.put("/api/recognition/settings", json=bad, headers=eng)
+        assert r.status_code == 422, (bad, r.text)
+        assert r.json()["error"] and r.json()["detail"]
+    r = client.put("/api/recognition/settings", json={"global_threshold": None},
+                   headers=headers["operator"])  # fmt: skip
+    assert r.status_code == 403
+    r = client.put("/api/recognition/settings",
+                   json={"global_threshold": None, "reason": "trial over"}, headers=eng)  # fmt: skip
+    assert r.status_code == 200, r.text
+    assert r.json()["chosen_by"] == "auto"
+    assert r.json()["global_threshold"] == pytest.approx(outcome.threshold)
+    back, _, _ = _rows(settings, kind="threshold", entity_id="global")
+    assert back.actor == "test-engineer" and back.action == "automatic"
+    assert back.old == {"global_threshold": 0.62, "chosen_by": "manual"}
+    assert back.new["chosen_by"] == "auto" and set(back.new["per_model"]) == {"wheel-a", "bracket"}
+    assert back.reason == "trial over"
+    got = client.get("/api/recognition/settings", headers=eng).json()
+    assert got["chosen_by"] == "auto" and got["global_threshold"] == pytest.approx(
+        outcome.threshold
+    )
+    # Already automatic: null again changes nothing and records nothing.
+    r = client.put("/api/recognition/settings", json={"global_threshold": None}, headers=eng)
+    assert r.status_code == 200 and r.json()["chosen_by"] == "auto"
+    assert len(_rows(settings, kind="threshold", entity_id="global")) == 3
+    assert asyncio.run(recompute()).stored
+    assert _rows(settings, kind="threshold", entity_id="global")[0].action == "auto"
+
+
+def test_global_threshold_back_to_automatic_without_a_choice_is_the_default(client, headers, settings):  # fmt: skip
+    eng = headers["engineer"]
+    assert client.put("/api/recognition/settings", json={"global_threshold": 0.7},
+                      headers=eng).status_code == 200  # fmt: skip
+    r = client.put("/api/recognition/settings", json={"global_threshold": None}, headers=eng)
+    assert r.status_code == 200, r.text
+    assert r.json()["chosen_by"] == "default" and r.json()["global_threshold"] == 0.5
+    back, _ = _rows(settings, kind="threshold", entity_id="global")
+    assert back.action == "automatic" and back.new == {
+        "global_threshold": 0.5,
+        "chosen_by": "default",
+    }
+
 
 # -- trained views ---------------------------------------------------------------------------
 

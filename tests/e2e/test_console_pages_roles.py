@@ -134,3 +134,67 @@ def test_roc_and_bins_of_the_threshold_charts(browser, shared_server):
         [1, 1, 0],
     ]
     assert got["bins"] == [2, 0, 1, 1]  # 1.0 falls in the last bin; 1.2 and NaN are dropped
+
+
+#: Per page, the controls a full-HD screen must show without scrolling sideways (and the
+#: first two of them in the first screenful).
+FULL_HD_CONTROLS = {
+    "cell": ("#estop", "#home", "#speed", "#joints", "#view3d", "#camera"),
+    "inspection": ("#insp-once", "#insp-run", "#insp-policy", "#insp-stop"),
+    "models": ("#models-table", "#new-model-form", "#global-threshold", "#global-save"),
+    "reports": ("#rep-filters", "#rep-apply", "#rep-from", "#rep-to", "#rep-count"),
+    "calibration": ("#calib-sessions", "#calib-refresh", "#calib-auto-form", "#calib-auto-start"),
+    "audit": ("#audit-kind", "#audit-table", "#audit-next"),
+}
+
+_LAYOUT = """(sels) => {
+  const W = window.innerWidth, H = window.innerHeight;
+  const doc = document.documentElement;
+  const out = {width: W, scroll: Math.max(doc.scrollWidth, document.body.scrollWidth),
+               controls: {}, wide: []};
+  for (const s of sels) {
+    const e = document.querySelector(s);
+    const r = e ? e.getBoundingClientRect() : null;
+    out.controls[s] = e === null ? null : {
+      left: r.left, right: r.right, top: r.top, shown: e.checkVisibility() && r.width > 0};
+  }
+  // Anything laid out past the right edge (what would need a sideways scroll).
+  for (const e of document.querySelectorAll('#page-root *, header *')) {
+    const r = e.getBoundingClientRect();
+    if (r.width > 0 && e.checkVisibility() && r.right > W + 0.5) out.wide.push(
+      `${e.tagName.toLowerCase()}#${e.id}.${e.className} right=${r.right.toFixed(0)}`);
+  }
+  out.height = H;
+  return out;
+}"""
+
+
+def test_console_pages_fit_a_full_hd_screen(browser, shared_server):
+    """At 1920x1080 every page (engineer: all of them) lays out without horizontal
+    overflow, and its key controls are shown inside the screen's width, the first ones in
+    the first screenful."""
+    token = shared_server.token("fullhd-engineer", "engineer")
+    page = browser.new_page(viewport={"width": 1920, "height": 1080})
+    page.goto(f"{shared_server.base}/#cell")
+    page.fill("#token", token)
+    page.click("#login")
+    page.wait_for_selector("#cell-page")
+    nav = page.eval_on_selector_all("#nav-pages a", "as => as.map(a => a.dataset.page)")
+    assert nav == list(FULL_HD_CONTROLS), nav
+    for pid, sels in FULL_HD_CONTROLS.items():
+        page.goto(f"{shared_server.base}/#{pid}")
+        page.wait_for_selector(f"#{pid}-page")
+        page.wait_for_timeout(300)  # first data loaded into the page's tables
+        got = page.evaluate(_LAYOUT, list(sels))
+        assert got["width"] == 1920 and got["height"] == 1080
+        assert got["scroll"] <= got["width"], (pid, got["scroll"], got["wide"][:5])
+        assert got["wide"] == [], (pid, got["wide"][:5])
+        for k, s in enumerate(sels):
+            c = got["controls"][s]
+            assert c is not None and c["shown"], (pid, s, c)
+            assert c["left"] >= 0 and c["right"] <= got["width"], (pid, s, c)
+            if k < 2:
+                assert 0 <= c["top"] < got["height"], (pid, s, c)
+        for s in ("#nav-pages", "#logout", "#conn", "#who"):
+            assert page.is_visible(s), (pid, s)
+    page.close()

@@ -13,6 +13,7 @@ from backend.api.types import bounded_float
 from backend.db.models import RecognitionSettings
 from backend.recognition.thresholds import (
     DEFAULT_THRESHOLD,
+    back_to_automatic,
     latest_settings,
     settings_audit_value,
 )
@@ -21,9 +22,13 @@ router = APIRouter(prefix="/recognition", tags=["recognition"])
 
 
 class RecognitionSettingsIn(BaseModel):
-    global_threshold: Annotated[
-        float, bounded_float(0.0, 1.0, "Score above which a model is reported")
-    ]
+    global_threshold: (
+        Annotated[
+            float,
+            bounded_float(0.0, 1.0, "Score above which a model is reported; null: automatic again"),
+        ]
+        | None
+    )
     note: str = Field("", max_length=500)
     reason: str | None = Field(
         None, max_length=audit.MAX_REASON_LENGTH, description="Why (kept in the audit trail)"
@@ -64,12 +69,30 @@ async def read_recognition_settings(_: ViewerUser, session: SessionDep) -> dict[
 
 @router.put(
     "/settings",
-    summary="Set the global threshold by hand (engineer)",
+    summary="Set the global threshold by hand, or null to hand it back to the automatic rule (engineer)",
     response_model=RecognitionSettingsOut,
 )
 async def update_recognition_settings(
     user: EngineerUser, session: SessionDep, body: RecognitionSettingsIn
 ) -> dict[str, Any]:
+    """A number sets the threshold by hand (``chosen_by="manual"``), which the automatic
+    rule then never overwrites; ``null`` ends that: the newest automatic choice (or the
+    default) is in force again and later teaches recompute it.  Each change is audited
+    (``set`` / ``automatic``); ``null`` while already automatic changes nothing."""
+    if body.global_threshold is None:
+        before, after = await back_to_automatic(session)
+        if after is not None and after is not before:
+            audit.record(
+                session,
+                actor=audit.Actor.of(user),
+                kind="threshold",
+                entity_id="global",
+                action="automatic",
+                old=None if before is None else settings_audit_value(before),
+                new=settings_audit_value(after),
+                reason=body.reason or body.note or None,
+            )
+        return _public(after)
     before = await latest_settings(session)
     row = RecognitionSettings(
         global_threshold=body.global_threshold,

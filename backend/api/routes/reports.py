@@ -161,6 +161,10 @@ class PruneOut(BaseModel):
 @router.get("/reports/summary", response_model=SummaryPublic, response_model_by_alias=True,
             summary="Totals, yield, cycle-time percentiles, stages, score distributions")  # fmt: skip
 async def read_summary(_: ViewerUser, session: SessionDep, f: FiltersDep) -> dict[str, Any]:
+    """Exact over every matching inspection (from the report blocks): integer counts,
+    nearest-rank percentiles (the stored value of rank ceil(p n / 100), never interpolated
+    or binned), means of durations summed in 0.1 ms quanta; the same on SQLite and
+    PostgreSQL."""
     return await summary(session, f)
 
 
@@ -172,12 +176,15 @@ async def read_timeseries(
     f: FiltersDep,
     bucket: Literal["minute", "hour", "day"] = "hour",
 ) -> dict[str, Any]:
+    """Exact counts and the nearest-rank median cycle time of each UTC bucket, contiguous
+    from the first to the last bucket with an inspection (at most 10,000 buckets)."""
     return await timeseries(session, f, bucket)
 
 
 @router.get("/reports/confusion", response_model=ConfusionPublic,
             summary="Confusion matrix against the simulator's truth")  # fmt: skip
 async def read_confusion(_: ViewerUser, session: SessionDep, f: FiltersDep) -> dict[str, Any]:
+    """Exact counts of the matching inspections that carry a truth (simulator)."""
     return await confusion(session, f)
 
 
