@@ -101,11 +101,17 @@ class LoadReport:
     seconds: float
 
 
-#: Extraction options per method beyond the engine's own (none: ``ViewIndex`` already halves
+#: Extraction options per method beyond the engine's own.  Options given here become part
+#: of the stored descriptor version (views extracted without them are listed as stale, to
+#: be re-extracted from their stored images).  No fixed ``threshold``: ``ViewIndex`` halves
 #: the detector threshold on low-texture views, which raised the gear housing's top view
-#: from 13 SIFT features to 42 in the simulated cell; a fixed threshold here would turn
-#: that adaptation off).  Options given here become part of the stored descriptor version.
-FEATURE_OPTIONS: dict[str, dict[str, float]] = {}
+#: from 13 SIFT features to 42 in the simulated cell.  ``smooth_px`` (issue 14): a 1 px
+#: Gaussian before SIFT, because renders without optical blur and sensor noise near that
+#: lowered threshold gave first-octave keypoints that did not survive a turn of the part on
+#: the belt (``benchmarks/recognition_yaw_curve.py``: the gear housing taught at yaw 0 and
+#: seen at 15..90 deg scored a median 0.07 before, 0.27 after; 0.7 and 1.4 px measured worse
+#: or equal in ``benchmarks/recognition_yaw.py``).
+FEATURE_OPTIONS: dict[str, dict[str, float]] = {"sift": {"smooth_px": 1.0}}
 
 
 def _probe_image() -> NDArray[np.uint8]:
