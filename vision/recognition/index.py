@@ -11,6 +11,7 @@ searchers.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Iterable
 from typing import Literal, overload
@@ -398,6 +399,14 @@ class ViewIndex:
         self._next_id = max(self._next_id, vid + 1)
         self._searchers.clear()
         return vid
+
+    def set_colour(self, view_id: int, colour: np.ndarray, outline: np.ndarray) -> None:
+        """Give a trained view its colour signature and the outline it describes (a view
+        loaded from features alone, whose image is read later)."""
+        view = self.view(view_id)
+        self._views[view_id] = dataclasses.replace(
+            view, colour=check_signature(colour), outline=check_outline(outline)
+        )
 
     def remove_model(self, model: str) -> int:
         """Remove every view of ``model``; return how many were removed (0 if unknown)."""
