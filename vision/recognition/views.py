@@ -93,9 +93,11 @@ MAX_CONTENDERS = 8
 
 #: Colour tie-break (module docstring), in the log units of ``colour_distance``: every other
 #: tied model must be at least ``COLOUR_MARGIN`` farther than the winner (0.7: about twice
-#: or half the share of one hue), and the winner at most ``COLOUR_MAX`` from its own views
-#: (2.0: the red band of ``wheel-5spoke-redband``, 2 to 4 % of its inner side view, is 3.7
-#: from a plain tread and 0.5 to 1.1 from its own views in the simulated cell).
+#: or half the share of one hue), and the winner at most ``COLOUR_MAX`` from its own views.
+#: Measured on the simulated twins (``benchmarks/recognition_yaw.py``, 4 twin queries): the
+#: right wheel's side views at 0.01-0.09, the other wheel's at 2.2-2.4 (the red band is 2-4 %
+#: of the inner side view). Strongly coloured parts whose colour shifts between views (the
+#: red valve block: 6-14 from its own views) are never decided by colour.
 COLOUR_MARGIN = 0.7
 COLOUR_MAX = 2.0
 
