@@ -21,7 +21,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -394,8 +394,15 @@ class LiveIndex:
                     load.append(vid)
             return IndexDiff(self._generation, put, drop, remove, tuple(load), deferred)
 
-    def apply(self, diff: IndexDiff, rows: list[ViewRow]) -> bool:
-        """Apply ``diff`` with the stored ``rows`` of its :attr:`IndexDiff.load_views`.
+    def apply(
+        self,
+        diff: IndexDiff,
+        rows: list[ViewRow],
+        images: Mapping[int, tuple[bytes, bytes | None]] | None = None,
+    ) -> bool:
+        """Apply ``diff`` with the stored ``rows`` of its :attr:`IndexDiff.load_views`
+        (and the stored image and mask PNGs of its side views, by view id, for their colour
+        signatures).
 
         Returns False, changing nothing, if the index took a change since the diff was
         taken (the snapshot may predate it: take a new diff).  Rows of views whose model
@@ -415,7 +422,8 @@ class LiveIndex:
                 if model is None:
                     continue
                 self.remove_view(row[0])
-                self._index_row(model, row)
+                if self._index_row(model, row) and images and row[0] in images:
+                    self._colour_from_png(row[0], *images[row[0]])
             self._generation += 1
             return True
 
