@@ -16,9 +16,11 @@ the trained side views whose object yaw matches the top view's yaw estimate), de
 
 Printed (rich table, ``--json`` one line): the thresholds chosen per viewpoint and the
 named / unknown rates, for the rule of :func:`vision.recognition.choose_threshold` and, as
-the baseline in the same run on the same images, the rule before issue 14's fix (twins'
-scores kept among the impostors: the top threshold at the genuine level); the wrong
-decisions with the own-model top score against its bar and the side scores.
+baselines in the same run on the same images, (a) the threshold rule before issue 14's
+first fix (twins' scores kept among the impostors: the top threshold at the genuine level)
+and (b) the features and decision before its second fix (no ``smooth_px`` before SIFT, no
+colour tie-break of the twins; its own index and threshold); the wrong decisions with the
+own-model top score against its bar and the side scores.
 Rendering is the slow part: ``--cache DIR`` keeps the images for a rerun.
 """
 
@@ -86,6 +88,7 @@ def run(
     from robot.sim import CATALOGUE, SimEngine
     from robot.sim.imaging import capture
     from vision.recognition import ViewIndex, choose_threshold, recognise_views
+    from vision.recognition.views import colour_support
 
     rng = np.random.default_rng(seed)
     engine = SimEngine()
@@ -106,7 +109,11 @@ def run(
             return {s.key: capture(engine, s.q).rgb for s in shots}
 
         backgrounds = _cached(cache, "backgrounds", empty)
-        index = ViewIndex("sift", feature_options=FEATURE_OPTIONS.get("sift", {}))
+        options = dict(FEATURE_OPTIONS.get("sift", {}))
+        index = ViewIndex("sift", feature_options=options)
+        # Baseline (b): the extraction before issue 14's smoothing (module docstring).
+        old_options = {k: v for k, v in options.items() if k != "smooth_px"}
+        old_index = ViewIndex("sift", feature_options=old_options) if baseline else None
         yaws = [
             math.remainder(2 * math.pi * k / teach_yaws, 2 * math.pi) for k in range(teach_yaws)
         ]
@@ -127,6 +134,8 @@ def run(
 
                 for s, (rgb, mask) in zip(shots, _cached(cache, key, render), strict=True):
                     index.add(name, rgb, viewpoint=s.viewpoint, mask=mask.astype(np.uint8))
+                    if old_index is not None:
+                        old_index.add(name, rgb, viewpoint=s.viewpoint, mask=mask.astype(np.uint8))
         teach_s = time.perf_counter() - t0
         _log(f"  choosing the threshold over {len(index)} views")
         t1 = time.perf_counter()
@@ -134,6 +143,7 @@ def run(
         choose_s = time.perf_counter() - t1
         # Baseline in the same run: the rule before the fix (twins' scores kept in).
         before = choose_threshold(index, exclude_twins=False) if baseline else None
+        old_choice = choose_threshold(old_index) if old_index is not None else None
         top = shots[0]
         rows: list[dict[str, Any]] = []
         pool = [(n, True) for n in names] + [(n, False) for n in untrained]
@@ -169,14 +179,22 @@ def run(
                 t2 = time.perf_counter()
                 res = asyncio.run(recognise_views(look, index, policy=policy, threshold=choice))
                 dt = time.perf_counter() - t2
-                ok_before = None
+
+                def correct(r: Any, name: str = name, trainable: bool = trainable) -> bool:
+                    if trainable:
+                        return bool(r.decision == "recognized" and r.model == name)
+                    return bool(r.decision != "recognized")
+
+                ok_before = ok_old = None
                 if before is not None:
                     old = asyncio.run(recognise_views(look, index, policy=policy, threshold=before))
-                    ok_before = (
-                        old.decision == "recognized" and old.model == name
-                        if trainable
-                        else old.decision != "recognized"
-                    )
+                    ok_before = correct(old)
+                if old_index is not None:
+                    old = asyncio.run(
+                        recognise_views(look, old_index, policy=policy, threshold=old_choice,
+                                        colour_tiebreak=False)
+                    )  # fmt: skip
+                    ok_old = correct(old)
                 top_r = res.views[0]
                 at1 = choice.at(1)
                 own = float(top_r.scores.get(name, 0.0))
@@ -194,6 +212,7 @@ def run(
                         "model": res.model,
                         "ok": ok,
                         "ok_before": ok_before,
+                        "ok_before_smooth_colour": ok_old,
                         "views": res.n_views,
                         "own_top": round(own, 3),
                         "own_top_bar": round(at1.per_model.get(name, at1.threshold), 3),
@@ -204,6 +223,15 @@ def run(
                             {k: round(float(v), 3) for k, v in r.scores.items() if v > 0}
                             for r in res.views[1:]
                         ],
+                        "colour": {
+                            k: round(v, 4)
+                            for k, v in colour_support(
+                                index,
+                                list(res.views),
+                                [None if vp == 1 else sides[vp] for vp in res.viewpoints],
+                                [k for k, v in res.scores.items() if v > 0],
+                            ).items()
+                        },
                         "seconds": round(dt, 3),
                     }
                 )
@@ -211,7 +239,7 @@ def run(
                 _log(
                     f"  {name} yaw {r['yaw_deg']:7.1f}: {r['decision']} {r['model']} "
                     f"views={r['views']} own_top={r['own_top']} bar={r['own_top_bar']} "
-                    f"side={r['side']}"
+                    f"side={r['side']} colour={r['colour']}"
                 )
         tr = [r for r in rows if r["trainable"]]
         un = [r for r in rows if not r["trainable"]]
@@ -239,6 +267,16 @@ def run(
             "unknown_pct_before": None
             if before is None
             else 100.0 * sum(bool(r["ok_before"]) for r in un) / max(1, len(un)),
+            "options": options,
+            "threshold_before_smooth_colour": None
+            if old_choice is None
+            else old_choice.per_viewpoint,
+            "named_pct_before_smooth_colour": None
+            if old_choice is None
+            else 100.0 * sum(bool(r["ok_before_smooth_colour"]) for r in tr) / max(1, len(tr)),
+            "unknown_pct_before_smooth_colour": None
+            if old_choice is None
+            else 100.0 * sum(bool(r["ok_before_smooth_colour"]) for r in un) / max(1, len(un)),
             "named_pct": 100.0 * sum(r["ok"] for r in tr) / max(1, len(tr)),
             "unknown_pct": 100.0 * sum(r["ok"] for r in un) / max(1, len(un)),
             "mean_views": float(np.mean([r["views"] for r in rows])),
@@ -281,7 +319,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if out["named_pct_before"] is not None:
         table.add_row("twins kept in (before, baseline)", vps(out["threshold_before"]),
                       f"{out['named_pct_before']:.1f}", f"{out['unknown_pct_before']:.1f}")  # fmt: skip
-    table.add_row("twins left out (now)", vps(out["per_viewpoint"]),
+    if out["named_pct_before_smooth_colour"] is not None:
+        table.add_row("twins left out, no smoothing, no colour (before, baseline)",
+                      vps(out["threshold_before_smooth_colour"]),
+                      f"{out['named_pct_before_smooth_colour']:.1f}",
+                      f"{out['unknown_pct_before_smooth_colour']:.1f}")  # fmt: skip
+    table.add_row(f"now: smoothing {out['options']}, colour tie-break", vps(out["per_viewpoint"]),
                   f"{out['named_pct']:.1f}", f"{out['unknown_pct']:.1f}")  # fmt: skip
     Console().print(table)
     print(f"genuine p10/p50 {out['genuine_p10_p50']}  impostor p50/p99 {out['impostor_p50_p99']}")

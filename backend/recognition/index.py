@@ -21,7 +21,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -32,9 +32,11 @@ from sqlalchemy import select
 
 from backend.db.models import ObjectModel, TrainedView
 from backend.db.session import Database
+from backend.recognition import images as im
 from vision.errors import InvalidInput, VisionCellError
 from vision.features import Features
 from vision.recognition import ViewIndex
+from vision.recognition.index import view_colour, view_outline
 
 __all__ = [
     "IndexDiff",
@@ -101,11 +103,37 @@ class LoadReport:
     seconds: float
 
 
-#: Extraction options per method beyond the engine's own (none: ``ViewIndex`` already halves
+#: Extraction options per method beyond the engine's own.  Options given here become part
+#: of the stored descriptor version (views extracted without them are listed as stale, to
+#: be re-extracted from their stored images).  No fixed ``threshold``: ``ViewIndex`` halves
 #: the detector threshold on low-texture views, which raised the gear housing's top view
-#: from 13 SIFT features to 42 in the simulated cell; a fixed threshold here would turn
-#: that adaptation off).  Options given here become part of the stored descriptor version.
-FEATURE_OPTIONS: dict[str, dict[str, float]] = {}
+#: from 13 SIFT features to 42 in the simulated cell.  ``smooth_px`` (issue 14): a 1 px
+#: Gaussian before SIFT, because renders without optical blur and sensor noise near that
+#: lowered threshold gave first-octave keypoints that did not survive a turn of the part on
+#: the belt (``benchmarks/recognition_yaw_curve.py``, five parts taught at yaw 0 and seen at
+#: 15..90 deg in a new frame: median score 0.08 before, 0.17 after; the pipe flange, whose
+#: fine bolt holes the blur removes, 0.43 -> 0.08; in the same diagnostic 1 px beat 0.7 and
+#: 1.4 px on the gear housing and the valve block; ``benchmarks/recognition_yaw.py`` without
+#: the colour tie-break: 66.7 -> 70.8 % named with 0.7, 1.0 and 1.4 px alike).
+FEATURE_OPTIONS: dict[str, dict[str, float]] = {"sift": {"smooth_px": 1.0}}
+
+
+def colour_of(
+    viewpoint: int,
+    features: Features,
+    image: NDArray[np.uint8] | None,
+    mask: NDArray[np.bool_] | None,
+) -> tuple[NDArray[np.float32] | None, NDArray[np.float32] | None]:
+    """``(signature, outline)`` of a side view's object region in its RGB ``image``
+    (:func:`vision.recognition.index.view_colour`), ``(None, None)`` for a top view, a grey
+    or absent image, or a region without usable colour.  Only side views need one: the
+    colour tie-break of :func:`vision.recognition.recognise_views` compares side views."""
+    if viewpoint not in (2, 3) or image is None or image.ndim != 3:
+        return None, None
+    m = None if mask is None else mask.astype(np.uint8)
+    outline = view_outline(features, m)
+    colour = view_colour(image, outline, mask=m)
+    return (None, None) if colour is None else (colour, outline)
 
 
 def _probe_image() -> NDArray[np.uint8]:
@@ -259,6 +287,14 @@ class LiveIndex:
                     ).order_by(TrainedView.id)
                 )
             ).all()
+            # Side views' images, for their colour signatures (the twins' tie-break).
+            images = (
+                await session.execute(
+                    select(TrainedView.id, TrainedView.image_png, TrainedView.mask_png)
+                    .where(TrainedView.viewpoint.in_((2, 3)))
+                    .order_by(TrainedView.id)
+                )
+            ).all()
         by_id = {m.id: IndexedModel.of(m) for m in models}
         with self._lock:
             if len(self._index):
@@ -266,6 +302,8 @@ class LiveIndex:
             self._models = dict(by_id)
             for row in rows:
                 self._index_row(by_id[row[1]], tuple(row))  # type: ignore[arg-type]
+            for vid, png, mask_png in images:
+                self._colour_from_png(vid, png, mask_png)
             self._generation += 1
             report = LoadReport(
                 len(by_id),
@@ -280,6 +318,21 @@ class LiveIndex:
                 report.stale[0].reason,
             )
         return report
+
+    def _colour_from_png(self, view_id: int, png: bytes, mask_png: bytes | None) -> None:
+        """Give an indexed view the colour signature of its stored image (lock held)."""
+        if view_id not in self._view_model:
+            return
+        view = self._index.view(view_id)
+        try:
+            rgb = im.rgb_from_png(png)
+            mask = None if mask_png is None else im.mask_from_png(mask_png)
+        except (ValueError, VisionCellError) as exc:
+            log.warning("view %d: no colour signature (%s)", view_id, exc)
+            return
+        colour, outline = colour_of(view.viewpoint, view.features, rgb, mask)
+        if colour is not None and outline is not None:
+            self._index.set_colour(view_id, colour, outline)
 
     def _index_row(self, model: IndexedModel, row: ViewRow) -> bool:
         """Index one stored view (lock held), or list it as stale; True if indexed."""
@@ -341,8 +394,15 @@ class LiveIndex:
                     load.append(vid)
             return IndexDiff(self._generation, put, drop, remove, tuple(load), deferred)
 
-    def apply(self, diff: IndexDiff, rows: list[ViewRow]) -> bool:
-        """Apply ``diff`` with the stored ``rows`` of its :attr:`IndexDiff.load_views`.
+    def apply(
+        self,
+        diff: IndexDiff,
+        rows: list[ViewRow],
+        images: Mapping[int, tuple[bytes, bytes | None]] | None = None,
+    ) -> bool:
+        """Apply ``diff`` with the stored ``rows`` of its :attr:`IndexDiff.load_views`
+        (and the stored image and mask PNGs of its side views, by view id, for their colour
+        signatures).
 
         Returns False, changing nothing, if the index took a change since the diff was
         taken (the snapshot may predate it: take a new diff).  Rows of views whose model
@@ -362,7 +422,8 @@ class LiveIndex:
                 if model is None:
                     continue
                 self.remove_view(row[0])
-                self._index_row(model, row)
+                if self._index_row(model, row) and images and row[0] in images:
+                    self._colour_from_png(row[0], *images[row[0]])
             self._generation += 1
             return True
 
@@ -389,6 +450,8 @@ class LiveIndex:
                     part=model.part,
                     base=model.sitting_base,
                     view_id=vid,
+                    colour=view.colour,
+                    outline=view.outline,
                 )
 
     def drop_model(self, model_id: int) -> int:
@@ -407,10 +470,19 @@ class LiveIndex:
             return len(gone)
 
     def add_view(
-        self, model: IndexedModel, view_id: int, viewpoint: int, features: Features
+        self,
+        model: IndexedModel,
+        view_id: int,
+        viewpoint: int,
+        features: Features,
+        *,
+        image: NDArray[np.uint8] | None = None,
+        mask: NDArray[np.bool_] | None = None,
     ) -> None:
         """Index one stored view (its features must be of the index's method and version);
-        a view already indexed under this id is replaced."""
+        a view already indexed under this id is replaced.  With the view's RGB ``image``
+        (and ``mask``), a side view also gets its colour signature (:func:`colour_of`)."""
+        colour, outline = colour_of(viewpoint, features, image, mask)
         if features.method != self.method or features.version != self.feature_version:
             self.check_features(features.method, features.version, what=f"view {view_id}")
         with self._lock:
@@ -428,6 +500,8 @@ class LiveIndex:
                     part=model.part,
                     base=model.sitting_base,
                     view_id=view_id,
+                    colour=colour,
+                    outline=outline,
                 )
             except ValueError as exc:
                 raise InvalidInput(str(exc)) from exc

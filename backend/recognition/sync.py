@@ -167,8 +167,10 @@ class IndexSync:
         for _ in range(APPLY_ATTEMPTS):
             diff = self.live.diff(*await self._snapshot())
             rows = await self._load(diff.load_views) if diff.load_views else []
+            side = tuple(r[0] for r in rows if r[2] in (2, 3))
+            images = await self._load_images(side) if side else {}
             # The index's lock may be held by a recognition thread: wait for it off the loop.
-            if await asyncio.to_thread(self.live.apply, diff, rows):
+            if await asyncio.to_thread(self.live.apply, diff, rows, images):
                 # A deferred diff kept views this process added that the snapshot lacked:
                 # leave the fingerprint unseen, so a later round looks again.
                 self._last = None if diff.deferred else fp
@@ -228,6 +230,23 @@ class IndexSync:
             out.extend(
                 (int(a), int(b), int(c), bytes(d), str(e), str(f)) for a, b, c, d, e, f in rows
             )
+        return out
+
+    async def _load_images(self, ids: tuple[int, ...]) -> dict[int, tuple[bytes, bytes | None]]:
+        """Stored image and mask of the side views ``ids`` (their colour signatures)."""
+        out: dict[int, tuple[bytes, bytes | None]] = {}
+        for i in range(0, len(ids), LOAD_CHUNK):
+            chunk = ids[i : i + LOAD_CHUNK]
+            async with self.db.session() as session:
+                rows = (
+                    await session.execute(
+                        select(TrainedView.id, TrainedView.image_png, TrainedView.mask_png).where(
+                            TrainedView.id.in_(chunk)
+                        )
+                    )
+                ).all()
+            for vid, png, mask_png in rows:
+                out[int(vid)] = (bytes(png), None if mask_png is None else bytes(mask_png))
         return out
 
     # -- the task ---------------------------------------------------------------------------

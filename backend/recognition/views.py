@@ -314,8 +314,8 @@ async def add_views(
                     new=_audit_value(row, row_model.name),
                     reason=by.reason,
                 )
-            for row, (feats, *_rest) in zip(rows, prepared, strict=True):
-                live.add_view(model, row.id, row.viewpoint, feats)
+            for row, v, (feats, *_rest) in zip(rows, views, prepared, strict=True):
+                live.add_view(model, row.id, row.viewpoint, feats, image=v.image, mask=v.mask)
                 added.append(row.id)
     except BaseException:
         for vid in added:
@@ -396,6 +396,6 @@ async def reextract_views(
                 reason=by.reason,
             )
             live.remove_view(vid)
-            live.add_view(model, vid, row.viewpoint, feats)
+            live.add_view(model, vid, row.viewpoint, feats, image=rgb, mask=mask)
         done += 1
     return done

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 
 from vision.features.types import Features, Keypoints
 
-__all__ = ["keypoints_from_cv", "keypoints_to_cv", "opencv_features"]
+__all__ = ["MAX_SMOOTH_PX", "keypoints_from_cv", "keypoints_to_cv", "opencv_features"]
 
 _VERSION = f"opencv-{cv2.__version__}"
+#: Largest pre-smoothing accepted, pixels (beyond it the finest octaves carry nothing).
+MAX_SMOOTH_PX = 5.0
 
 
 def keypoints_from_cv(kps: list[cv2.KeyPoint] | tuple[cv2.KeyPoint, ...]) -> Keypoints:
@@ -59,6 +63,7 @@ def opencv_features(
     max_features: int | None = None,
     threshold: float | None = None,
     mask: np.ndarray | None = None,
+    smooth_px: float = 0.0,
 ) -> Features:
     """Detect and describe with OpenCV's SIFT (Lowe 2004), ORB (Rublee et al. 2011) or AKAZE
     (Alcantarilla et al. 2013).
@@ -73,7 +78,23 @@ def opencv_features(
         Detector threshold (SIFT ``contrastThreshold``, AKAZE ``threshold``).
     mask : ndarray of shape (H, W), optional
         Non-zero where keypoints may be detected.
+    smooth_px : float
+        Standard deviation of a Gaussian blur applied to the image before detection and
+        description, pixels (0 = none, at most :data:`MAX_SMOOTH_PX`). SIFT assumes an input
+        already blurred by 0.5 px and doubles it for its first octave (Lowe 2004, section
+        3.3); an image without optical blur (a render without anti-aliasing) or with sensor
+        noise near the detector threshold breaks that assumption, and the first octave's
+        keypoints then follow the pixel grid and the noise rather than the object: a part
+        rotated on the belt no longer finds them (issue 14, ``benchmarks/recognition_yaw.py``).
     """
+    if (
+        isinstance(smooth_px, bool)
+        or not isinstance(smooth_px, int | float)
+        or not (math.isfinite(smooth_px) and 0.0 <= smooth_px <= MAX_SMOOTH_PX)
+    ):
+        raise ValueError(f"smooth_px must be a number in [0, {MAX_SMOOTH_PX:g}], got {smooth_px!r}")
+    if smooth_px > 0.0:
+        grey = cv2.GaussianBlur(grey, (0, 0), float(smooth_px))
     det, binary = _create(method, max_features, threshold)
     m = None if mask is None else (np.asarray(mask) > 0).astype(np.uint8)
     kps, desc = det.detectAndCompute(grey, m)

@@ -11,14 +11,17 @@ searchers.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Iterable
 from typing import Literal, overload
 
+import cv2
 import numpy as np
 
 from vision.features import METHODS, Features, extract
 from vision.recognition import serial
+from vision.recognition.colour import check_signature, colour_signature, region_from_outline
 from vision.recognition.search import Searcher
 from vision.recognition.serial import FORMAT, FORMAT_VERSION, IndexFormatError
 from vision.recognition.trained import VIEWPOINTS, TrainedView, check_viewpoint
@@ -33,7 +36,10 @@ __all__ = [
     "TrainedView",
     "ViewIndex",
     "check_image",
+    "check_outline",
     "check_viewpoint",
+    "view_colour",
+    "view_outline",
 ]
 
 #: Viewpoints of the cell: 1 = top, 2 and 3 = the two side positions (section 3.5.3).
@@ -91,6 +97,65 @@ def check_image(image: object, mask: object = None) -> tuple[np.ndarray, np.ndar
     if not m.any():
         raise ValueError("mask is empty: it selects no pixel of the image")
     return image, m.astype(np.uint8)
+
+
+#: Vertices kept of a view's region outline (the convex hull, simplified beyond this).
+MAX_OUTLINE_POINTS = 64
+
+
+def view_outline(features: Features, mask: np.ndarray | None = None) -> np.ndarray:
+    """Outline of a trained view's region, (K, 2) float32 pixels: the convex hull of the
+    ``mask`` when given (the whole object, so a colour band at its edge is inside), else of
+    the keypoints; at most :data:`MAX_OUTLINE_POINTS` vertices."""
+    pts = features.keypoints.xy
+    if mask is not None:
+        m = (np.asarray(mask) > 0).astype(np.uint8)
+        contours, _ = cv2.findContours(m, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        if contours:
+            pts = np.concatenate([c.reshape(-1, 2) for c in contours]).astype(np.float64)
+    if len(pts) < 3:
+        return np.zeros((0, 2), np.float32)
+    hull = cv2.convexHull(np.ascontiguousarray(pts, dtype=np.float32))
+    eps = 0.5
+    while len(hull) > MAX_OUTLINE_POINTS:
+        hull = cv2.approxPolyDP(hull, eps, True)
+        eps *= 2.0
+    return hull.reshape(-1, 2).astype(np.float32)
+
+
+def check_outline(outline: object) -> np.ndarray:
+    """Validate an outline: (K, 2) finite pixels, K at most :data:`MAX_OUTLINE_POINTS`."""
+    a = np.asarray(outline, dtype=np.float32)
+    if a.ndim != 2 or a.shape[1] != 2 or len(a) > MAX_OUTLINE_POINTS:
+        raise ValueError(
+            f"an outline has shape (K, 2) with K <= {MAX_OUTLINE_POINTS}, got {a.shape}"
+        )
+    if not np.all(np.isfinite(a)):
+        raise ValueError("an outline must be finite")
+    return a
+
+
+def view_colour(
+    image: np.ndarray,
+    outline: np.ndarray,
+    *,
+    mask: np.ndarray | None = None,
+    H: np.ndarray | None = None,
+) -> np.ndarray | None:
+    """Colour signature (:func:`vision.recognition.colour.colour_signature`) of a view's region.
+
+    The region is the convex polygon ``outline`` (:func:`view_outline`) in ``image``, inside
+    ``mask`` when given; for a query, pass the trained view's outline and the
+    trained-view-to-query map ``H``: the outline is mapped into the query, so both
+    signatures describe the same part of the object. ``None`` when the region has too few
+    usable pixels or the image is grey.
+    """
+    if image.ndim != 3:
+        return None
+    region = region_from_outline(outline, image.shape[:2], H)
+    if mask is not None:
+        region &= (np.asarray(mask) > 0).astype(np.uint8)
+    return colour_signature(image, region)
 
 
 def _viewpoints(viewpoint: int | tuple[int, ...]) -> tuple[int, ...]:
@@ -259,6 +324,8 @@ class ViewIndex:
         part: str | None = None,
         base: str | None = None,
         view_id: int | None = None,
+        colour: np.ndarray | None = None,
+        outline: np.ndarray | None = None,
     ) -> int:
         """Train one view of ``model`` and return its view id.
 
@@ -277,6 +344,12 @@ class ViewIndex:
             Physical part and sitting base this model stands for.
         view_id : int, optional
             Id to give the view (a database key); by default the next free one.
+        colour : ndarray of shape (SIGNATURE_SIZE,), optional
+            The view's colour signature (:func:`view_colour`), for views given as features;
+            an RGB image gets its own when none is given.
+        outline : ndarray of shape (K, 2), optional
+            The region ``colour`` describes (:func:`view_outline`); default: the convex
+            hull of ``mask`` (RGB images) or of the keypoints.
 
         Raises
         ------
@@ -296,6 +369,18 @@ class ViewIndex:
         if len(self._views) >= MAX_VIEWS:
             raise ValueError(f"the index is full ({MAX_VIEWS} views)")
         feats = self.features(image, mask=mask)
+        if outline is not None:
+            outline = check_outline(outline)
+        elif isinstance(image, np.ndarray) and image.ndim == 3 and colour is None:
+            outline = view_outline(feats, mask)
+        if colour is not None:
+            colour = check_signature(colour)
+            if outline is None:
+                outline = view_outline(feats)
+        elif isinstance(image, np.ndarray) and image.ndim == 3 and outline is not None:
+            colour = view_colour(image, outline, mask=mask)
+        if colour is None:
+            outline = None
         if len(feats) < 3:
             raise ValueError(
                 f"only {len(feats)} {self.method} features in the view of {model!r}: "
@@ -310,10 +395,18 @@ class ViewIndex:
                 )
             break
         vid = self._next_id if view_id is None else view_id
-        self._views[vid] = TrainedView(vid, model, viewpoint, part, base, feats)
+        self._views[vid] = TrainedView(vid, model, viewpoint, part, base, feats, colour, outline)
         self._next_id = max(self._next_id, vid + 1)
         self._searchers.clear()
         return vid
+
+    def set_colour(self, view_id: int, colour: np.ndarray, outline: np.ndarray) -> None:
+        """Give a trained view its colour signature and the outline it describes (a view
+        loaded from features alone, whose image is read later)."""
+        view = self.view(view_id)
+        self._views[view_id] = dataclasses.replace(
+            view, colour=check_signature(colour), outline=check_outline(outline)
+        )
 
     def remove_model(self, model: str) -> int:
         """Remove every view of ``model``; return how many were removed (0 if unknown)."""

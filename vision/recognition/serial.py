@@ -12,6 +12,7 @@ import numpy as np
 
 from vision.errors import VisionCellError
 from vision.features import Features, Keypoints
+from vision.recognition.colour import SIGNATURE_SIZE, check_signature
 from vision.recognition.trained import TrainedView, check_viewpoint
 
 if TYPE_CHECKING:
@@ -22,7 +23,9 @@ __all__ = ["FORMAT", "FORMAT_VERSION", "IndexFormatError", "dump", "load"]
 #: Magic name and version of the byte form; bump the version whenever the layout or the
 #: meaning of a stored field changes.
 FORMAT = "visioncell.view-index"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: Older versions :func:`load` still reads (1: without colour signatures).
+READABLE_VERSIONS = (1, 2)
 
 
 class IndexFormatError(VisionCellError, ValueError):
@@ -55,6 +58,8 @@ def dump(index: ViewIndex) -> bytes:
                 "feature_version": v.features.version,
                 "binary": v.features.binary,
                 "image_shape": list(v.features.image_shape),
+                "colour": v.colour is not None,
+                "outline_n": 0 if v.outline is None else len(v.outline),
             }
             for v in views
         ],
@@ -73,6 +78,12 @@ def dump(index: ViewIndex) -> bytes:
         "descriptors": (
             np.concatenate([f.descriptors for f in fs]) if fs else np.zeros((0, dim), dtype)
         ),
+        "colour": np.array(
+            [v.colour for v in views if v.colour is not None], dtype=np.float32
+        ).reshape(-1, SIGNATURE_SIZE),
+        "outline": np.concatenate(
+            [np.zeros((0, 2), np.float32)] + [v.outline for v in views if v.outline is not None]
+        ).astype(np.float32),
     }
     buf = io.BytesIO()
     np.savez_compressed(buf, allow_pickle=False, **arrays)
@@ -95,7 +106,7 @@ def load(cls: type[ViewIndex], blob: bytes) -> ViewIndex:
     if not isinstance(header, dict) or header.get("format") != FORMAT:
         got = header.get("format") if isinstance(header, dict) else header
         raise IndexFormatError(f"not a serialised view index (format {got!r})")
-    if header.get("version") != FORMAT_VERSION:
+    if header.get("version") not in READABLE_VERSIONS:
         raise IndexFormatError(
             f"view index format version {header.get('version')!r} is not the supported "
             f"version {FORMAT_VERSION}: retrain the views (or migrate the stored index)"
@@ -109,6 +120,9 @@ def load(cls: type[ViewIndex], blob: bytes) -> ViewIndex:
             min_features=header["min_features"],
         )
         start = 0
+        colours = data.get("colour", np.zeros((0, SIGNATURE_SIZE), np.float32))
+        outlines = data.get("outline", np.zeros((0, 2), np.float32))
+        n_colour = n_outline = 0
         for v in header["views"]:
             sl = slice(start, start + int(v["n"]))
             start = sl.stop
@@ -128,12 +142,30 @@ def load(cls: type[ViewIndex], blob: bytes) -> ViewIndex:
                 tuple(v["image_shape"]),
             )
             vid = int(v["id"])
+            colour = outline = None
+            if v.get("colour", False):
+                colour = check_signature(colours[n_colour])
+                n_colour += 1
+                k = int(v.get("outline_n", 0))
+                outline = outlines[n_outline : n_outline + k]
+                if len(outline) != k:
+                    raise ValueError("outline points missing")
+                n_outline += k
             index._views[vid] = TrainedView(
-                vid, v["model"], check_viewpoint(v["viewpoint"]), v["part"], v["base"], f
+                vid,
+                v["model"],
+                check_viewpoint(v["viewpoint"]),
+                v["part"],
+                v["base"],
+                f,
+                colour,
+                outline,
             )
         if start != len(data["descriptors"]):
             raise ValueError("descriptor count does not match the views")
+        if n_colour != len(colours) or n_outline != len(outlines):
+            raise ValueError("colour signature or outline count does not match the views")
         index._next_id = max([int(header["next_id"]), *[k + 1 for k in index._views]])
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise IndexFormatError(f"corrupt view index: {exc}") from exc
     return index

@@ -35,6 +35,12 @@ class TrainedView:
         Physical part and sitting base the model stands for (section 3.5.3), if given.
     features : Features
         Keypoints (pixels of the trained image) and descriptors, extracted inside the mask.
+    colour : ndarray of shape (SIGNATURE_SIZE,) or None
+        Colour signature of the view's region (:mod:`vision.recognition.colour`), ``None``
+        when the view was trained from grey pixels or from features alone.
+    outline : ndarray of shape (K, 2) or None
+        Convex outline of the region ``colour`` describes (pixels of the trained image);
+        mapped into a query by a verified ``H`` to describe the same region there.
     """
 
     view_id: int
@@ -43,6 +49,8 @@ class TrainedView:
     part: str | None
     base: str | None
     features: Features
+    colour: np.ndarray | None = None
+    outline: np.ndarray | None = None
 
 
 @overload

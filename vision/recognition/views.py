@@ -35,6 +35,18 @@ Fused score
     choice's ``candidate`` bar (the best :data:`MAX_CONTENDERS`) to a side view, and then only
     the side views are fused: models alike from the top raise the top threshold beyond
     reach, and only a side view can decide.
+
+Colour tie-break (issue 14)
+    The features are grey, so two models that differ only by colour (a red band on a tyre's
+    tread) stay within the ambiguity margin after every side view. When the side views end
+    ``ambiguous``, each model within the margin of the best fused score is compared by colour
+    on the side views where it was verified: the signature of the query region (the outline
+    of its best trained view's object region mapped by that view's ``H``) against the
+    signature stored with that view (:mod:`vision.recognition.colour`), averaged over those views. The
+    most similar model is named only when it beats every other tied model by at least
+    :data:`COLOUR_MARGIN`, resembles its own views by at least :data:`COLOUR_MIN`, and passes
+    its thresholds as any side-view decision must (its fused bar, and its own bar on a side
+    view). Colour never raises a score: an object that no model explains stays ``unknown``.
 """
 
 from __future__ import annotations
@@ -48,7 +60,8 @@ from types import MappingProxyType
 import numpy as np
 
 from vision.features import Features
-from vision.recognition.index import ViewIndex
+from vision.recognition.colour import colour_distance
+from vision.recognition.index import ViewIndex, view_colour
 from vision.recognition.recognise import (
     DEFAULT_MARGIN,
     Recognition,
@@ -60,7 +73,15 @@ from vision.recognition.recognise import (
 )
 from vision.recognition.threshold import ThresholdChoice
 
-__all__ = ["DEFAULT_CONFUSION_LIMIT", "POLICIES", "ViewsRecognition", "recognise_views"]
+__all__ = [
+    "COLOUR_MARGIN",
+    "COLOUR_MAX",
+    "DEFAULT_CONFUSION_LIMIT",
+    "POLICIES",
+    "ViewsRecognition",
+    "colour_support",
+    "recognise_views",
+]
 
 POLICIES = ("naive", "top-only", "two-views", "best-next")
 #: ``best-next`` accepts a top-view recognition when every other model passes on less than
@@ -69,6 +90,16 @@ DEFAULT_CONFUSION_LIMIT = 0.05
 
 #: Side views are checked against at most this many contenders from an inconclusive top view.
 MAX_CONTENDERS = 8
+
+#: Colour tie-break (module docstring), in the log units of ``colour_distance``: every other
+#: tied model must be at least ``COLOUR_MARGIN`` farther than the winner (0.7: about twice
+#: or half the share of one hue), and the winner at most ``COLOUR_MAX`` from its own views.
+#: Measured on the simulated twins (``benchmarks/recognition_yaw.py``, 4 twin queries): the
+#: right wheel's side views at 0.01-0.09, the other wheel's at 2.2-2.4 (the red band is 2-4 %
+#: of the inner side view). Strongly coloured parts whose colour shifts between views (the
+#: red valve block: 6-14 from its own views) are never decided by colour.
+COLOUR_MARGIN = 0.7
+COLOUR_MAX = 2.0
 
 LookResult = np.ndarray | Features | tuple[np.ndarray, np.ndarray | None]
 Look = Callable[[int], LookResult | Awaitable[LookResult]]
@@ -149,6 +180,35 @@ def _side_order(
     return sorted(sides, key=lambda vp: (cost(vp), vp))
 
 
+def colour_support(
+    index: ViewIndex,
+    views: list[Recognition],
+    images: list[np.ndarray | None],
+    models: list[str],
+) -> dict[str, float]:
+    """Mean colour distance of each of ``models`` over the side views where it was verified
+    and both the query region and its best trained view have a colour signature (module
+    docstring); models without one are left out."""
+    out: dict[str, float] = {}
+    for m in models:
+        dists = []
+        for r, image in zip(views, images, strict=True):
+            if r.viewpoint not in (2, 3) or image is None:
+                continue
+            cand = next((c for c in r.candidates if c.model == m and c.H is not None), None)
+            if cand is None:
+                continue
+            view = index.view(cand.view_id)
+            if view.colour is None or view.outline is None:
+                continue
+            q = view_colour(image, view.outline, H=cand.H)
+            if q is not None:
+                dists.append(colour_distance(q, view.colour))
+        if dists:
+            out[m] = float(np.mean(dists))
+    return out
+
+
 def _top_confusers(choice: ThresholdChoice, model: str, limit: float) -> tuple[str, ...]:
     row = choice.confusion.get(1, {}).get(model, {})
     rows_in = {a: r.get(model, 0.0) for a, r in choice.confusion.get(1, {}).items() if a != model}
@@ -167,6 +227,7 @@ async def recognise_views(
     threshold: float | ThresholdChoice | None = None,
     margin: float = DEFAULT_MARGIN,
     confusion_limit: float = DEFAULT_CONFUSION_LIMIT,
+    colour_tiebreak: bool = True,
 ) -> ViewsRecognition:
     """Recognise a 3D object from up to three viewpoints (module docstring).
 
@@ -186,6 +247,8 @@ async def recognise_views(
         Relative confusion margin (see :func:`vision.recognition.decide`).
     confusion_limit : float
         ``best-next`` only: top-view confusion share in [0, 1] under which one view suffices.
+    colour_tiebreak : bool
+        Break a tie left after the side views by colour (module docstring; default on).
 
     Raises
     ------
@@ -209,6 +272,8 @@ async def recognise_views(
         or not 0.0 <= float(confusion_limit) <= 1.0
     ):
         raise ValueError(f"confusion_limit must be in [0, 1], got {confusion_limit!r}")
+    if not isinstance(colour_tiebreak, bool):
+        raise ValueError(f"colour_tiebreak must be true or false, got {colour_tiebreak!r}")
     decide({}, threshold=threshold, margin=margin)  # validates threshold and margin before moving
     choice = threshold if isinstance(threshold, ThresholdChoice) else None
 
@@ -229,6 +294,7 @@ async def recognise_views(
 
     visited: list[int] = []
     views: list[Recognition] = []
+    images: list[np.ndarray | None] = []  # RGB images of the visited views (colour tie-break)
 
     async def see(vp: int, viewpoint: int | None, models=None) -> Recognition:
         image, mask = await _look(look, vp)
@@ -245,6 +311,7 @@ async def recognise_views(
         )
         visited.append(vp)
         views.append(r)
+        images.append(image if isinstance(image, np.ndarray) and image.ndim == 3 else None)
         return r
 
     def result(
@@ -294,6 +361,27 @@ async def recognise_views(
         if not alike:
             return single(top)
         contenders = (top.model, *alike)
+
+    def colour_winner(fused: dict[str, float]) -> str | None:
+        """The tied model colour singles out (module docstring), or ``None``."""
+        best = max(fused.values(), default=0.0)
+        tied = [m for m, v in fused.items() if v > 0.0 and v >= (1.0 - margin) * best]
+        if len(tied) < 2:
+            return None
+        dist = colour_support(index, views, images, tied)
+        if len(dist) != len(tied):
+            return None  # a tied model has no colour to compare: no tie-break
+        ranked = sorted(tied, key=lambda m: (dist[m], m))
+        w, runner = ranked[0], ranked[1]
+        if dist[w] > COLOUR_MAX or dist[runner] - dist[w] < COLOUR_MARGIN:
+            return None
+        fused_bar = float(np.mean([bar(w, vp) for vp in visited[(1 if skip_top else 0) :]]))
+        side_ok = any(
+            vp in (2, 3) and r.scores.get(w, 0.0) > bar(w, vp)
+            for vp, r in zip(visited, views, strict=True)
+        )
+        return w if fused[w] > fused_bar and side_ok else None
+
     models = list(contenders)
     # A model the top view named on its own (no look-alike passed within the margin) needs
     # the side views' fused support only; when the top view could not choose, the side view
@@ -316,4 +404,8 @@ async def recognise_views(
     if decision == "recognized" and not (named_from_top and model == top.model):
         # The side check did not confirm the winner on its own view: report the doubt.
         decision, model, cont = "ambiguous", None, cont
+    if decision == "ambiguous" and colour_tiebreak:
+        winner = colour_winner(fused)
+        if winner is not None:
+            return result("recognized", winner, fused, (winner,))
     return result(decision, model, fused, cont)
