@@ -514,8 +514,9 @@ class ReportName(Base):
 
 
 class ReportBlock(Base):
-    """The packed report records of one cell's inspections started in one UTC hour
-    (:mod:`backend.reports.blocks`), appended in each inspection's own transaction."""
+    """The packed report records of one cell's inspections started in one UTC hour, or of
+    one part of them (:mod:`backend.reports.blocks`), appended in each inspection's own
+    transaction."""
 
     __tablename__ = "report_blocks"
 
@@ -523,9 +524,13 @@ class ReportBlock(Base):
     cell_id: Mapped[int] = mapped_column(ForeignKey("cells.id", ondelete="CASCADE"))
     #: Start of the hour, seconds since 1970-01-01 UTC (a multiple of 3600).
     start_s: Mapped[int] = mapped_column(BigInteger)
+    #: Part of the hour (0, 1, ..; each holds at most ``blocks.MAX_RECORDS`` records).
+    part: Mapped[int] = mapped_column(Integer, default=0)
     #: Number of records in ``data``.
     n: Mapped[int] = mapped_column(Integer)
     #: ``n`` records of :data:`backend.reports.blocks.RECORD`, concatenated.
     data: Mapped[bytes] = mapped_column(LargeBinary)
 
-    __table_args__ = (UniqueConstraint("cell_id", "start_s", name="uq_report_blocks_cell_start"),)
+    __table_args__ = (
+        UniqueConstraint("cell_id", "start_s", "part", name="uq_report_blocks_cell_start"),
+    )

@@ -1,5 +1,6 @@
-"""Report blocks: an exact, packed copy of the report columns of every inspection, one row
-per (cell, UTC hour), written in the inspection's own transaction (issue 15).
+"""Report blocks: an exact, packed copy of the report columns of every inspection, in rows
+per (cell, UTC hour) of at most :data:`MAX_RECORDS` records each (parts 0, 1, ..), written
+in the inspection's own transaction (issue 15).
 
 Why: the reports' nearest-rank percentiles (cycle time, eleven stages, score per model)
 over arbitrary filters cannot be read from a pre-aggregated histogram without losing
@@ -21,6 +22,12 @@ committed inspection always has its record.  Inspection rows are never deleted e
 their cell, and the blocks go with it (``ON DELETE CASCADE``); image retention deletes
 images and scenes only.  Migration 0010 fills the blocks of the inspections stored before.
 
+Write cost: a new record rewrites only the last part of its hour, at most
+:data:`MAX_RECORDS` records (about 32 kB); a single row per hour would grow to the whole
+hour's records and be rewritten on every inspection (quadratic bytes written per hour:
+about 200 MB an hour for a cell on a 2 s cycle, and as many dead row versions on
+PostgreSQL).
+
 What a record does not keep: stage names outside ``STAGES`` (the inspection service times
 exactly those), true names and model names beyond 64 characters (cut), more than 32,767 views.
 """
@@ -35,7 +42,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from sqlalchemy import select, update
+from sqlalchemy import insert, select, update
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.ext.asyncio import AsyncSession
 
@@ -44,10 +51,12 @@ from backend.reports.filters import DECISIONS, ReportFilters
 from backend.reports.stages import STAGES
 from vision.errors import NotFound
 
-__all__ = ["BLOCK_S", "RECORD", "Records", "append", "encode", "load", "t_us"]
+__all__ = ["BLOCK_S", "MAX_RECORDS", "RECORD", "Records", "append", "encode", "load", "t_us"]
 
 #: Seconds of time one block covers (UTC hours, aligned on the epoch).
 BLOCK_S = 3600
+#: Most records in one part of a block (module docstring, write cost).
+MAX_RECORDS = 256
 _EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 _US = timedelta(microseconds=1)
 _NAME_LEN = 64
@@ -135,13 +144,26 @@ async def _name_ids(session: AsyncSession, names: set[str]) -> dict[str, int]:
     return {str(n): int(i) for i, n in rows.all()}
 
 
+def parts(data: bytes, n: int, new: bytes, k: int) -> list[tuple[int, bytes]]:
+    """``data`` (``n`` records) with ``new`` (``k`` records) appended, cut into parts of at
+    most :data:`MAX_RECORDS`: the first is the rewritten ``data``, the others new parts."""
+    size = RECORD.itemsize
+    room = max(0, MAX_RECORDS - n)
+    out = [(n + min(room, k), bytes(data) + new[: room * size])]
+    for i in range(room, k, MAX_RECORDS):
+        chunk = new[i * size : (i + MAX_RECORDS) * size]
+        out.append((len(chunk) // size, chunk))
+    return out
+
+
 async def append(session: AsyncSession, rows: Sequence[dict[str, Any]]) -> None:
     """Add the records of the inspection ``rows`` (with their ``cell_id``) to their blocks,
     in the caller's transaction (so the rows and their records commit or fail together).
 
-    Each block is created empty if missing (``ON CONFLICT DO NOTHING``), then locked
-    (``SELECT .. FOR UPDATE`` on PostgreSQL; SQLite's writer lock covers it) and rewritten,
-    in (cell, hour) order so that concurrent writers cannot deadlock.
+    Part 0 of each hour is created empty if missing (``ON CONFLICT DO NOTHING``) and locked
+    (``SELECT .. FOR UPDATE`` on PostgreSQL; SQLite's writer lock covers it) as the hour's
+    lock, in (cell, hour) order so that concurrent writers cannot deadlock; then the hour's
+    last part is rewritten with the new records and any that do not fit go to new parts.
     """
     if not rows:
         return
@@ -153,23 +175,33 @@ async def append(session: AsyncSession, rows: Sequence[dict[str, Any]]) -> None:
     tb = ReportBlock.__table__
     keys = sorted(groups)
     await session.execute(
-        _insert(session, tb).on_conflict_do_nothing(index_elements=["cell_id", "start_s"]),
-        [{"cell_id": c, "start_s": s, "n": 0, "data": b""} for c, s in keys],
+        _insert(session, tb).on_conflict_do_nothing(index_elements=["cell_id", "start_s", "part"]),
+        [{"cell_id": c, "start_s": s, "part": 0, "n": 0, "data": b""} for c, s in keys],
     )
     for c, s in keys:
-        bid, n, data = (
+        hour = (tb.c.cell_id == c, tb.c.start_s == s)
+        await session.execute(select(tb.c.id).where(*hour, tb.c.part == 0).with_for_update())
+        bid, part, n, data = (
             await session.execute(
-                select(tb.c.id, tb.c.n, tb.c.data)
-                .where(tb.c.cell_id == c, tb.c.start_s == s)
+                select(tb.c.id, tb.c.part, tb.c.n, tb.c.data)
+                .where(*hour)
+                .order_by(tb.c.part.desc())
+                .limit(1)
                 .with_for_update()
             )
         ).one()
-        new = encode(groups[(c, s)], ids)
-        await session.execute(
-            update(ReportBlock)
-            .where(ReportBlock.id == bid)
-            .values(n=int(n) + len(groups[(c, s)]), data=bytes(data) + new)
+        (n_last, last), *more = parts(
+            data, int(n), encode(groups[(c, s)], ids), len(groups[(c, s)])
         )
+        await session.execute(
+            update(ReportBlock).where(ReportBlock.id == bid).values(n=n_last, data=last)
+        )
+        if more:
+            await session.execute(
+                insert(ReportBlock),
+                [{"cell_id": c, "start_s": s, "part": int(part) + 1 + i, "n": k, "data": d}
+                 for i, (k, d) in enumerate(more)],
+            )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -202,7 +234,7 @@ async def load(session: AsyncSession, f: ReportFilters) -> Records:
         q = q.where(tb.c.start_s >= lo // (BLOCK_S * 1_000_000) * BLOCK_S)
     if hi is not None:
         q = q.where(tb.c.start_s <= hi // 1_000_000)
-    q = q.where(tb.c.n > 0).order_by(tb.c.cell_id, tb.c.start_s)
+    q = q.where(tb.c.n > 0).order_by(tb.c.cell_id, tb.c.start_s, tb.c.part)
     blobs = (await session.scalars(q)).all()
     names = {int(i): str(n) for i, n in (await session.execute(select(ReportName.id, ReportName.name))).all()}  # fmt: skip
     rec = np.frombuffer(b"".join(bytes(b) for b in blobs), dtype=RECORD)

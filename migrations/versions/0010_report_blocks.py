@@ -5,7 +5,7 @@ Revises: 0009
 Create Date: 2026-12-02 06:30:00
 
 Issue 15, target of the report queries: every inspection's report columns as one packed
-record in the block of its cell and UTC hour (``backend.reports.blocks``), written in the
+record in the block of its cell and UTC hour (parts of at most 256 records) (``backend.reports.blocks``), written in the
 inspection's transaction from now on; the upgrade fills the blocks of the inspections
 already stored, in id order, 2,000 at a time.
 """
@@ -27,7 +27,7 @@ depends_on = None
 
 def _backfill() -> None:
     """Records of the stored inspections, encoded by the same function the writers use."""
-    from backend.reports.blocks import BLOCK_S, _names_of, encode, t_us
+    from backend.reports.blocks import BLOCK_S, MAX_RECORDS, RECORD, _names_of, encode, t_us
 
     conn = op.get_bind()
     insp = sa.table(
@@ -41,11 +41,11 @@ def _backfill() -> None:
     names = sa.table("report_names", sa.column("id", sa.Integer), sa.column("name", sa.String))
     blocks = sa.table(
         "report_blocks", sa.column("cell_id", sa.Integer), sa.column("start_s", sa.BigInteger),
-        sa.column("n", sa.Integer), sa.column("data", sa.LargeBinary),
+        sa.column("part", sa.Integer), sa.column("n", sa.Integer),
+        sa.column("data", sa.LargeBinary),
     )  # fmt: skip
     ids: dict[str, int] = {}
     groups: dict[tuple[int, int], list[bytes]] = {}
-    counts: dict[tuple[int, int], int] = {}
     last = 0
     while True:
         rows = [
@@ -65,10 +65,15 @@ def _backfill() -> None:
             by.setdefault((int(r["cell_id"]), start), []).append(r)
         for k, rs in by.items():
             groups.setdefault(k, []).append(encode(rs, ids))
-            counts[k] = counts.get(k, 0) + len(rs)
         last = rows[-1]["id"]
-    out = [{"cell_id": c, "start_s": s, "n": counts[(c, s)], "data": b"".join(groups[(c, s)])}
-           for c, s in sorted(groups)]  # fmt: skip
+    out = []
+    size = RECORD.itemsize * MAX_RECORDS
+    for c, s in sorted(groups):
+        data = b"".join(groups[(c, s)])
+        for p, k in enumerate(range(0, len(data), size)):
+            chunk = data[k : k + size]
+            out.append({"cell_id": c, "start_s": s, "part": p, "n": len(chunk) // RECORD.itemsize,
+                        "data": chunk})  # fmt: skip
     for k in range(0, len(out), 500):
         conn.execute(sa.insert(blocks), out[k : k + 500])
 
@@ -86,6 +91,7 @@ def upgrade() -> None:
         sa.Column("id", sa.Integer(), nullable=False),
         sa.Column("cell_id", sa.Integer(), nullable=False),
         sa.Column("start_s", sa.BigInteger(), nullable=False),
+        sa.Column("part", sa.Integer(), nullable=False),
         sa.Column("n", sa.Integer(), nullable=False),
         sa.Column("data", sa.LargeBinary(), nullable=False),
         sa.ForeignKeyConstraint(
@@ -95,7 +101,7 @@ def upgrade() -> None:
             ondelete="CASCADE",
         ),
         sa.PrimaryKeyConstraint("id", name=op.f("pk_report_blocks")),
-        sa.UniqueConstraint("cell_id", "start_s", name="uq_report_blocks_cell_start"),
+        sa.UniqueConstraint("cell_id", "start_s", "part", name="uq_report_blocks_cell_start"),
     )
     if op.get_bind().dialect.name == "postgresql":
         # Blocks are read whole and compress poorly: uncompressed out-of-line storage

@@ -19,7 +19,7 @@ from backend.db.session import Database
 from backend.inspection import results
 from backend.inspection.recovery import mark_interrupted
 from backend.inspection.results import InspectionRecord, store
-from backend.reports import confusion, make_filters, sql, summary, timeseries
+from backend.reports import blocks, confusion, make_filters, sql, summary, timeseries
 from backend.reports.blocks import RECORD
 from backend.reports.stages import stage_rows
 from benchmarks.reports_data import ensure_cells, generate_rows, insert_rows
@@ -114,11 +114,45 @@ def test_blocks_answer_as_the_sql_and_sqlite_postgres(postgres_url, tmp_path) ->
     assert asyncio.run(_check_engine(postgres_url)) == asyncio.run(_check_engine(url))
 
 
+def test_an_hour_splits_into_parts_and_still_answers_as_the_sql(tmp_path, monkeypatch) -> None:
+    """Parts of at most MAX_RECORDS records (4 here, so that the 700 rows' hours split and
+    the bulk loader's chunks cross part boundaries) answer exactly as one block would."""
+    monkeypatch.setattr(blocks, "MAX_RECORDS", 4)
+    url = f"sqlite+aiosqlite:///{tmp_path / 'b.db'}"
+    upgrade(url)
+    asyncio.run(_check_engine(url))
+
+    async def sizes() -> list[tuple[int, int, int]]:
+        db = Database(url)
+        try:
+            async with db.session() as s:
+                rows = await s.execute(select(ReportBlock.cell_id, ReportBlock.start_s,
+                                              ReportBlock.part, ReportBlock.n))  # fmt: skip
+                return [(int(c), int(t), int(n)) for c, t, _p, n in rows.all()]
+        finally:
+            await db.dispose()
+
+    got = asyncio.run(sizes())
+    assert max(n for _, _, n in got) == 4 and len(got) > len({(c, t) for c, t, _ in got})
+
+
+def test_parts_fill_the_last_one_then_start_new_ones(monkeypatch) -> None:
+    monkeypatch.setattr(blocks, "MAX_RECORDS", 3)
+    size = RECORD.itemsize
+    rec = [bytes([i]) * size for i in range(8)]
+    # 2 records stored, 6 new: the last part takes one, then parts of 3 and 2.
+    out = blocks.parts(rec[0] + rec[1], 2, b"".join(rec[2:]), 6)
+    assert [n for n, _ in out] == [3, 3, 2]
+    assert b"".join(d for _, d in out) == b"".join(rec)
+    assert blocks.parts(b"".join(rec[:3]), 3, rec[3], 1) == [(3, b"".join(rec[:3])), (1, rec[3])]
+    assert blocks.parts(b"", 0, rec[0], 1) == [(1, rec[0])]
+
+
 async def _blocks(db: Database) -> list[tuple[int, int, int, bytes]]:
     async with db.session() as s:
         rows = await s.execute(
             select(ReportBlock.cell_id, ReportBlock.start_s, ReportBlock.n, ReportBlock.data)
-            .order_by(ReportBlock.cell_id, ReportBlock.start_s)
+            .order_by(ReportBlock.cell_id, ReportBlock.start_s, ReportBlock.part)
         )  # fmt: skip
         return [(int(c), int(t), int(n), bytes(d)) for c, t, n, d in rows.all()]
 
