@@ -27,7 +27,7 @@ from vision.features.colour_input import (
     clipped_weight,
     linear_from_image,
     m_images_uint8,
-    noise_model,
+    noise_estimates,
     srgb_decode,
 )
 from vision.features.colour_input import noise_floor as _noise_floor
@@ -279,10 +279,10 @@ def _m_images_and_noise(
     step = 1.0 / w
     if transfer == "srgb":  # one DN near black of the decoded curve
         step = float(srgb_decode(np.float32(1.0 / w)))
-    floor = max(_noise_floor(lin, step, noise_floor), 1e-6)
+    floor, shot, read = noise_estimates(lin, step, noise_floor)
+    floor = max(floor, 1e-6)
     weight = clipped_weight(lin, saturation) if saturation < 1.0 else None
     m = robust_m_images(lin, floor=floor, weight=weight, pairs=pairs)
-    shot, read = noise_model(lin, step)
     var = m_noise_variance(lin, floor=floor, shot=shot, read=read, weight=weight, pairs=pairs)
     return m, var
 
@@ -333,23 +333,24 @@ def joint_parts(
             if len(live):
                 parts[live, k] = _m_descriptors_sift(mk[None], [cvk[i] for i in live])[:, 0]
         return kp, g, parts, c
-    from vision.features.surf import surf_describe, surf_keypoints
+    from vision.features.surf import surf_describe_channels, surf_features
 
     det = {key: v for key, v in detect.items() if v is not None}
-    kp = surf_keypoints(grey, **det, **opts)
+    # The grey base exactly as extract(grey, "surf"): detection, orientation and descriptors
+    # on one integral image.
+    fg = surf_features(grey, **det, **opts)
+    kp = fg.keypoints
     up = bool(opts.get("upright", False))
     ext = bool(opts.get("extended", False))
     width = 128 if ext else 64
     if len(kp) == 0:
         e = np.zeros((0, width), np.float32)
         return kp, e, np.zeros((0, 2, width), np.float32), np.zeros((0, 2), np.float32)
-    g = np.asarray(surf_describe(grey, kp, upright=up, extended=ext), np.float32)
+    g = np.asarray(fg.descriptors, np.float32)
     c = block_snr_weight(m, var, kp, radius_per_size=0.5)
-    parts = np.zeros((len(kp), len(m), width), np.float32)
-    for k, mk in enumerate(m):
-        live = np.flatnonzero(c[:, k] > 0)
-        if len(live):
-            parts[live, k] = surf_describe(mk, kp.take(live), upright=up, extended=ext, coarse=True)
+    # Both m-images in one pass, at the grey keypoints' positions, scales and orientations;
+    # blocks of weight 0 are not computed (they stay 0).
+    parts = surf_describe_channels(m, kp, live=c > 0, upright=up, extended=ext, coarse=True)
     return kp, g, parts, c
 
 
