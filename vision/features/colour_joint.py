@@ -183,7 +183,15 @@ def block_snr_weight(
         gx = cv2.Sobel(mk, cv2.CV_32F, 1, 0, ksize=3)
         gy = cv2.Sobel(mk, cv2.CV_32F, 0, 1, ksize=3)
         energy = window_mean((gx * gx + gy * gy) * np.float32(1.0 / 64.0))
-        noise = _SOBEL_NOISE_GAIN * (window_mean(var[k]) + extra_var)
+        # The propagated model treats quantisation as independent noise per pixel; on a flat
+        # patch with less sensor noise than one step it is not (every pixel rounds alike).
+        # The finest diagonal detail of the m-image itself, which texture only adds to,
+        # bounds the noise it really holds: the smaller of the two is taken.
+        hh = 0.5 * (mk[:-1, :-1] - mk[:-1, 1:] - mk[1:, :-1] + mk[1:, 1:])
+        detail = np.zeros_like(mk)
+        detail[:-1, :-1] = hh * hh
+        model = window_mean(var[k])
+        noise = _SOBEL_NOISE_GAIN * (np.minimum(model, window_mean(detail)) + extra_var)
         out[:, k] = np.where(energy > noise, 1.0 - noise / np.maximum(energy, 1e-30), 0.0)
     return out
 
