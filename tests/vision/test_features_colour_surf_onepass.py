@@ -10,7 +10,12 @@ import pytest
 from vision.features import extract
 from vision.features.colour import detection_grey
 from vision.features.colour_input import noise_estimates, noise_floor, noise_model
-from vision.features.colour_joint import _JOINT_M, _m_images_and_noise, block_snr_weight, joint_parts
+from vision.features.colour_joint import (
+    _JOINT_M,
+    _m_images_and_noise,
+    block_snr_weight,
+    joint_parts,
+)
 from vision.features.surf import surf_describe, surf_describe_channels, surf_keypoints
 
 
