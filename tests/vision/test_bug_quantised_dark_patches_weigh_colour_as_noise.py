@@ -30,8 +30,8 @@ def test_flat_dark_patches_keep_their_colour_weight() -> None:
     )
     weights = []
     for gain in (0.5, 2.0):
-        m, var = _m_images_and_noise(_chart(gain), **colour, pairs=_JOINT_M)
-        weights.append(block_snr_weight(m, var, kp, radius_per_size=0.5))
+        m, var, quant = _m_images_and_noise(_chart(gain), **colour, pairs=_JOINT_M)
+        weights.append(block_snr_weight(m, var, kp, radius_per_size=0.5, quant_var=quant))
     dark, bright = weights
     # Noise-free patches: the colour edges are all signal at either exposure.
     assert np.median(dark) > 0.8, dark

@@ -61,8 +61,8 @@ def test_joint_surf_blocks_unchanged() -> None:
     np.testing.assert_array_equal(kp.xy, kp0.xy)
     np.testing.assert_array_equal(kp.angle_rad, kp0.angle_rad)
     np.testing.assert_array_equal(g, surf_describe(grey, kp0))
-    m, var = _m_images_and_noise(rgb, **colour, pairs=_JOINT_M)
-    c0 = block_snr_weight(m, var, kp0, radius_per_size=0.5)
+    m, var, quant = _m_images_and_noise(rgb, **colour, pairs=_JOINT_M)
+    c0 = block_snr_weight(m, var, kp0, radius_per_size=0.5, quant_var=quant)
     np.testing.assert_array_equal(c, c0)
     assert (c > 0).any() and (c == 0).any()
     for k, mk in enumerate(m):

@@ -146,6 +146,7 @@ def block_snr_weight(
     *,
     extra_var: float = 0.0,
     radius_per_size: float = 3.0,
+    quant_var: np.ndarray | None = None,
 ) -> np.ndarray:
     """Weight of each m-image block of each keypoint by its signal over the expected noise.
 
@@ -158,6 +159,11 @@ def block_snr_weight(
     weight is the Wiener gain ``max(0, E - N) / E`` (the share of the gradient energy that is
     signal): 0 where the colour ratios hold nothing but noise -- dark, flat or clipped windows
     -- so the joint descriptor is then exactly the grey one, towards 1 at strong colour edges.
+    ``quant_var`` (the quantisation's share of ``var``, same shape): the model takes it as
+    independent per-pixel noise, which it is only where the sensor noise dithers it; given,
+    the window's noise is the mean squared finest diagonal detail ``HH`` of the m-image
+    clipped to [``var - quant_var``, ``var``] (issue 17: flat dark patches of 8-bit linear
+    images).
 
     Returns
     -------
@@ -183,15 +189,18 @@ def block_snr_weight(
         gx = cv2.Sobel(mk, cv2.CV_32F, 1, 0, ksize=3)
         gy = cv2.Sobel(mk, cv2.CV_32F, 0, 1, ksize=3)
         energy = window_mean((gx * gx + gy * gy) * np.float32(1.0 / 64.0))
-        # The propagated model treats quantisation as independent noise per pixel; on a flat
-        # patch with less sensor noise than one step it is not (every pixel rounds alike).
-        # The finest diagonal detail of the m-image itself, which texture only adds to,
-        # bounds the noise it really holds: the smaller of the two is taken.
-        hh = 0.5 * (mk[:-1, :-1] - mk[:-1, 1:] - mk[1:, :-1] + mk[1:, 1:])
-        detail = np.zeros_like(mk)
-        detail[:-1, :-1] = hh * hh
         model = window_mean(var[k])
-        noise = _SOBEL_NOISE_GAIN * (np.minimum(model, window_mean(detail)) + extra_var)
+        if quant_var is not None:
+            # The model counts quantisation as independent noise per pixel; with less sensor
+            # noise than one step it is not (a flat patch rounds alike at every pixel). Its
+            # share is bounded by what the m-image's finest diagonal detail holds (texture
+            # only adds to that): noise = detail clipped to [sensor part, model].
+            hh = 0.5 * (mk[:-1, :-1] - mk[:-1, 1:] - mk[1:, :-1] + mk[1:, 1:])
+            detail = np.zeros_like(mk)
+            detail[:-1, :-1] = hh * hh
+            sensor = model - window_mean(quant_var[k])
+            model = np.clip(window_mean(detail), sensor, model)
+        noise = _SOBEL_NOISE_GAIN * (model + extra_var)
         out[:, k] = np.where(energy > noise, 1.0 - noise / np.maximum(energy, 1e-30), 0.0)
     return out
 
@@ -278,10 +287,10 @@ def _m_images_and_noise(
     noise_floor: float,
     saturation: float,
     pairs: tuple[int, ...] | None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The noise-aware m-images and their expected noise variance (:func:`m_noise_variance`
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The noise-aware m-images, their expected noise variance (:func:`m_noise_variance`
     with the sensor noise measured in the image, :func:`~vision.features.colour_input.
-    noise_model`)."""
+    noise_model`) and the quantisation's share of it."""
     w = check_white_level(rgb, white_level)
     lin = linear_from_image(rgb, transfer=transfer, white_level=w)
     step = 1.0 / w
@@ -292,7 +301,9 @@ def _m_images_and_noise(
     weight = clipped_weight(lin, saturation) if saturation < 1.0 else None
     m = robust_m_images(lin, floor=floor, weight=weight, pairs=pairs)
     var = m_noise_variance(lin, floor=floor, shot=shot, read=read, weight=weight, pairs=pairs)
-    return m, var
+    q = step * step / 12.0  # the quantisation's share of ``read``
+    quant = m_noise_variance(lin, floor=floor, shot=0.0, read=q, weight=weight, pairs=pairs)
+    return m, var, quant
 
 
 def joint_m_images(
@@ -329,12 +340,12 @@ def joint_parts(
 
     ``colour`` holds ``transfer``, ``white_level``, ``noise_floor``, ``saturation``.
     """
-    m, var = _m_images_and_noise(rgb, **colour, pairs=_JOINT_M)
+    m, var, quant = _m_images_and_noise(rgb, **colour, pairs=_JOINT_M)
     if base == "sift":
         kp, cvk, g = _sift_detect_describe(grey, **detect)
         width = 128
         # The uint8 mapping for OpenCV adds its quantisation step to the m-image noise.
-        c = block_snr_weight(m, var, kp, extra_var=(1.0 / M_SCALE) ** 2 / 12.0)
+        c = block_snr_weight(m, var, kp, extra_var=(1.0 / M_SCALE) ** 2 / 12.0, quant_var=quant)
         parts = np.zeros((len(kp), len(m), width), np.float32)
         for k, mk in enumerate(m):
             live = np.flatnonzero(c[:, k] > 0)  # blocks of weight 0 stay 0: not described
@@ -355,7 +366,7 @@ def joint_parts(
         e = np.zeros((0, width), np.float32)
         return kp, e, np.zeros((0, 2, width), np.float32), np.zeros((0, 2), np.float32)
     g = np.asarray(fg.descriptors, np.float32)
-    c = block_snr_weight(m, var, kp, radius_per_size=0.5)
+    c = block_snr_weight(m, var, kp, radius_per_size=0.5, quant_var=quant)
     # Both m-images in one pass, at the grey keypoints' positions, scales and orientations;
     # blocks of weight 0 are not computed (they stay 0).
     parts = surf_describe_channels(m, kp, live=c > 0, upright=up, extended=ext, coarse=True)
