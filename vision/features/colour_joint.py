@@ -130,13 +130,34 @@ def m_noise_variance(
     -------
     ndarray of shape (len(pairs), H, W), float32
     """
+    return _m_variances(lin, floor, shot, (read,), weight, pairs)[0]
+
+
+def _m_variances(
+    lin: np.ndarray,
+    floor: float,
+    shot: float,
+    reads: tuple[float, ...],
+    weight: np.ndarray | None,
+    pairs: tuple[int, ...] | None,
+) -> list[np.ndarray]:
+    """:func:`m_noise_variance` for several read-noise levels, the first with ``shot`` and
+    the others without (the quantisation's share), sharing ``1 / (C + f)^2``."""
     idx = range(3) if pairs is None else pairs
     x = lin + np.float32(floor)
-    rel = (np.float32(shot) * lin + np.float32(read)) / (x * x)  # var(log(C + f)) per channel
-    out = np.stack([rel[..., _PAIR_CHANNELS[i][0]] + rel[..., _PAIR_CHANNELS[i][1]] for i in idx])
-    if weight is not None:
-        out *= (weight * weight)[None]
-    return out.astype(np.float32)
+    inv = 1.0 / (x * x)
+    w2 = None if weight is None else (weight * weight)[None]
+    outs = []
+    for j, read in enumerate(reads):
+        num = np.float32(shot) * lin + np.float32(read) if j == 0 else np.float32(read)
+        rel = num * inv  # var(log(C + f)) per channel
+        out = np.stack(
+            [rel[..., _PAIR_CHANNELS[i][0]] + rel[..., _PAIR_CHANNELS[i][1]] for i in idx]
+        )
+        if w2 is not None:
+            out *= w2
+        outs.append(out.astype(np.float32))
+    return outs
 
 
 def block_snr_weight(
@@ -300,9 +321,8 @@ def _m_images_and_noise(
     floor = max(floor, 1e-6)
     weight = clipped_weight(lin, saturation) if saturation < 1.0 else None
     m = robust_m_images(lin, floor=floor, weight=weight, pairs=pairs)
-    var = m_noise_variance(lin, floor=floor, shot=shot, read=read, weight=weight, pairs=pairs)
     q = step * step / 12.0  # the quantisation's share of ``read``
-    quant = m_noise_variance(lin, floor=floor, shot=0.0, read=q, weight=weight, pairs=pairs)
+    var, quant = _m_variances(lin, floor, shot, (read, q), weight, pairs)
     return m, var, quant
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numbers
 
+import cv2
 import numpy as np
 
 from vision.features.surf_describe import (
@@ -177,7 +178,11 @@ def surf_describe_channels(
                 f"{live.dtype} {live.shape}"
             )
     scales = _keypoint_scales(keypoints)
-    ii = integral_image(np.moveaxis(images, 0, -1))
+    # One interleaved (H + 1, W + 1, C) summed-area table in float64 (OpenCV's integral:
+    # the same sums as integral_image per channel, several times faster).
+    ii = cv2.integral(np.ascontiguousarray(np.moveaxis(images, 0, -1)), sdepth=cv2.CV_64F)
+    if ii.ndim == 2:  # OpenCV drops a single channel's axis
+        ii = ii[..., None]
     theta = np.zeros(len(keypoints)) if upright else -keypoints.angle_rad
     return describe_integral_channels(
         ii, keypoints.xy, scales, theta, live=live, extended=extended, coarse=coarse
