@@ -29,7 +29,9 @@ __all__ = [
     "check_white_level",
     "clipped_weight",
     "linear_from_image",
+    "noise_estimates",
     "noise_floor",
+    "noise_model",
     "noise_sigma",
     "srgb8_from_linear",
     "srgb_decode",
@@ -113,11 +115,24 @@ def noise_sigma(x: np.ndarray) -> float:
     x = np.asarray(x, dtype=np.float32)
     if x.ndim == 2:
         x = x[..., None]
+    if x.shape[0] >= 4 and x.shape[1] >= 4:  # a 1-in-4 subsample of the blocks suffices
+        return float(np.median(_fine_detail(x)[0]) / 0.6745)
     h, w = (x.shape[0] // 2) * 2, (x.shape[1] // 2) * 2
     a, b = x[0:h:2, 0:w:2], x[0:h:2, 1:w:2]
     c, d = x[1:h:2, 0:w:2], x[1:h:2, 1:w:2]
-    hh = 0.5 * (a - b - c + d)
-    return float(np.median(np.abs(hh[::2, ::2])) / 0.6745)  # a 1-in-4 subsample suffices
+    return float(np.median(np.abs(0.5 * (a - b - c + d))) / 0.6745)
+
+
+def _fine_detail(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``|HH|``, the block mean and the block maximum of every second 2x2 block along each
+    axis (a quarter of the blocks) of an (H, W, C) image with H, W >= 4, flattened over
+    blocks and channels: what :func:`noise_sigma` and :func:`noise_model` both measure."""
+    h, w = (x.shape[0] // 2) * 2, (x.shape[1] // 2) * 2
+    p, r = x[0:h:4, 0:w:4], x[0:h:4, 1:w:4]
+    s, t = x[1:h:4, 0:w:4], x[1:h:4, 1:w:4]
+    hh = np.abs(0.5 * (p - r - s + t)).reshape(-1)
+    mu = (0.25 * (p + r + s + t)).reshape(-1)
+    return hh, mu, np.maximum.reduce([p, r, s, t]).reshape(-1)
 
 
 def noise_floor(lin: np.ndarray, step: float, k: float) -> float:
@@ -180,16 +195,33 @@ def noise_model(lin: np.ndarray, step: float, *, bins: int = 16) -> tuple[float,
     x = np.asarray(lin, dtype=np.float32)
     if x.ndim == 2:
         x = x[..., None]
-    h, w = (x.shape[0] // 2) * 2, (x.shape[1] // 2) * 2
     q = step * step / 12.0
-    if h < 4 or w < 4:
+    if x.shape[0] < 4 or x.shape[1] < 4:
         return 0.0, float(q)
     # Every second 2x2 block along each axis (a quarter of them) is plenty for 16 bins.
-    p, r = x[0:h:4, 0:w:4], x[0:h:4, 1:w:4]
-    s, t = x[1:h:4, 0:w:4], x[1:h:4, 1:w:4]
-    hh = np.abs(0.5 * (p - r - s + t)).reshape(-1)
-    mu = (0.25 * (p + r + s + t)).reshape(-1)
-    keep = np.maximum.reduce([p, r, s, t]).reshape(-1) < 0.98
+    return _fit_noise(*_fine_detail(x), q, bins)
+
+
+def noise_estimates(lin: np.ndarray, step: float, k: float) -> tuple[float, float, float]:
+    """``(noise_floor(lin, step, k), *noise_model(lin, step))`` from one pass over the image's
+    fine Haar detail (both measure the same blocks)."""
+    x = np.asarray(lin, dtype=np.float32)
+    if x.ndim == 2:
+        x = x[..., None]
+    if x.shape[0] < 4 or x.shape[1] < 4:
+        return (noise_floor(x, step, k), *noise_model(x, step))
+    hh, mu, peak = _fine_detail(x)
+    sigma = float(np.median(hh) / 0.6745)
+    floor = float(k * np.hypot(sigma, step / np.sqrt(12.0)))
+    return (floor, *_fit_noise(hh, mu, peak, step * step / 12.0, 16))
+
+
+def _fit_noise(
+    hh: np.ndarray, mu: np.ndarray, peak: np.ndarray, q: float, bins: int
+) -> tuple[float, float]:
+    """The least-squares fit of :func:`noise_model` from its blocks' ``|HH|``, means and
+    maxima (clipped blocks, maximum >= 0.98, left out); ``q`` the quantisation variance."""
+    keep = peak < 0.98
     hh, mu = hh[keep], mu[keep]
     if hh.size < 4 * bins:
         return 0.0, float(np.median(hh) / 0.6745) ** 2 + q if hh.size else q

@@ -27,7 +27,7 @@ from vision.features.colour_input import (
     clipped_weight,
     linear_from_image,
     m_images_uint8,
-    noise_model,
+    noise_estimates,
     srgb_decode,
 )
 from vision.features.colour_input import noise_floor as _noise_floor
@@ -130,13 +130,34 @@ def m_noise_variance(
     -------
     ndarray of shape (len(pairs), H, W), float32
     """
+    return _m_variances(lin, floor, shot, (read,), weight, pairs)[0]
+
+
+def _m_variances(
+    lin: np.ndarray,
+    floor: float,
+    shot: float,
+    reads: tuple[float, ...],
+    weight: np.ndarray | None,
+    pairs: tuple[int, ...] | None,
+) -> list[np.ndarray]:
+    """:func:`m_noise_variance` for several read-noise levels, the first with ``shot`` and
+    the others without (the quantisation's share), sharing ``1 / (C + f)^2``."""
     idx = range(3) if pairs is None else pairs
     x = lin + np.float32(floor)
-    rel = (np.float32(shot) * lin + np.float32(read)) / (x * x)  # var(log(C + f)) per channel
-    out = np.stack([rel[..., _PAIR_CHANNELS[i][0]] + rel[..., _PAIR_CHANNELS[i][1]] for i in idx])
-    if weight is not None:
-        out *= (weight * weight)[None]
-    return out.astype(np.float32)
+    inv = 1.0 / (x * x)
+    w2 = None if weight is None else (weight * weight)[None]
+    outs = []
+    for j, read in enumerate(reads):
+        num = np.float32(shot) * lin + np.float32(read) if j == 0 else np.float32(read)
+        rel = num * inv  # var(log(C + f)) per channel
+        out = np.stack(
+            [rel[..., _PAIR_CHANNELS[i][0]] + rel[..., _PAIR_CHANNELS[i][1]] for i in idx]
+        )
+        if w2 is not None:
+            out *= w2
+        outs.append(out.astype(np.float32))
+    return outs
 
 
 def block_snr_weight(
@@ -146,6 +167,7 @@ def block_snr_weight(
     *,
     extra_var: float = 0.0,
     radius_per_size: float = 3.0,
+    quant_var: np.ndarray | None = None,
 ) -> np.ndarray:
     """Weight of each m-image block of each keypoint by its signal over the expected noise.
 
@@ -158,6 +180,11 @@ def block_snr_weight(
     weight is the Wiener gain ``max(0, E - N) / E`` (the share of the gradient energy that is
     signal): 0 where the colour ratios hold nothing but noise -- dark, flat or clipped windows
     -- so the joint descriptor is then exactly the grey one, towards 1 at strong colour edges.
+    ``quant_var`` (the quantisation's share of ``var``, same shape): the model takes it as
+    independent per-pixel noise, which it is only where the sensor noise dithers it; given,
+    the window's noise is the mean squared finest diagonal detail ``HH`` of the m-image
+    clipped to [``var - quant_var``, ``var``] (issue 17: flat dark patches of 8-bit linear
+    images).
 
     Returns
     -------
@@ -183,7 +210,18 @@ def block_snr_weight(
         gx = cv2.Sobel(mk, cv2.CV_32F, 1, 0, ksize=3)
         gy = cv2.Sobel(mk, cv2.CV_32F, 0, 1, ksize=3)
         energy = window_mean((gx * gx + gy * gy) * np.float32(1.0 / 64.0))
-        noise = _SOBEL_NOISE_GAIN * (window_mean(var[k]) + extra_var)
+        model = window_mean(var[k])
+        if quant_var is not None:
+            # The model counts quantisation as independent noise per pixel; with less sensor
+            # noise than one step it is not (a flat patch rounds alike at every pixel). Its
+            # share is bounded by what the m-image's finest diagonal detail holds (texture
+            # only adds to that): noise = detail clipped to [sensor part, model].
+            hh = 0.5 * (mk[:-1, :-1] - mk[:-1, 1:] - mk[1:, :-1] + mk[1:, 1:])
+            detail = np.zeros_like(mk)
+            detail[:-1, :-1] = hh * hh
+            sensor = model - window_mean(quant_var[k])
+            model = np.clip(window_mean(detail), sensor, model)
+        noise = _SOBEL_NOISE_GAIN * (model + extra_var)
         out[:, k] = np.where(energy > noise, 1.0 - noise / np.maximum(energy, 1e-30), 0.0)
     return out
 
@@ -270,21 +308,22 @@ def _m_images_and_noise(
     noise_floor: float,
     saturation: float,
     pairs: tuple[int, ...] | None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The noise-aware m-images and their expected noise variance (:func:`m_noise_variance`
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The noise-aware m-images, their expected noise variance (:func:`m_noise_variance`
     with the sensor noise measured in the image, :func:`~vision.features.colour_input.
-    noise_model`)."""
+    noise_model`) and the quantisation's share of it."""
     w = check_white_level(rgb, white_level)
     lin = linear_from_image(rgb, transfer=transfer, white_level=w)
     step = 1.0 / w
     if transfer == "srgb":  # one DN near black of the decoded curve
         step = float(srgb_decode(np.float32(1.0 / w)))
-    floor = max(_noise_floor(lin, step, noise_floor), 1e-6)
+    floor, shot, read = noise_estimates(lin, step, noise_floor)
+    floor = max(floor, 1e-6)
     weight = clipped_weight(lin, saturation) if saturation < 1.0 else None
     m = robust_m_images(lin, floor=floor, weight=weight, pairs=pairs)
-    shot, read = noise_model(lin, step)
-    var = m_noise_variance(lin, floor=floor, shot=shot, read=read, weight=weight, pairs=pairs)
-    return m, var
+    q = step * step / 12.0  # the quantisation's share of ``read``
+    var, quant = _m_variances(lin, floor, shot, (read, q), weight, pairs)
+    return m, var, quant
 
 
 def joint_m_images(
@@ -321,35 +360,36 @@ def joint_parts(
 
     ``colour`` holds ``transfer``, ``white_level``, ``noise_floor``, ``saturation``.
     """
-    m, var = _m_images_and_noise(rgb, **colour, pairs=_JOINT_M)
+    m, var, quant = _m_images_and_noise(rgb, **colour, pairs=_JOINT_M)
     if base == "sift":
         kp, cvk, g = _sift_detect_describe(grey, **detect)
         width = 128
         # The uint8 mapping for OpenCV adds its quantisation step to the m-image noise.
-        c = block_snr_weight(m, var, kp, extra_var=(1.0 / M_SCALE) ** 2 / 12.0)
+        c = block_snr_weight(m, var, kp, extra_var=(1.0 / M_SCALE) ** 2 / 12.0, quant_var=quant)
         parts = np.zeros((len(kp), len(m), width), np.float32)
         for k, mk in enumerate(m):
             live = np.flatnonzero(c[:, k] > 0)  # blocks of weight 0 stay 0: not described
             if len(live):
                 parts[live, k] = _m_descriptors_sift(mk[None], [cvk[i] for i in live])[:, 0]
         return kp, g, parts, c
-    from vision.features.surf import surf_describe, surf_keypoints
+    from vision.features.surf import surf_describe_channels, surf_features
 
     det = {key: v for key, v in detect.items() if v is not None}
-    kp = surf_keypoints(grey, **det, **opts)
+    # The grey base exactly as extract(grey, "surf"): detection, orientation and descriptors
+    # on one integral image.
+    fg = surf_features(grey, **det, **opts)
+    kp = fg.keypoints
     up = bool(opts.get("upright", False))
     ext = bool(opts.get("extended", False))
     width = 128 if ext else 64
     if len(kp) == 0:
         e = np.zeros((0, width), np.float32)
         return kp, e, np.zeros((0, 2, width), np.float32), np.zeros((0, 2), np.float32)
-    g = np.asarray(surf_describe(grey, kp, upright=up, extended=ext), np.float32)
-    c = block_snr_weight(m, var, kp, radius_per_size=0.5)
-    parts = np.zeros((len(kp), len(m), width), np.float32)
-    for k, mk in enumerate(m):
-        live = np.flatnonzero(c[:, k] > 0)
-        if len(live):
-            parts[live, k] = surf_describe(mk, kp.take(live), upright=up, extended=ext, coarse=True)
+    g = np.asarray(fg.descriptors, np.float32)
+    c = block_snr_weight(m, var, kp, radius_per_size=0.5, quant_var=quant)
+    # Both m-images in one pass, at the grey keypoints' positions, scales and orientations;
+    # blocks of weight 0 are not computed (they stay 0).
+    parts = surf_describe_channels(m, kp, live=c > 0, upright=up, extended=ext, coarse=True)
     return kp, g, parts, c
 
 

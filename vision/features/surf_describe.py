@@ -33,7 +33,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["describe_integral", "orientation_integral"]
+__all__ = ["describe_integral", "describe_integral_channels", "orientation_integral"]
 
 #: Scale of a keypoint in units of its size_px (size_px = 20 s).
 WINDOW_IN_S = 20.0
@@ -222,6 +222,98 @@ def _descriptors(
     return out
 
 
+@numba.njit(cache=True, inline="always")
+def _area_c(ii, x, y, ch):
+    """:func:`_area` on channel ``ch`` of a multi-channel integral image (H + 1, W + 1, C)."""
+    xi = min(int(x), ii.shape[1] - 2)
+    yi = min(int(y), ii.shape[0] - 2)
+    fx = x - xi
+    fy = y - yi
+    top = ii[yi, xi, ch] + fx * (ii[yi, xi + 1, ch] - ii[yi, xi, ch])
+    bottom = ii[yi + 1, xi, ch] + fx * (ii[yi + 1, xi + 1, ch] - ii[yi + 1, xi, ch])
+    return top + fy * (bottom - top)
+
+
+@numba.njit(cache=True)
+def _descriptors_channels(
+    ii, live, xs, ys, scales, thetas, extended, offs, weights, cell, cell_w, floors, haar_side
+):
+    """:func:`_descriptors` of every channel of ``ii`` (H + 1, W + 1, C) in one pass: the
+    sample positions and Haar boxes are computed once per keypoint and read from all channels
+    (interleaved, so one cache line serves them all); ``live[p, k]`` false leaves keypoint
+    ``p`` of channel ``k`` at 0 without computing it. Same arithmetic per channel as
+    :func:`_descriptors` with :func:`_haar`."""
+    n = xs.shape[0]
+    nc = ii.shape[2]
+    per_cell = 8 if extended else 4
+    dim = 16 * per_cell
+    out = np.zeros((n, nc, dim), dtype=np.float32)
+    acc = np.zeros((nc, dim))
+    height = ii.shape[0] - 1
+    width = ii.shape[1] - 1
+    for p in range(n):
+        todo = False
+        for k in range(nc):
+            todo = todo or live[p, k]
+        if not todo:
+            continue
+        s = scales[p]
+        c = math.cos(thetas[p])
+        sn = math.sin(thetas[p])
+        side = min(haar_side * s, float(height), float(width))
+        h = 0.5 * side
+        acc[:, :] = 0.0
+        for b in range(offs.shape[0]):
+            v = offs[b]
+            for a in range(offs.shape[0]):
+                u = offs[a]
+                gx = xs[p] + s * (c * u - sn * v)
+                gy = ys[p] + s * (sn * u + c * v)
+                x0 = min(max(gx + 0.5 - h, 0.0), width - side)
+                y0 = min(max(gy + 0.5 - h, 0.0), height - side)
+                x1 = x0 + h
+                x2 = x0 + side
+                y1 = y0 + h
+                y2 = y0 + side
+                w = weights[b, a]
+                for k in range(nc):
+                    if not live[p, k]:
+                        continue
+                    f00 = _area_c(ii, x0, y0, k)
+                    f10 = _area_c(ii, x1, y0, k)
+                    f20 = _area_c(ii, x2, y0, k)
+                    f01 = _area_c(ii, x0, y1, k)
+                    f21 = _area_c(ii, x2, y1, k)
+                    f02 = _area_c(ii, x0, y2, k)
+                    f12 = _area_c(ii, x1, y2, k)
+                    f22 = _area_c(ii, x2, y2, k)
+                    dx = (f22 - f12 - f20 + f10) - (f12 - f02 - f10 + f00)
+                    dy = (f22 - f02 - f21 + f01) - (f21 - f01 - f20 + f00)
+                    tx = w * (c * dx + sn * dy)
+                    ty = w * (-sn * dx + c * dy)
+                    for kb in range(2):
+                        wb = cell_w[b, kb]
+                        if wb == 0.0:
+                            continue
+                        for ka in range(2):
+                            wa = cell_w[a, ka]
+                            if wa == 0.0:
+                                continue
+                            base = (cell[b, kb] * 4 + cell[a, ka]) * per_cell
+                            _accumulate(acc[k], base, tx, ty, wa * wb, extended)
+        for k in range(nc):
+            if not live[p, k]:
+                continue
+            norm = 0.0
+            for d in range(dim):
+                norm += acc[k, d] * acc[k, d]
+            if norm > floors[k] * floors[k]:
+                inv = 1.0 / math.sqrt(norm)
+                for d in range(dim):
+                    out[p, k, d] = acc[k, d] * inv
+    return out
+
+
 def _cell_weights(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Sub-regions (n, 2) and weights (n, 2) of the samples at positions ``t`` (units of s)
     along a side: each sample is shared between the two nearest sub-region centres by linear
@@ -316,4 +408,53 @@ def describe_integral(
         _CELL,
         _CELL_W,
         _noise_floor(ii),
+    )
+
+
+def describe_integral_channels(
+    ii: np.ndarray,
+    xy: np.ndarray,
+    scales: np.ndarray,
+    theta_image: np.ndarray,
+    *,
+    live: np.ndarray | None = None,
+    extended: bool = False,
+    coarse: bool = False,
+) -> np.ndarray:
+    """:func:`describe_integral` of every channel of a multi-channel integral image
+    ``ii`` (H + 1, W + 1, C) in one pass, (N, C, 64) or (N, C, 128) float32.
+
+    ``live`` (N, C) bool, default all true: where false the descriptor is left at 0 and not
+    computed. Each channel's result equals :func:`describe_integral` of that channel's
+    integral image.
+    """
+    ii = np.ascontiguousarray(ii, dtype=np.float64)
+    if ii.ndim != 3:
+        raise ValueError(f"ii must have shape (H + 1, W + 1, C), got {ii.shape}")
+    xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
+    n, nc = len(xy), ii.shape[2]
+    live = np.ones((n, nc), bool) if live is None else np.ascontiguousarray(live, dtype=bool)
+    if live.shape != (n, nc):
+        raise ValueError(f"live must have shape {(n, nc)}, got {live.shape}")
+    offs, w, cell, cell_w = (
+        (_COARSE_T, _COARSE_W, _COARSE_CELL, _COARSE_CELL_W)
+        if coarse
+        else (_DESC_T, _DESC_W, _CELL, _CELL_W)
+    )
+    share = float(w.sum() / _DESC_W.sum())
+    floors = np.array([_noise_floor(ii[..., k]) * share for k in range(nc)], np.float64)
+    return _descriptors_channels(
+        ii,
+        live,
+        np.ascontiguousarray(xy[:, 0]),
+        np.ascontiguousarray(xy[:, 1]),
+        np.ascontiguousarray(scales, dtype=np.float64),
+        np.ascontiguousarray(theta_image, dtype=np.float64),
+        bool(extended),
+        offs,
+        w,
+        cell,
+        cell_w,
+        floors,
+        4.0 if coarse else 2.0,
     )

@@ -30,9 +30,9 @@ LAYERS_PER_OCTAVE = 4
 
 def integral_image(image: np.ndarray) -> np.ndarray:
     """Summed-area table ``ii`` of shape (H + 1, W + 1), float64: ``ii[r, c] = sum image[:r, :c]``
-    (paper eq. 1)."""
+    (paper eq. 1). An (H, W, C) image gives one table per channel, (H + 1, W + 1, C)."""
     img = np.asarray(image, dtype=np.float64)
-    ii = np.zeros((img.shape[0] + 1, img.shape[1] + 1), dtype=np.float64)
+    ii = np.zeros((img.shape[0] + 1, img.shape[1] + 1, *img.shape[2:]), dtype=np.float64)
     np.cumsum(np.cumsum(img, axis=0), axis=1, out=ii[1:, 1:])
     return ii
 
