@@ -176,6 +176,22 @@ def _accumulate(acc, base, tx, ty, w, extended):
         acc[base + 3] += w * abs(ty)
 
 
+@numba.njit(cache=True, inline="always")
+def _soft_bin(acc, cell, cell_w, b, a, per_cell, tx, ty, extended):
+    """Add the sample at grid position (a, b) to the (up to four) sub-regions it is shared
+    between (:func:`_cell_weights`)."""
+    for kb in range(2):
+        wb = cell_w[b, kb]
+        if wb == 0.0:
+            continue
+        for ka in range(2):
+            wa = cell_w[a, ka]
+            if wa == 0.0:
+                continue
+            base = (cell[b, kb] * 4 + cell[a, ka]) * per_cell
+            _accumulate(acc, base, tx, ty, wa * wb, extended)
+
+
 @numba.njit(cache=True)
 def _descriptors(
     ii, xs, ys, scales, thetas, extended, offs, weights, cell, cell_w, floor, haar_side=2.0
@@ -202,16 +218,7 @@ def _descriptors(
                 w = weights[b, a]
                 tx = w * (c * dx + sn * dy)
                 ty = w * (-sn * dx + c * dy)
-                for kb in range(2):
-                    wb = cell_w[b, kb]
-                    if wb == 0.0:
-                        continue
-                    for ka in range(2):
-                        wa = cell_w[a, ka]
-                        if wa == 0.0:
-                            continue
-                        base = (cell[b, kb] * 4 + cell[a, ka]) * per_cell
-                        _accumulate(acc, base, tx, ty, wa * wb, extended)
+                _soft_bin(acc, cell, cell_w, b, a, per_cell, tx, ty, extended)
         norm = 0.0
         for d in range(dim):
             norm += acc[d] * acc[d]
@@ -291,16 +298,7 @@ def _descriptors_channels(
                     dy = (f22 - f02 - f21 + f01) - (f21 - f01 - f20 + f00)
                     tx = w * (c * dx + sn * dy)
                     ty = w * (-sn * dx + c * dy)
-                    for kb in range(2):
-                        wb = cell_w[b, kb]
-                        if wb == 0.0:
-                            continue
-                        for ka in range(2):
-                            wa = cell_w[a, ka]
-                            if wa == 0.0:
-                                continue
-                            base = (cell[b, kb] * 4 + cell[a, ka]) * per_cell
-                            _accumulate(acc[k], base, tx, ty, wa * wb, extended)
+                    _soft_bin(acc[k], cell, cell_w, b, a, per_cell, tx, ty, extended)
         for k in range(nc):
             if not live[p, k]:
                 continue

@@ -82,16 +82,7 @@ async def update_recognition_settings(
     if body.global_threshold is None:
         before, after = await back_to_automatic(session)
         if after is not None and after is not before:
-            audit.record(
-                session,
-                actor=audit.Actor.of(user),
-                kind="threshold",
-                entity_id="global",
-                action="automatic",
-                old=None if before is None else settings_audit_value(before),
-                new=settings_audit_value(after),
-                reason=body.reason or body.note or None,
-            )
+            _audit_threshold(session, user, body, "automatic", before, after)
         return _public(after)
     before = await latest_settings(session)
     row = RecognitionSettings(
@@ -101,14 +92,25 @@ async def update_recognition_settings(
     )
     session.add(row)
     await session.flush()
+    _audit_threshold(session, user, body, "set", before, row)
+    return _public(row)
+
+
+def _audit_threshold(
+    session: Any,
+    user: Any,
+    body: RecognitionSettingsIn,
+    action: str,
+    before: RecognitionSettings | None,
+    after: RecognitionSettings,
+) -> None:
     audit.record(
         session,
         actor=audit.Actor.of(user),
         kind="threshold",
         entity_id="global",
-        action="set",
+        action=action,
         old=None if before is None else settings_audit_value(before),
-        new=settings_audit_value(row),
+        new=settings_audit_value(after),
         reason=body.reason or body.note or None,
     )
-    return _public(row)
