@@ -174,6 +174,14 @@ def test_console_pages_fit_a_full_hd_screen(browser, shared_server):
     overflow, and its key controls are shown inside the screen's width, the first ones in
     the first screenful."""
     token = shared_server.token("fullhd-engineer", "engineer")
+    # An audit row with long unbroken values (a JSON note and a reason without spaces): one
+    # such row once widened the Audit page's table to 2981 px. Set, then back to automatic.
+    auth = {"Authorization": f"Bearer {token}"}
+    for body in ({"global_threshold": 0.5, "note": "n" * 200, "reason": "r" * 250},
+                 {"global_threshold": None, "reason": "a" * 250}):  # fmt: skip
+        r = httpx.put(f"{shared_server.base}/api/recognition/settings", json=body, headers=auth,
+                      timeout=10)  # fmt: skip
+        assert r.status_code == 200, r.text
     page = browser.new_page(viewport={"width": 1920, "height": 1080})
     page.goto(f"{shared_server.base}/#cell")
     page.fill("#token", token)
