@@ -58,7 +58,11 @@ def test_calibration_tab_lists_sessions_shows_reports_and_activates(browser, ser
     )
     page.click(f".activate[data-id='{cid}']")
     page.wait_for_selector(f"#calib-sessions tbody tr[data-id='{sid}'] .status-active")
-    assert f"intrinsic: #{cid}" in page.inner_text("#calib-active")
+    # The sessions table and the "Active" line refresh from two requests: wait for both.
+    page.wait_for_function(
+        "(want) => document.querySelector('#calib-active').textContent.includes(want)",
+        arg=f"intrinsic: #{cid}",
+    )
     # Start of an automatic run: this server has no simulator and no board pattern was
     # given, so the API's reason is shown (a full run is in tests/backend/test_calibration_auto.py).
     page.click("#calib-auto-start")
