@@ -208,6 +208,12 @@ async function load() {
   const gen = ++generation;
   say("");
   const f = filters();
+  // A reversed range is refused here, in the page's own words, before any request: the
+  // reports and the inspection list would each refuse it in their API's terms.
+  if (f.get("from") && f.get("to") && f.get("from") > f.get("to")) {
+    say(`From (${when(f.get("from"))}) is after To (${when(f.get("to"))}): nothing to report.`);
+    return;
+  }
   try {
     const [summary, ts, conf] = await Promise.all([
       api("GET", `/reports/summary?${f}`),
@@ -219,7 +225,10 @@ async function load() {
     renderTimeseries(ts);
     renderConfusion(conf);
   } catch (e) { if (gen === generation) say(e.message); }
-  try { await Promise.all([loadGallery(), loadTable()]); } catch (e) { if (gen === generation) say(e.message); }
+  // The first refusal stays shown (the lists' would repeat it in other words).
+  try { await Promise.all([loadGallery(), loadTable()]); } catch (e) {
+    if (gen === generation && !q("#rep-message").textContent) say(e.message);
+  }
 }
 
 async function loadChoices() {
