@@ -171,6 +171,15 @@ LOCAL_GRACE_S = 30.0
 #: A stored view as :meth:`LiveIndex.apply` takes it:
 #: ``(view_id, model_id, viewpoint, features blob, descriptor kind, descriptor version)``.
 ViewRow = tuple[int, int, int, bytes, str, str]
+#: The columns of a :data:`ViewRow`, in its order (for ``select(*VIEW_ROW_COLUMNS)``).
+VIEW_ROW_COLUMNS = (
+    TrainedView.id,
+    TrainedView.model_id,
+    TrainedView.viewpoint,
+    TrainedView.features,
+    TrainedView.descriptor_kind,
+    TrainedView.descriptor_version,
+)
 
 
 class LiveIndex:
@@ -275,18 +284,7 @@ class LiveIndex:
         t0 = time.perf_counter()
         async with db.session() as session:
             models = list(await session.scalars(select(ObjectModel)))
-            rows = (
-                await session.execute(
-                    select(
-                        TrainedView.id,
-                        TrainedView.model_id,
-                        TrainedView.viewpoint,
-                        TrainedView.features,
-                        TrainedView.descriptor_kind,
-                        TrainedView.descriptor_version,
-                    ).order_by(TrainedView.id)
-                )
-            ).all()
+            rows = (await session.execute(select(*VIEW_ROW_COLUMNS).order_by(TrainedView.id))).all()
             # Side views' images, for their colour signatures (the twins' tie-break).
             images = (
                 await session.execute(

@@ -37,7 +37,7 @@ from sqlalchemy.engine import make_url
 from backend.db.changes import CHANNEL
 from backend.db.models import AuditEntry, ObjectModel, TrainedView
 from backend.db.session import Database
-from backend.recognition.index import IndexedModel, LiveIndex, ViewRow
+from backend.recognition.index import VIEW_ROW_COLUMNS, IndexedModel, LiveIndex, ViewRow
 from backend.taskutil import cancel_and_wait
 
 __all__ = ["LISTEN_CHECK_S", "IndexSync", "SyncReport", "fingerprint"]
@@ -217,14 +217,7 @@ class IndexSync:
             async with self.db.session() as session:
                 rows = (
                     await session.execute(
-                        select(
-                            TrainedView.id,
-                            TrainedView.model_id,
-                            TrainedView.viewpoint,
-                            TrainedView.features,
-                            TrainedView.descriptor_kind,
-                            TrainedView.descriptor_version,
-                        ).where(TrainedView.id.in_(chunk))
+                        select(*VIEW_ROW_COLUMNS).where(TrainedView.id.in_(chunk))
                     )
                 ).all()
             out.extend(

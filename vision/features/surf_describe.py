@@ -379,21 +379,11 @@ def describe_integral(
     side ``4 s`` (a quarter of the work; for smooth images such as colour ratios, issue 17).
     """
     xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
-    if coarse:
-        return _descriptors(
-            ii,
-            np.ascontiguousarray(xy[:, 0]),
-            np.ascontiguousarray(xy[:, 1]),
-            np.ascontiguousarray(scales, dtype=np.float64),
-            np.ascontiguousarray(theta_image, dtype=np.float64),
-            bool(extended),
-            _COARSE_T,
-            _COARSE_W,
-            _COARSE_CELL,
-            _COARSE_CELL_W,
-            _noise_floor(ii) * float(_COARSE_W.sum() / _DESC_W.sum()),
-            4.0,
-        )
+    if coarse:  # the same window's noise floor, scaled by the coarse grid's total weight
+        grid = (_COARSE_T, _COARSE_W, _COARSE_CELL, _COARSE_CELL_W)
+        floor, side = _noise_floor(ii) * float(_COARSE_W.sum() / _DESC_W.sum()), 4.0
+    else:
+        grid, floor, side = (_DESC_T, _DESC_W, _CELL, _CELL_W), _noise_floor(ii), 2.0
     return _descriptors(
         ii,
         np.ascontiguousarray(xy[:, 0]),
@@ -401,11 +391,9 @@ def describe_integral(
         np.ascontiguousarray(scales, dtype=np.float64),
         np.ascontiguousarray(theta_image, dtype=np.float64),
         bool(extended),
-        _DESC_T,
-        _DESC_W,
-        _CELL,
-        _CELL_W,
-        _noise_floor(ii),
+        *grid,
+        floor,
+        side,
     )
 
 
