@@ -109,3 +109,10 @@ export function releaseImages(root) {
     releaseBlob(img);
   }
 }
+
+/** A datetime-local input's value as an ISO string in UTC ("" when empty or invalid). */
+export function isoUtc(localValue) {
+  if (!localValue) return "";
+  const t = new Date(localValue);
+  return Number.isFinite(t.getTime()) ? t.toISOString() : "";
+}

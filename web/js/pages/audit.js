@@ -2,7 +2,7 @@
 // calibration, user or token, when, from what to what and why (GET /api/audit).
 // Read only: the API has no way to edit the trail.  Every text goes in as a text node.
 
-import { $, el, setText } from "../dom.js";
+import { $, el, isoUtc, setText } from "../dom.js";
 
 const KINDS = ["threshold", "model", "view", "calibration", "user", "token"];
 const PAGE_SIZE = 50;
@@ -19,13 +19,6 @@ function valueText(v) {
   if (v === null || v === undefined) return "-";
   const text = JSON.stringify(v);
   return text.length > 300 ? `${text.slice(0, 297)}...` : text;
-}
-
-/** A datetime-local input's value as an ISO string in UTC ("" when empty or invalid). */
-function isoUtc(localValue) {
-  if (!localValue) return "";
-  const t = new Date(localValue);
-  return Number.isFinite(t.getTime()) ? t.toISOString() : "";
 }
 
 function filterQuery() {

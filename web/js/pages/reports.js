@@ -7,7 +7,7 @@
 // /api/inspections.
 
 import { api, ApiError, fetchBlob } from "../api.js";
-import { $, el, lazyImage, releaseImages, setText } from "../dom.js";
+import { $, el, isoUtc, lazyImage, releaseImages, setText } from "../dom.js";
 import { COLORS, bars, columns, histogram } from "../charts.js";
 
 const TABLE_SIZE = 20;
@@ -24,13 +24,6 @@ const q = (sel) => (root ? $(sel, root) : null);
 const pct = (v) => (v === null || v === undefined ? "-" : `${(v * 100).toFixed(1)} %`);
 const sec = (v) => (v === null || v === undefined ? "-" : `${v.toFixed(2)} s`);
 const when = (iso) => (iso ? iso.slice(0, 19).replace("T", " ") : "-");
-
-/** A datetime-local input's value as an ISO string in UTC ("" when empty or invalid). */
-function isoUtc(localValue) {
-  if (!localValue) return "";
-  const t = new Date(localValue);
-  return Number.isFinite(t.getTime()) ? t.toISOString() : "";
-}
 
 /** The report filters as query parameters (names of the reporting API). */
 function filters() {
