@@ -43,6 +43,8 @@ OUT_DIR = Path(__file__).parent / "out"
 DOCS_DIR = Path(__file__).parent.parent / "docs"
 #: Bounds per 1,000 inspections after the warm-up: RSS MB, open files, DB connections.
 BOUNDS = {"rss_mb": 20.0, "open_files": 1.0, "db_connections": 1.0}
+WINDOW = 5
+"""Samples in the early and late medians."""
 
 
 def rss_mb() -> float:
@@ -160,6 +162,10 @@ async def soak(args: argparse.Namespace, progress: Any) -> dict[str, Any]:
             "after_warmup": round(warm[0][key], 2) if warm else None,
             "end": round(samples[-1][key], 2) if samples else None,
             "max": round(max(s[key] for s in samples), 2) if samples else None,
+            # medians of the first and last few warm samples: a leak moves them, a file or
+            # connection that is open just when one inspection ends does not
+            "early_median": round(float(np.median(ys[:WINDOW])), 2) if ys else None,
+            "late_median": round(float(np.median(ys[-WINDOW:])), 2) if ys else None,
             "slope_per_1000": round(slope_per_1000(xs, ys), 3),
             "bound_per_1000": BOUNDS[key],
             # idle baseline: slope per the same wall time as 1,000 inspections took

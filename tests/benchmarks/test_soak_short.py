@@ -21,6 +21,9 @@ def test_thirty_inspections_leak_no_files_or_connections(tmp_path, monkeypatch):
     r = asyncio.run(soak.soak(args, lambda msg: None))
     assert r["inspections"] == 30 and sum(r["decisions"].values()) == 30
     files, conns = r["series"]["open_files"], r["series"]["db_connections"]
-    assert files["end"] <= files["after_warmup"] + 1, files
-    assert conns["max"] <= 5 and conns["end"] <= conns["after_warmup"] + 1, conns
+    # Compared as medians of five samples: each sample is taken as an inspection ends, when
+    # an image file or a second pooled connection may be open for a moment (CI once saw
+    # 27 -> 29 files between two single samples); a leak of one per inspection adds 20.
+    assert files["late_median"] <= files["early_median"] + 1, files
+    assert conns["max"] <= 5 and conns["late_median"] <= conns["early_median"] + 1, conns
     assert r["series"]["rss_mb"]["max"] > 0 and (tmp_path / "soak.png").exists()

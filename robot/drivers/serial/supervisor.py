@@ -6,7 +6,8 @@ under a :class:`~robot.drivers.serial.device.SerialDevice`:
 1. open the port (a missing or busy port is an ordinary failure, not an exception upwards);
 2. attach it to the device and run the driver's handshake (``HELLO`` and the rest);
 3. mark the link ready, then watch it: the transport's ``connection_lost`` ends it, and so
-   does silence (nothing received for ``silence_timeout_s``; a real RS-232 cable pulled out
+   does silence (nothing received for ``silence_timeout_s`` of the host's own running time:
+   a stall of this process is not the controller's silence; a real RS-232 cable pulled out
    of a USB adaptor leaves the port open but dead).  While it is up, a heartbeat ``PING``
    goes out whenever nothing was sent for ``heartbeat_s``, so the controller's watchdog
    knows the host is alive;
@@ -124,6 +125,9 @@ class LinkSupervisor:
         self._close_reason: str | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._ping: asyncio.Task[None] | None = None
+        self._last_beat_s = 0.0
+        self._rx_seen_s = 0.0
+        self._stalled_s = 0.0
 
     def start(self) -> None:
         """Start supervising (idempotent)."""
@@ -231,6 +235,7 @@ class LinkSupervisor:
             ) from None
 
     async def _heartbeat(self) -> None:
+        self._last_beat_s = time.monotonic()
         while True:
             await asyncio.sleep(self.heartbeat_s / 2)
             try:
@@ -240,10 +245,19 @@ class LinkSupervisor:
 
     def _beat(self) -> None:
         link = self.link
+        now = time.monotonic()
+        # Silence is counted in the host's own running time.  When this process is held up
+        # (the GIL behind a long computation, swapping, a starved machine) the beat comes
+        # late and no ping went out meanwhile, so the quiet of those seconds says nothing
+        # about the controller: the lateness is discounted until something is received.
+        late = now - self._last_beat_s - self.heartbeat_s / 2
+        self._last_beat_s = now
+        if self.device.last_rx_s != self._rx_seen_s:
+            self._rx_seen_s, self._stalled_s = self.device.last_rx_s, 0.0
+        self._stalled_s += max(0.0, min(late, now - self.device.last_rx_s))
         if not self.ready.is_set() or link is None:
             return
-        now = time.monotonic()
-        if now - self.device.last_rx_s > self.silence_timeout_s:
+        if now - self.device.last_rx_s - self._stalled_s > self.silence_timeout_s:
             self._close_reason = f"controller silent for {self.silence_timeout_s:g} s"
             link.close()
         elif now - self.device.last_tx_s >= self.heartbeat_s and (
