@@ -756,9 +756,9 @@ class InspectionRun:
     job: Any = None
 
 
-async def grab_background(rt: Any, *, speed: float | None = None) -> None:
-    """Grab the empty-belt background of the top view at the station (the station must be
-    empty), e.g. after the lights changed; stored with the teaches' backgrounds."""
+async def _station_top(rt: Any) -> tuple[_Ctx, Any]:
+    """The context and the top view at the station, planned with the active hand-eye
+    calibration (the nominal mounting without one)."""
     from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
 
     async with rt.database.session() as session:
@@ -767,6 +767,13 @@ async def grab_background(rt: Any, *, speed: float | None = None) -> None:
     ctx = await context(rt)
     top = (await asyncio.to_thread(plan_shots, ctx.station, (1,), T_ee_cam=T,
                                    object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
+    return ctx, top
+
+
+async def grab_background(rt: Any, *, speed: float | None = None) -> None:
+    """Grab the empty-belt background of the top view at the station (the station must be
+    empty), e.g. after the lights changed; stored with the teaches' backgrounds."""
+    _ctx, top = await _station_top(rt)
     frame = await rt.cell.look(top.q, speed=speed)
     rt.teach_backgrounds.put(top, frame.rgb)
 
@@ -784,7 +791,6 @@ async def grab_belt_background(
     simulator's today: a :class:`~vision.errors.Conflict` otherwise).  Kept on the runtime
     (``rt.belt_background``) until the next grab.
     """
-    from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
     from backend.inspection.belt import BeltGeometry, build_belt_background
 
     sim = rt.sim
@@ -794,12 +800,7 @@ async def grab_belt_background(
         raise InvalidInput(f"frames must be an integer in 5..64, got {frames!r}")
     if not (isinstance(jog_m_s, int | float) and 0.01 <= jog_m_s <= 2.0):
         raise InvalidInput(f"jog_m_s must be in [0.01, 2] m/s, got {jog_m_s!r}")
-    async with rt.database.session() as session:
-        T = (await active_camera_calibration(session, rt.cell_id)).T_ee_cam
-    T = np.asarray(NOMINAL_T_EE_CAM if T is None else T, dtype=np.float64)
-    ctx = await context(rt)
-    top = (await asyncio.to_thread(plan_shots, ctx.station, (1,), T_ee_cam=T,
-                                   object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
+    ctx, top = await _station_top(rt)
     spec = sim.config.layout.conveyor
     before = sim.conveyor_state
     shots: list[tuple[NDArray[np.uint8], float]] = []

@@ -40,7 +40,10 @@ async def ideal() -> AsyncIterator[IdealDriver]:
 
 @pytest.fixture
 async def emulator(ideal: IdealDriver, tmp_path) -> AsyncIterator[Emulator]:
-    emu = Emulator(ideal, link=str(tmp_path / "robot-tty"), rate_hz=50.0, seed=7)
+    # The emulator shares the test's process: a stall of the process is host silence to it.
+    # Its watchdog (1 s by default; tested on its own in test_serial_reconnect) is 3 s here,
+    # so that a starved CI machine does not stop moves these tests are not about.
+    emu = Emulator(ideal, link=str(tmp_path / "robot-tty"), rate_hz=50.0, seed=7, watchdog_s=3.0)
     await emu.start()
     yield emu
     await emu.close()
