@@ -57,7 +57,7 @@ async def test_move_reaches_the_goal_within_targets_faster_than_real_time(driver
     wall = time.monotonic() - t0
     assert report.completed and report.reason == "done"
     assert report.final_error_rad <= 0.5e-3 and report.rms_tracking_error_rad <= 5e-3
-    assert wall < 0.5 * traj.duration_s  # time_scale = 8
+    assert wall < traj.duration_s  # time_scale = 8: faster than real time, with 8x of margin
     np.testing.assert_allclose(driver.state.q, CFG["top"], atol=0.5e-3)
     assert not driver.state.moving
 
