@@ -293,6 +293,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--queries", type=int, default=3, help="random yaws per object (1..50)")
     ap.add_argument("--teach-yaws", type=int, default=4, help="object yaws taught (1..12)")
     ap.add_argument("--policy", default="two-views")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the query yaws and jitter")
     ap.add_argument("--cache", type=Path, default=None, help="folder caching the rendered images")
     ap.add_argument("--no-baseline", action="store_true", help="skip the rule before the fix")
     args = ap.parse_args(argv)
@@ -305,6 +306,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         policy=args.policy,
         cache=args.cache,
         baseline=not args.no_baseline,
+        seed=args.seed,
     )
     table = Table(
         title=f"Recognition at random yaw ({args.policy}): {len(out['rows'])} inspections, "
