@@ -299,6 +299,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     args = ap.parse_args(argv)
     if not 1 <= args.objects <= 12 or not 1 <= args.queries <= 50 or not 1 <= args.teach_yaws <= 12:
         ap.error("--objects 1..12, --queries 1..50, --teach-yaws 1..12")
+    if not 0 <= args.seed < 2**32:
+        ap.error(f"--seed must be in 0..2**32-1, got {args.seed}")
     out = run(
         objects=args.objects,
         queries=args.queries,
