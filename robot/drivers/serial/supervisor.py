@@ -234,10 +234,15 @@ class LinkSupervisor:
                 f"handshake not finished within {self.handshake_timeout_s:g} s"
             ) from None
 
+    @property
+    def _beat_interval_s(self) -> float:
+        """How often the line is checked: half the heartbeat, so a ping is never late by more."""
+        return self.heartbeat_s / 2
+
     async def _heartbeat(self) -> None:
         self._last_beat_s = time.monotonic()
         while True:
-            await asyncio.sleep(self.heartbeat_s / 2)
+            await asyncio.sleep(self._beat_interval_s)
             try:
                 self._beat()
             except Exception:  # never let the watch on the line die silently
@@ -250,7 +255,7 @@ class LinkSupervisor:
         # (the GIL behind a long computation, swapping, a starved machine) the beat comes
         # late and no ping went out meanwhile, so the quiet of those seconds says nothing
         # about the controller: the lateness is discounted until something is received.
-        late = now - self._last_beat_s - self.heartbeat_s / 2
+        late = now - self._last_beat_s - self._beat_interval_s
         self._last_beat_s = now
         if self.device.last_rx_s != self._rx_seen_s:
             self._rx_seen_s, self._stalled_s = self.device.last_rx_s, 0.0
