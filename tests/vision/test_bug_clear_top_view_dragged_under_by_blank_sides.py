@@ -178,3 +178,41 @@ async def test_untrained_object_below_the_top_bar_is_unknown_after_one_view(inde
     scripted({1: {"A": 0.08}, 2: {"A": 0.9}})
     r = await recognise_views(_look, index, policy="two-views", threshold=_choice())
     assert (r.decision, r.viewpoints) == ("unknown", (1,))
+
+
+def _own_choice() -> ThresholdChoice:
+    """Own bars (``choose_threshold``, "Own bars"): the plain part P never verified another
+    model's views (low bars); A, prone to verifying others, keeps the global ones."""
+    own = {1: {"A": TOP_BAR, "B": TOP_BAR, "C": 0.03}, 2: {"A": SIDE_BAR, "B": SIDE_BAR, "C": 0.08}}
+    own[3] = dict(own[2])
+    return replace(_choice(), own_viewpoint=own)
+
+
+async def test_plain_part_passes_on_its_own_side_bar(index, scripted):
+    # C: 0.073 from the top (under the top bar 0.107, above its own 0.03: shortlisted), then
+    # 0.15 and 0.12 from the sides: under the side bar 0.264 set by A, above C's own 0.08.
+    scripted({1: {"C": 0.073}, 2: {"C": 0.15}, 3: {"C": 0.12}})
+    r = await recognise_views(_look, index, policy="two-views", threshold=_own_choice())
+    assert (r.decision, r.model, r.viewpoints) == ("recognized", "C", (1, 2))
+    # Without own bars: not even shortlisted.
+    r = await recognise_views(_look, index, policy="two-views", threshold=_choice())
+    assert (r.decision, r.viewpoints) == ("unknown", (1,))
+
+
+async def test_untrained_object_shortlisted_by_an_own_bar_still_needs_the_side_views(
+    index, scripted
+):
+    # An untrained object scoring a little for C from the top and under C's own bars on
+    # the sides: shortlisted, not named.
+    scripted({1: {"C": 0.05}, 2: {"C": 0.06}, 3: {"C": 0.07}})
+    r = await recognise_views(_look, index, policy="two-views", threshold=_own_choice())
+    assert r.decision == "unknown" and r.viewpoints == (1, 2, 3)
+
+
+async def test_own_bars_do_not_lower_the_bar_of_a_model_prone_to_verify_others(index, scripted):
+    # A shortlisted from the top (above the candidate bar lowered to 0.05), side scores
+    # 0.2: above C's own bar, but A's own bar is the global 0.264.
+    choice = replace(_own_choice(), candidate_viewpoint={1: 0.05, 2: SIDE_BAR, 3: SIDE_BAR})
+    scripted({1: {"A": 0.09}, 2: {"A": 0.2}, 3: {"A": 0.2}})
+    r = await recognise_views(_look, index, policy="two-views", threshold=choice)
+    assert r.decision == "unknown"

@@ -301,8 +301,18 @@ async def recognise_views(
         return choice.at(vp) if choice is not None else threshold
 
     def bar(model: str, vp: int) -> float:
+        """``model``'s bar at ``vp``: its own bar on a side view (module docstring, "Own
+        bars"), its acceptance threshold on the top view."""
+        if choice is not None and vp in (2, 3):
+            return choice.own(model, vp)
         glob, per_model = resolve_threshold(at(vp))
         return per_model.get(model, glob)
+
+    def shortlist(model: str) -> float:
+        """Bar above which a top-view score makes ``model`` worth a side view."""
+        if choice is None:
+            return bar(model, 1)
+        return min(choice.at(1).candidate, choice.own(model, 1))
 
     skip_top = False  # set when the top view only shortlisted (it could not rank)
 
@@ -366,9 +376,10 @@ async def recognise_views(
     if top.decision == "unknown":
         # Nothing certain from the top; models above the candidate bar are worth a side view.
         # The top view could not rank them, so the margin does not prune here.
-        cand = choice.at(1).candidate if choice is not None else bar("", 1)
         contenders = tuple(
-            m for m in sorted(top.scores, key=lambda m: (-top.scores[m], m)) if top.scores[m] > cand
+            m
+            for m in sorted(top.scores, key=lambda m: (-top.scores[m], m))
+            if top.scores[m] > shortlist(m)
         )[:MAX_CONTENDERS]
         if not contenders:
             return single(top)
@@ -386,9 +397,8 @@ async def recognise_views(
         """Models that could still be the object when the top view named ``m``: those above
         the top view's candidate bar (they passed there, but lost by more than the margin)
         and, with a choice, those confused with ``m`` from the top (its confusion table)."""
-        cand = choice.at(1).candidate if choice is not None else bar("", 1)
         near = [b for b in sorted(top.scores, key=lambda b: (-top.scores[b], b))
-                if b != m and top.scores[b] > cand]  # fmt: skip
+                if b != m and top.scores[b] > shortlist(b)]  # fmt: skip
         alike = _top_confusers(choice, m, float(confusion_limit)) if choice is not None else ()
         out = [*near, *(b for b in alike if b not in near and b != m)]
         return out[: MAX_CONTENDERS - 1]
