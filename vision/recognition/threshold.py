@@ -45,10 +45,16 @@ Own bars (issue 14)
     that never verifies other parts gets a low bar, a wheel that verifies other wheels a
     high one, whereas the global bar of a side viewpoint is set by the model most prone to
     verify others (a wheel: 0.264, where plain parts verify with 8-12 inliers, 0.1-0.2).
-    Each own bar bounds that model's false accepts alone; over the models verified on one
-    view the bound adds up, so they are not acceptance bars on their own: the policies use
-    them where a decision already has a first test behind it (a side view checking the
-    contenders of the top view, the top view shortlisting models for a side view).
+    An own bar is never below the rule on the scores of every model pooled (each model's
+    scores to the other models' views, some thousand at a side viewpoint): a model that
+    verified none of its 40-130 impostor views (own maximum 0, plain parts) has a
+    false-accept rate of perhaps under 1 %, not 0, and a bar of 0 would pass any
+    verification at all; the pooled rule estimates how high an impostor scores against
+    one model at the target rate. Each own bar bounds that model's false accepts alone;
+    over the models verified on one view the bound adds up, so they are not acceptance
+    bars on their own: the policies use them where a decision already has a first test
+    behind it (a side view checking the contenders of the top view, the top view
+    shortlisting models for a side view).
 
 Per viewpoint
     The same rule on the scores of each viewpoint alone gives ``per_viewpoint[vp]`` and
@@ -187,6 +193,32 @@ def _candidate(
     else:
         c = youden_threshold(genuine, distinct)
     return float(min(c, cap))
+
+
+def _own_bars(
+    imp_vp: Mapping[str, Sequence[float]],
+    models: Sequence[str],
+    cap: float,
+    *,
+    rule: str,
+    target_far: float,
+) -> dict[str, float]:
+    """Own bars of one viewpoint (module docstring, "Own bars"): the rule on each model's
+    impostor scores, not below the rule on every model's pooled, at most ``cap``."""
+    if rule != "conformal-far":
+        return {m: float(cap) for m in models}
+    pooled = [s for m in models for s in imp_vp.get(m, [])]
+    if not pooled:
+        return {m: float(cap) for m in models}
+    floor = conformal_threshold(pooled, target_far)[0]
+    out: dict[str, float] = {}
+    for m in models:
+        imp = imp_vp.get(m, [])
+        if len(imp) < MIN_OWN_IMPOSTORS:
+            out[m] = float(cap)
+        else:
+            out[m] = float(min(cap, max(floor, conformal_threshold(imp, target_far)[0])))
+    return out
 
 
 def choose_threshold(
@@ -330,12 +362,7 @@ def choose_threshold(
         tv, _, _, pm = _rule(g_vp, d_vp, imp_vp, models, rule=rule, target_far=target_far)
         per_vp[vp], per_model_vp[vp] = tv, pm
         cand_vp[vp] = _candidate(g_vp, d_vp, rule=rule, target_far=target_far, cap=tv)
-        own_vp[vp] = {
-            m: float(min(tv, conformal_threshold(imp_vp[m], target_far)[0]))
-            if rule == "conformal-far" and len(imp_vp[m]) >= MIN_OWN_IMPOSTORS
-            else float(tv)
-            for m in models
-        }
+        own_vp[vp] = _own_bars(imp_vp, models, tv, rule=rule, target_far=target_far)
     g = np.asarray(genuine)
     i = np.asarray(impostor)
     confusion: dict[int, dict[str, dict[str, float]]] = {}
