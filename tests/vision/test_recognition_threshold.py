@@ -164,3 +164,20 @@ def test_own_bars_are_at_most_the_viewpoint_bar_and_fall_back_with_few_scores():
             small.add(f"M{k}", rotated(textured(50 + k), 15.0 * a - 20.0), viewpoint=1)
     ch = choose_threshold(small, target_far=0.1)
     assert ch.own_viewpoint[1] == {m: ch.per_viewpoint[1] for m in small.models}
+
+
+def test_own_bar_of_a_model_that_verified_nothing_is_the_pooled_bar_not_zero():
+    from vision.recognition.threshold import MIN_OWN_IMPOSTORS, _own_bars
+
+    n = MIN_OWN_IMPOSTORS
+    imp = {
+        "plain": [0.0] * n,  # verified none of the other models' views
+        "wheel": [0.0] * (n - 3) + [0.2, 0.25, 0.3],  # verifies other wheels
+        "few": [0.0] * (n - 1),  # too few scores: the viewpoint's bar
+    }
+    got = _own_bars(imp, list(imp), 0.3, rule="conformal-far", target_far=0.05)
+    pooled = sorted(s for v in imp.values() for s in v)
+    k = int(np.ceil((len(pooled) + 1) * 0.95 - 1e-9))
+    assert got["plain"] == pooled[k - 1] > 0.0
+    assert got["wheel"] == 0.3 and got["few"] == 0.3
+    assert _own_bars(imp, list(imp), 0.3, rule="youden", target_far=0.05) == dict.fromkeys(imp, 0.3)
