@@ -14,15 +14,16 @@ Policies
     ``two-views`` (section 3.5.3, the chapter's choice): top view against the top views of
     every model. A model the top view names alone is checked with side view 2 (and 3 if
     view 2 neither confirms nor contradicts it) against the side views of itself and its
-    *challengers* (the other models above the top view's candidate bar, and those confused
-    with it from the top); it stays named unless a side view is won by a challenger (see
-    "Fused score"). When the top view is ambiguous, its contenders (the passing best and the
-    models within the margin of it), or, when no model passes, every model above the
-    choice's candidate bar, are verified with side view 2 against the side views of the
+    *challengers* (the other models above their shortlist bar from the top, and those
+    confused with it from the top); it stays named unless a side view is won by a
+    challenger (see "Fused score"). When the top view is ambiguous, its contenders (the
+    passing best and the models within the margin of it), or, when no model passes, every
+    model above its *shortlist bar* (the lower of the choice's candidate bar and the
+    model's own top bar, "Own bars" below), are verified with side view 2 against the side views of the
     contenders only (those of both side viewpoints: the arm sees an object from two azimuths
     only, and the inner view of an object turned by 180 degrees is its outer view), and
     with view 3 if still uncertain: the fused decision must recognise a model that also
-    passes its own bar on a side view; fail after three. Nothing above the candidate bar
+    passes its own bar on a side view; fail after three. Nothing above its shortlist bar
     from the top: unknown after one view.
     ``best-next`` (beyond the chapter): like ``two-views``, but a model recognised from the
     top that no other model is confused with from the top (confusion table of
@@ -55,6 +56,18 @@ Fused score
     side view does either, it stays named. Untrained objects stay guarded where the top
     view did not name one model alone (only shortlisted, or look-alikes within the margin
     such as the twin wheels): there the side views decide exactly as before.
+
+Own bars (issue 14)
+    On a side view a model's bar is its own bar there (``ThresholdChoice.own``: from the
+    scores it gave the other models' views, never below the pooled rule, at most the
+    viewpoint's bar; :func:`choose_threshold`, "Own bars"), not the viewpoint's global bar:
+    that one is set by the model most prone to verify others (side 2: 0.264, a wheel's),
+    and plain parts that verify with 8-12 inliers (0.1-0.2) never passed it. The fused bar
+    is the mean of these bars. Own bars are not acceptance bars on their own (over the
+    models verified on a view their false-accept bounds add up), so they apply only where
+    the top view has already tested the object: on the side views that check its
+    contenders, and to shortlist models for them; a name from the top view alone still
+    needs the top view's acceptance bar.
 
 Colour tie-break (issue 14)
     The features are grey, so two models that differ only by colour (a red band on a tyre's
