@@ -156,6 +156,10 @@ def _detail(choice: ThresholdChoice, n_views: int) -> dict[str, Any]:
             for vp, row in choice.per_model_viewpoint.items()
         },
         "candidate_viewpoint": {str(k): float(v) for k, v in choice.candidate_viewpoint.items()},
+        "own_viewpoint": {
+            str(vp): {m: float(t) for m, t in row.items()}
+            for vp, row in choice.own_viewpoint.items()
+        },
         "views": n_views,
         "genuine": [round(float(x), 5) for x in choice.genuine],
         "impostor": [round(float(x), 5) for x in choice.impostor],
@@ -195,6 +199,10 @@ def choice_from_detail(global_threshold: float, detail: Mapping[str, Any]) -> Th
         candidate_viewpoint={
             int(k): float(v) for k, v in detail.get("candidate_viewpoint", {}).items()
         },
+        own_viewpoint={
+            int(vp): {str(m): float(t) for m, t in row.items()}
+            for vp, row in detail.get("own_viewpoint", {}).items()
+        },
     )
 
 
@@ -227,7 +235,14 @@ async def current_choice(session: AsyncSession) -> ThresholdChoice:
         vp
     ) in choice.per_viewpoint:  # the per-viewpoint choice replaces per_model: override there too
         per_vp.setdefault(vp, dict(overrides))
-    return replace(choice, per_model={**choice.per_model, **overrides}, per_model_viewpoint=per_vp)
+    # A model's own threshold replaces its own bars too (the policies' side-view bars).
+    own_vp = {vp: {**row, **overrides} for vp, row in choice.own_viewpoint.items()}
+    return replace(
+        choice,
+        per_model={**choice.per_model, **overrides},
+        per_model_viewpoint=per_vp,
+        own_viewpoint=own_vp,
+    )
 
 
 def _choose(snapshot: bytes, target_far: float) -> tuple[ThresholdChoice, int]:

@@ -136,3 +136,48 @@ def test_plot_writes_a_small_png(choice, tmp_path):
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and 5_000 < len(data) < 300_000
     with pytest.raises(ValueError, match="dpi"):
         plot_threshold(choice, tmp_path / "x.png", dpi=1000)
+
+
+def test_own_bars_are_at_most_the_viewpoint_bar_and_fall_back_with_few_scores():
+    """Own bars (issue 14): each model's bar from its own impostor scores, capped by the
+    viewpoint's bar; a model with fewer than MIN_OWN_IMPOSTORS scores gets the viewpoint's."""
+    from tests.vision.recognition_utils import rotated, textured
+    from vision.recognition import ViewIndex, choose_threshold
+    from vision.recognition.threshold import MIN_OWN_IMPOSTORS
+
+    ix = ViewIndex("sift")
+    n_models, n_views = 6, 4  # 5 * 4 = 20 impostor views per model at the top
+    for k in range(n_models):
+        for a in range(n_views):
+            ix.add(f"M{k}", rotated(textured(50 + k), 15.0 * a - 20.0), viewpoint=1)
+    ch = choose_threshold(ix, target_far=0.1)
+    assert (n_models - 1) * n_views >= MIN_OWN_IMPOSTORS
+    own = ch.own_viewpoint[1]
+    assert set(own) == set(ix.models)
+    assert all(0.0 <= t <= ch.per_viewpoint[1] for t in own.values())
+    assert min(own.values()) < ch.per_viewpoint[1]  # the global is set by one model only
+    assert ch.own("M0", 1) == own["M0"] and ch.at(1).own_viewpoint == {}
+    # Three views per model: 6 impostor scores each, too few: the viewpoint's bar.
+    small = ViewIndex("sift")
+    for k in range(3):
+        for a in range(3):
+            small.add(f"M{k}", rotated(textured(50 + k), 15.0 * a - 20.0), viewpoint=1)
+    ch = choose_threshold(small, target_far=0.1)
+    assert ch.own_viewpoint[1] == {m: ch.per_viewpoint[1] for m in small.models}
+
+
+def test_own_bar_of_a_model_that_verified_nothing_is_the_pooled_bar_not_zero():
+    from vision.recognition.threshold import MIN_OWN_IMPOSTORS, _own_bars
+
+    n = MIN_OWN_IMPOSTORS
+    imp = {
+        "plain": [0.0] * n,  # verified none of the other models' views
+        "wheel": [0.0] * (n - 3) + [0.2, 0.25, 0.3],  # verifies other wheels
+        "few": [0.0] * (n - 1),  # too few scores: the viewpoint's bar
+    }
+    got = _own_bars(imp, list(imp), 0.3, rule="conformal-far", target_far=0.05)
+    pooled = sorted(s for v in imp.values() for s in v)
+    k = int(np.ceil((len(pooled) + 1) * 0.95 - 1e-9))
+    assert got["plain"] == pooled[k - 1] > 0.0
+    assert got["wheel"] == 0.3 and got["few"] == 0.3
+    assert _own_bars(imp, list(imp), 0.3, rule="youden", target_far=0.05) == dict.fromkeys(imp, 0.3)

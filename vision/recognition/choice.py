@@ -54,6 +54,11 @@ class ThresholdChoice:
         Per-model thresholds of each viewpoint.
     candidate_viewpoint : mapping of int to float
         ``candidate`` of each viewpoint.
+    own_viewpoint : mapping of int to mapping of str to float
+        Per-model bars of each viewpoint from the model's own impostor scores alone, not
+        raised to the viewpoint's threshold (each <= it); the global one where the model
+        has too few scores (:func:`vision.recognition.choose_threshold`, "Own bars"). The
+        multi-view policies apply them on side views and to shortlist from the top.
     """
 
     threshold: float
@@ -72,6 +77,7 @@ class ThresholdChoice:
     per_viewpoint: Mapping[int, float] = field(default_factory=dict)
     per_model_viewpoint: Mapping[int, Mapping[str, float]] = field(default_factory=dict)
     candidate_viewpoint: Mapping[int, float] = field(default_factory=dict)
+    own_viewpoint: Mapping[int, Mapping[str, float]] = field(default_factory=dict)
 
     def at(self, viewpoint: int) -> ThresholdChoice:
         """The choice for one viewpoint (itself when that viewpoint has no thresholds)."""
@@ -85,7 +91,17 @@ class ThresholdChoice:
             per_viewpoint={},
             per_model_viewpoint={},
             candidate_viewpoint={},
+            own_viewpoint={},
         )
+
+    def own(self, model: str, viewpoint: int) -> float:
+        """``model``'s own bar at ``viewpoint`` (``own_viewpoint``), else its per-model
+        threshold there."""
+        row = self.own_viewpoint.get(viewpoint)
+        if row is not None and model in row:
+            return float(row[model])
+        at = self.at(viewpoint)
+        return float(at.per_model.get(model, at.threshold))
 
     def roc(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(thresholds, far, tpr)`` over every observed score (accept when score > t)."""

@@ -35,6 +35,27 @@ Per-model thresholds
     no model gets a lower one, so the false-accept rate of the whole decision stays that of
     the global rule.
 
+Own bars (issue 14)
+    ``own_viewpoint[vp][m]``: the rule on the scores model ``m`` gave to the other models'
+    views of viewpoint ``vp`` alone (its twins' views left out), at most ``per_viewpoint[vp]``;
+    ``per_viewpoint[vp]`` itself when ``m`` has fewer than :data:`MIN_OWN_IMPOSTORS` such
+    scores (the largest of ``n`` exchangeable scores is beaten by a new one with probability
+    ``1 / (n + 1)``: with too few it bounds nothing). With the conformal rule and under 99
+    scores it is the largest score ``m`` gave to any other model's view there: a plain part
+    that never verifies other parts gets a low bar, a wheel that verifies other wheels a
+    high one, whereas the global bar of a side viewpoint is set by the model most prone to
+    verify others (a wheel: 0.264, where plain parts verify with 8-12 inliers, 0.1-0.2).
+    An own bar is never below the rule on the scores of every model pooled (each model's
+    scores to the other models' views, some thousand at a side viewpoint): a model that
+    verified none of its 40-130 impostor views (own maximum 0, plain parts) has a
+    false-accept rate of perhaps under 1 %, not 0, and a bar of 0 would pass any
+    verification at all; the pooled rule estimates how high an impostor scores against
+    one model at the target rate. Each own bar bounds that model's false accepts alone;
+    over the models verified on one view the bound adds up, so they are not acceptance
+    bars on their own: the policies use them where a decision already has a first test
+    behind it (a side view checking the contenders of the top view, the top view
+    shortlisting models for a side view).
+
 Per viewpoint
     The same rule on the scores of each viewpoint alone gives ``per_viewpoint[vp]`` and
     ``per_model_viewpoint[vp][m]``; :meth:`ThresholdChoice.at` returns the choice for one
@@ -78,6 +99,9 @@ __all__ = [
 
 RULES = ("conformal-far", "youden")
 MAX_NEGATIVES = 10_000
+#: Fewest impostor scores of a model at a viewpoint for its own bar (module docstring):
+#: the largest of 20 is beaten by a new exchangeable score with probability 1/21 < 5 %.
+MIN_OWN_IMPOSTORS = 20
 
 
 def _check_scores(x: object, name: str, *, allow_empty: bool = False) -> np.ndarray:
@@ -169,6 +193,32 @@ def _candidate(
     else:
         c = youden_threshold(genuine, distinct)
     return float(min(c, cap))
+
+
+def _own_bars(
+    imp_vp: Mapping[str, Sequence[float]],
+    models: Sequence[str],
+    cap: float,
+    *,
+    rule: str,
+    target_far: float,
+) -> dict[str, float]:
+    """Own bars of one viewpoint (module docstring, "Own bars"): the rule on each model's
+    impostor scores, not below the rule on every model's pooled, at most ``cap``."""
+    if rule != "conformal-far":
+        return {m: float(cap) for m in models}
+    pooled = [s for m in models for s in imp_vp.get(m, [])]
+    if not pooled:
+        return {m: float(cap) for m in models}
+    floor = conformal_threshold(pooled, target_far)[0]
+    out: dict[str, float] = {}
+    for m in models:
+        imp = imp_vp.get(m, [])
+        if len(imp) < MIN_OWN_IMPOSTORS:
+            out[m] = float(cap)
+        else:
+            out[m] = float(min(cap, max(floor, conformal_threshold(imp, target_far)[0])))
+    return out
 
 
 def choose_threshold(
@@ -301,6 +351,7 @@ def choose_threshold(
     per_vp: dict[int, float] = {}
     per_model_vp: dict[int, dict[str, float]] = {}
     cand_vp: dict[int, float] = {}
+    own_vp: dict[int, dict[str, float]] = {}
     for vp in viewpoints:
         g_vp = [s for s, v in zip(genuine, genuine_vps, strict=True) if v == vp]
         i_vp = [s for s, v in zip(impostor, impostor_vps, strict=True) if v == vp]
@@ -311,6 +362,7 @@ def choose_threshold(
         tv, _, _, pm = _rule(g_vp, d_vp, imp_vp, models, rule=rule, target_far=target_far)
         per_vp[vp], per_model_vp[vp] = tv, pm
         cand_vp[vp] = _candidate(g_vp, d_vp, rule=rule, target_far=target_far, cap=tv)
+        own_vp[vp] = _own_bars(imp_vp, models, tv, rule=rule, target_far=target_far)
     g = np.asarray(genuine)
     i = np.asarray(impostor)
     confusion: dict[int, dict[str, dict[str, float]]] = {}
@@ -342,4 +394,5 @@ def choose_threshold(
         per_viewpoint=per_vp,
         per_model_viewpoint=per_model_vp,
         candidate_viewpoint=cand_vp,
+        own_viewpoint=own_vp,
     )
