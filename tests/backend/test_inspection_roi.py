@@ -93,7 +93,7 @@ def test_taller_bound_and_belt_motion_move_the_region():
     # the taller space holds the lower one (up to the edges' growth by the margin)
     assert (low.mask > high.mask).sum() < 0.01 * low.mask.sum()
     moved = side_roi(top, height_m=0.06, moved_m=(0.0, 0.08, 0.0), **kw)
-    tall_box_moved = BOX + [0.0, 0.08, 0.0]
+    tall_box_moved = BOX + np.array([0.0, 0.08, 0.0])
     assert _inside(moved.mask, CAM, T_SIDE, tall_box_moved).all()
     assert not _inside(low.mask, CAM, T_SIDE, tall_box_moved).all()
 
@@ -180,7 +180,8 @@ async def test_the_services_side_view_passes_the_region_as_the_query_mask(vp):
     top = plan_shots(station, (1,), T_ee_cam=np.asarray(NOMINAL_T_EE_CAM), object_height_m=0.1,
                      top_rolls_rad=(0.0,))[0]  # fmt: skip
     T_top = T_base_ee(np.asarray(top.q)) @ T_ee_cam
-    box = _box(station + [0.0, 0.0, belt.surface_z_m - station[2]], (0.06, 0.05), 0.09)
+    base = np.array([station[0], station[1], belt.surface_z_m])
+    box = _box(base, (0.06, 0.05), 0.09)
     rt = SimpleNamespace(cell=_Cell(), sim=None)
     ctx = service._Ctx(rt, cam, T_ee_cam, "test", station, float(belt.surface_z_m))
     side = await service._side_view(
