@@ -1,18 +1,22 @@
 """Genuine and impostor scores of the cell's recognition at random object yaw (issue 14).
 
     python -m benchmarks.recognition_yaw [--json] [--objects 12] [--queries 3] [--teach-yaws 4]
+        [--seed 0] [--cache DIR] [--no-baseline] [--no-roi] [--teach-spread half|full]
 
 Procedure (simulated cell, rendered afresh, no database): every trainable catalogue entry
 is taught as the teach job teaches it (:func:`backend.recognition.teach.plan_shots`: the
 top view at the camera rolls of ``TOP_ROLLS_RAD`` and both side views, segmented by the
 active contour from the empty-belt background, at ``--teach-yaws`` object yaws spread over
-the turn); the automatic threshold is chosen from those views
+a half turn as the teach plan spreads them, :func:`backend.recognition.teach.teach_yaws_rad`;
+``--teach-spread full``: over the whole turn, as before); the automatic threshold is chosen from those views
 (:func:`vision.recognition.choose_threshold`, as after a teach).  Then each entry (and the
 two untrained ones) is put back at random yaws with a few mm of jitter and inspected as
 :func:`backend.inspection.service.inspect_object` does: the top view segmented, side views
-planned from where the top view found the object (and, with ``yaw_aware``, restricted to
-the trained side views whose object yaw matches the top view's yaw estimate), decided by
-:func:`vision.recognition.recognise_views` with the ``two-views`` policy.
+planned at the station point, each side query matched inside the image of the space the
+object found from the top can occupy (:func:`backend.inspection.roi.side_roi`, the
+service's function, up to the tallest taught model's height; ``--no-roi``: the whole frame,
+as before), decided by :func:`vision.recognition.recognise_views` with the ``two-views``
+policy.  The side queries' feature counts and the regions' share of the frame are printed.
 
 Printed (rich table, ``--json`` one line): the thresholds chosen per viewpoint and the
 named / unknown rates, for the rule of :func:`vision.recognition.choose_threshold` and, as
