@@ -79,6 +79,7 @@ def run(
     baseline: bool = True,
     roi: bool = True,
     spread: str = "half",
+    teach_yaws_deg: list[float] | None = None,
 ) -> dict[str, Any]:
     """Teach, choose the threshold and inspect (module docstring); ``names`` and
     ``untrained`` replace the catalogue's trainable (first ``objects``) and untrained
@@ -122,7 +123,9 @@ def run(
         # Baseline (b): the extraction before issue 14's smoothing (module docstring).
         old_options = {k: v for k, v in options.items() if k != "smooth_px"}
         old_index = ViewIndex("sift", feature_options=old_options) if baseline else None
-        if spread == "half":  # the teach job's plan (teach_yaws_rad)
+        if teach_yaws_deg is not None:  # an experiment's own yaws
+            yaws = [math.radians(y) for y in teach_yaws_deg]
+        elif spread == "half":  # the teach job's plan (teach_yaws_rad)
             yaws = list(teach_yaws_rad(teach_yaws))
         else:  # before: spread over the full turn
             yaws = [
@@ -352,7 +355,18 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                     help="match side queries over the whole frame (before the side ROI)")
     ap.add_argument("--teach-spread", choices=("half", "full"), default="half",
                     help="teach yaws over a half turn (the teach plan) or the full turn (before)")
+    ap.add_argument("--teach-yaws-deg", default=None,
+                    help="explicit teach yaws, degrees, comma-separated (overrides the spread)")
     args = ap.parse_args(argv)
+    yaws_deg = None
+    if args.teach_yaws_deg is not None:
+        try:
+            yaws_deg = [float(v) for v in args.teach_yaws_deg.split(",")]
+        except ValueError:
+            ap.error(f"--teach-yaws-deg must be numbers, got {args.teach_yaws_deg!r}")
+        if not 1 <= len(yaws_deg) <= 12 or not all(math.isfinite(y) and abs(y) <= 180 for y in yaws_deg):
+            ap.error(f"--teach-yaws-deg: 1..12 yaws within +-180, got {args.teach_yaws_deg!r}")
+        args.teach_yaws = len(yaws_deg)
     if not 1 <= args.objects <= 12 or not 1 <= args.queries <= 50 or not 1 <= args.teach_yaws <= 12:
         ap.error("--objects 1..12, --queries 1..50, --teach-yaws 1..12")
     if not 0 <= args.seed < 2**32:
@@ -367,6 +381,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         seed=args.seed,
         roi=not args.no_roi,
         spread=args.teach_spread,
+        teach_yaws_deg=yaws_deg,
     )
     table = Table(
         title=f"Recognition at random yaw ({args.policy}): {len(out['rows'])} inspections, "
