@@ -253,10 +253,20 @@ def side_roi(
                             np.ascontiguousarray(camera.dist, dtype=np.float64).tobytes(), W, H)  # fmt: skip
     if (np.roll(poly[:, 0], -1) - poly[:, 0]) @ (np.roll(poly[:, 1], -1) + poly[:, 1]) > 0:
         poly = poly[::-1]  # sum (x2 - x1)(y2 + y1) = -2 * signed area: make the area positive
-    inside = np.ones(len(grid), dtype=bool)
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    cand = np.flatnonzero(
+        (grid[:, 0] >= lo[0])
+        & (grid[:, 0] <= hi[0])
+        & (grid[:, 1] >= lo[1])
+        & (grid[:, 1] <= hi[1])
+    )  # the hull's bounding box first: the edge tests only there
+    g = grid[cand]
+    keep = np.ones(len(cand), dtype=bool)
     for a, b in zip(poly, np.roll(poly, -1, axis=0), strict=True):
         e = b - a
-        inside &= e[0] * (grid[:, 1] - a[1]) - e[1] * (grid[:, 0] - a[0]) >= 0
+        keep &= e[0] * (g[:, 1] - a[1]) - e[1] * (g[:, 0] - a[0]) >= 0
+    inside = np.zeros(len(grid), dtype=bool)
+    inside[cand[keep]] = True
     roi = inside.reshape(H, W).astype(np.uint8)
     if not roi.any():
         return _whole("the object's space projects off the side image")
