@@ -2,8 +2,8 @@
 
 The twelve trainable catalogue entries are taught through the services the API calls
 (``backend.recognition.teach``: 3d models, the top view at three camera rolls and both side
-views, each object at the station at yaw 0 and then at ``--teach-yaws`` - 1 further object
-yaws, the operator turning it between rounds; the automatic threshold is chosen once, after
+views, each object at the station at ``--teach-yaws`` object yaws over a half turn
+(:func:`backend.recognition.teach.teach_yaws_rad`), the operator turning it between rounds; the automatic threshold is chosen once, after
 the last round of the last model, over every view), then objects (random catalogue entry, the two
 untrained ones mixed in; random yaw, a few mm of lateral and along-belt jitter) are
 inspected with :func:`backend.inspection.service.inspect_object`, what continuous operation
@@ -204,8 +204,9 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
     async with CellRuntime(settings, view3d=False) as rt:
         engine = rt.sim
         spec = engine.config.layout.conveyor
-        yaws = tuple(360.0 * k / args.teach_yaws for k in range(args.teach_yaws))
-        yaws = tuple(y - 360.0 if y > 180.0 else y for y in yaws)
+        from backend.recognition.teach import teach_yaws_rad
+
+        yaws = tuple(math.degrees(y) for y in teach_yaws_rad(args.teach_yaws))
         teach_s, threshold = await _teach_all(rt, trained, yaws)
         err.print(f"threshold: {threshold}")
         ctx = await service.context(rt)

@@ -1,18 +1,22 @@
 """Genuine and impostor scores of the cell's recognition at random object yaw (issue 14).
 
     python -m benchmarks.recognition_yaw [--json] [--objects 12] [--queries 3] [--teach-yaws 4]
+        [--seed 0] [--cache DIR] [--no-baseline] [--no-roi] [--teach-spread half|full]
 
 Procedure (simulated cell, rendered afresh, no database): every trainable catalogue entry
 is taught as the teach job teaches it (:func:`backend.recognition.teach.plan_shots`: the
 top view at the camera rolls of ``TOP_ROLLS_RAD`` and both side views, segmented by the
 active contour from the empty-belt background, at ``--teach-yaws`` object yaws spread over
-the turn); the automatic threshold is chosen from those views
+a half turn as the teach plan spreads them, :func:`backend.recognition.teach.teach_yaws_rad`;
+``--teach-spread full``: over the whole turn, as before); the automatic threshold is chosen from those views
 (:func:`vision.recognition.choose_threshold`, as after a teach).  Then each entry (and the
 two untrained ones) is put back at random yaws with a few mm of jitter and inspected as
 :func:`backend.inspection.service.inspect_object` does: the top view segmented, side views
-planned from where the top view found the object (and, with ``yaw_aware``, restricted to
-the trained side views whose object yaw matches the top view's yaw estimate), decided by
-:func:`vision.recognition.recognise_views` with the ``two-views`` policy.
+planned at the station point, each side query matched inside the image of the space the
+object found from the top can occupy (:func:`backend.inspection.roi.side_roi`, the
+service's function, up to the tallest taught model's height; ``--no-roi``: the whole frame,
+as before), decided by :func:`vision.recognition.recognise_views` with the ``two-views``
+policy.  The side queries' feature counts and the regions' share of the frame are printed.
 
 Printed (rich table, ``--json`` one line): the thresholds chosen per viewpoint and the
 named / unknown rates, for the rule of :func:`vision.recognition.choose_threshold` and, as
@@ -73,6 +77,9 @@ def run(
     names: list[str] | None = None,
     untrained: list[str] | None = None,
     baseline: bool = True,
+    roi: bool = True,
+    spread: str = "half",
+    teach_yaws_deg: list[float] | None = None,
 ) -> dict[str, Any]:
     """Teach, choose the threshold and inspect (module docstring); ``names`` and
     ``untrained`` replace the catalogue's trainable (first ``objects``) and untrained
@@ -81,10 +88,12 @@ def run(
 
     headless_mujoco()
     from backend.calibration.autoplan import NOMINAL_T_EE_CAM
+    from backend.inspection.roi import height_bound, side_query, side_roi
     from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
     from backend.recognition.index import FEATURE_OPTIONS
     from backend.recognition.segment import segment_object
-    from backend.recognition.teach import TOP_ROLLS_RAD, plan_shots
+    from backend.recognition.teach import TOP_ROLLS_RAD, plan_shots, teach_yaws_rad
+    from robot.kinematics import T_base_ee
     from robot.sim import CATALOGUE, SimEngine
     from robot.sim.imaging import capture
     from vision.recognition import ViewIndex, choose_threshold, recognise_views
@@ -114,9 +123,14 @@ def run(
         # Baseline (b): the extraction before issue 14's smoothing (module docstring).
         old_options = {k: v for k, v in options.items() if k != "smooth_px"}
         old_index = ViewIndex("sift", feature_options=old_options) if baseline else None
-        yaws = [
-            math.remainder(2 * math.pi * k / teach_yaws, 2 * math.pi) for k in range(teach_yaws)
-        ]
+        if teach_yaws_deg is not None:  # an experiment's own yaws
+            yaws = [math.radians(y) for y in teach_yaws_deg]
+        elif spread == "half":  # the teach job's plan (teach_yaws_rad)
+            yaws = list(teach_yaws_rad(teach_yaws))
+        else:  # before: spread over the full turn
+            yaws = [
+                math.remainder(2 * math.pi * k / teach_yaws, 2 * math.pi) for k in range(teach_yaws)
+            ]
         t0 = time.perf_counter()
         for k, name in enumerate(names):
             _log(f"  teaching {k + 1}/{len(names)}: {name}")
@@ -145,6 +159,22 @@ def run(
         before = choose_threshold(index, exclude_twins=False) if baseline else None
         old_choice = choose_threshold(old_index) if old_index is not None else None
         top = shots[0]
+        # The service's camera model and mounting without calibrations (the simulator's
+        # nominal ones) and the side viewpoints planned from the station point (as rendered).
+        camera = engine.config.camera.pinhole
+        T_ee_cam_model = np.asarray(engine.config.camera.T_ee_cam, dtype=np.float64)
+        T_cam_top = T_base_ee(np.asarray(top.q)) @ T_ee_cam_model
+        T_cam_sides = {
+            vp: T_base_ee(
+                np.asarray(plan_viewpoints(point, T_ee_cam=T_ee_cam, views=(VIEW_NAMES[vp - 1],),
+                                           object_height_m=0.1).views[0].q)
+            ) @ T_ee_cam_model
+            for vp in (2, 3)
+        }  # fmt: skip
+        # Height bound as the service's: the taught models' stored heights (the inspection
+        # benchmark stores the catalogue's height with each model it creates).
+        roi_height = height_bound(float(CATALOGUE[n].geometry().bounds[1, 2]) for n in names)
+        surface_z = float(belt.surface_z_m)
         rows: list[dict[str, Any]] = []
         pool = [(n, True) for n in names] + [(n, False) for n in untrained]
         for name, trainable in pool:
@@ -171,10 +201,20 @@ def run(
 
                 rgb, qmask, sides = _cached(cache, key, shoot)
 
-                def look(vp: int, rgb: Any = rgb, qmask: Any = qmask, sides: Any = sides) -> Any:
+                rois = {}
+                if roi:
+                    for vp in (2, 3):
+                        rois[vp] = side_roi(
+                            qmask, camera=camera, T_base_cam_top=T_cam_top,
+                            T_base_cam_side=T_cam_sides[vp], surface_z_m=surface_z,
+                            height_m=roi_height, image_shape=sides[vp].shape[:2],
+                        )  # fmt: skip
+
+                def look(vp: int, rgb: Any = rgb, qmask: Any = qmask, sides: Any = sides,
+                         rois: Any = rois) -> Any:  # fmt: skip
                     if vp == 1:
                         return rgb, qmask.astype(np.uint8)
-                    return sides[vp]
+                    return side_query(sides[vp], rois[vp]) if vp in rois else sides[vp]
 
                 t2 = time.perf_counter()
                 res = asyncio.run(recognise_views(look, index, policy=policy, threshold=choice))
@@ -223,6 +263,8 @@ def run(
                             {k: round(float(v), 3) for k, v in r.scores.items() if v > 0}
                             for r in res.views[1:]
                         ],
+                        "side_features": [int(r.n_features) for r in res.views[1:]],
+                        "side_roi": {vp: (round(r.fraction, 3), r.reason) for vp, r in rois.items()},
                         "colour": {
                             k: round(v, 4)
                             for k, v in colour_support(
@@ -239,7 +281,7 @@ def run(
                 _log(
                     f"  {name} yaw {r['yaw_deg']:7.1f}: {r['decision']} {r['model']} "
                     f"views={r['views']} own_top={r['own_top']} bar={r['own_top_bar']} "
-                    f"side={r['side']} colour={r['colour']}"
+                    f"side={r['side']} colour={r['colour']} side_features={r['side_features']}"
                 )
         tr = [r for r in rows if r["trainable"]]
         un = [r for r in rows if not r["trainable"]]
@@ -280,6 +322,19 @@ def run(
             "named_pct": 100.0 * sum(r["ok"] for r in tr) / max(1, len(tr)),
             "unknown_pct": 100.0 * sum(r["ok"] for r in un) / max(1, len(un)),
             "mean_views": float(np.mean([r["views"] for r in rows])),
+            "side_roi": roi,
+            "teach_spread": spread,
+            "teach_yaws_deg": [round(math.degrees(y), 1) for y in yaws],
+            "roi_height_m": roi_height,
+            "side_features_p50": float(np.median([n for r in rows for n in r["side_features"]]))
+            if any(r["side_features"] for r in rows)
+            else None,
+            "roi_fraction_p50": float(np.median([f for r in rows for f, _ in r["side_roi"].values()]))
+            if roi
+            else None,
+            "roi_fallbacks": sum(
+                1 for r in rows for f, why in r["side_roi"].values() if why.startswith("whole")
+            ),
             "rows": rows,
         }
     finally:
@@ -296,7 +351,22 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--seed", type=int, default=0, help="seed of the query yaws and jitter")
     ap.add_argument("--cache", type=Path, default=None, help="folder caching the rendered images")
     ap.add_argument("--no-baseline", action="store_true", help="skip the rule before the fix")
+    ap.add_argument("--no-roi", action="store_true",
+                    help="match side queries over the whole frame (before the side ROI)")
+    ap.add_argument("--teach-spread", choices=("half", "full"), default="half",
+                    help="teach yaws over a half turn (the teach plan) or the full turn (before)")
+    ap.add_argument("--teach-yaws-deg", default=None,
+                    help="explicit teach yaws, degrees, comma-separated (overrides the spread)")
     args = ap.parse_args(argv)
+    yaws_deg = None
+    if args.teach_yaws_deg is not None:
+        try:
+            yaws_deg = [float(v) for v in args.teach_yaws_deg.split(",")]
+        except ValueError:
+            ap.error(f"--teach-yaws-deg must be numbers, got {args.teach_yaws_deg!r}")
+        if not 1 <= len(yaws_deg) <= 12 or not all(math.isfinite(y) and abs(y) <= 180 for y in yaws_deg):
+            ap.error(f"--teach-yaws-deg: 1..12 yaws within +-180, got {args.teach_yaws_deg!r}")
+        args.teach_yaws = len(yaws_deg)
     if not 1 <= args.objects <= 12 or not 1 <= args.queries <= 50 or not 1 <= args.teach_yaws <= 12:
         ap.error("--objects 1..12, --queries 1..50, --teach-yaws 1..12")
     if not 0 <= args.seed < 2**32:
@@ -309,6 +379,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         cache=args.cache,
         baseline=not args.no_baseline,
         seed=args.seed,
+        roi=not args.no_roi,
+        spread=args.teach_spread,
+        teach_yaws_deg=yaws_deg,
     )
     table = Table(
         title=f"Recognition at random yaw ({args.policy}): {len(out['rows'])} inspections, "
@@ -335,6 +408,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     print(
         f"mean views {out['mean_views']:.2f} (teach {out['teach_s']:.0f} s, choose {out['choose_s']:.0f} s)"
     )
+    print(f"teach yaws {out['teach_yaws_deg']} deg; side ROI {'on' if out['side_roi'] else 'off'} "
+          f"(height bound {out['roi_height_m']:.3f} m, p50 {out['roi_fraction_p50']} of the frame, "
+          f"{out['roi_fallbacks']} fallbacks); side query features p50 {out['side_features_p50']}")  # fmt: skip
     for r in out["rows"]:
         if not r["ok"]:
             print(f"  wrong: {r['name']} yaw {r['yaw_deg']} -> {r['decision']} {r['model']} "

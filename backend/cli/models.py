@@ -354,10 +354,32 @@ def teach(
     height: Annotated[float, typer.Option(help="Object height, metres")] = 0.1,
     wait: Annotated[float, typer.Option(help="Longest wait for the object, s")] = 120.0,
     replace: Annotated[bool, typer.Option(help="Replace the model's earlier views")] = False,
+    round_: Annotated[
+        str | None,
+        typer.Option(
+            "--round",
+            help="K/N: round K of N, the object turned to the K-th of N yaws over a half "
+            "turn (k * 180 / N deg from its first round's pose; the side views then see a "
+            "new pair of faces each round)",
+        ),
+    ] = None,
 ) -> None:
     """Teach a model with the arm of the running cell and follow the job."""
     if background not in ("grab", "stored"):
         raise _fail(f"--background must be 'grab' or 'stored', got {background!r}")
+    yaw_rad = 0.0
+    if round_ is not None:
+        from backend.recognition.teach import MAX_ROUNDS, teach_yaws_rad
+
+        try:
+            k, n = (int(v) for v in round_.split("/"))
+        except ValueError:
+            raise _fail(f"--round must be K/N (e.g. 2/4), got {round_!r}") from None
+        if not 1 <= n <= MAX_ROUNDS or not 1 <= k <= n:
+            raise _fail(f"--round K/N needs 1 <= K <= N <= {MAX_ROUNDS}, got {round_!r}")
+        yaw_rad = teach_yaws_rad(n)[k - 1]
+        print(f"round {k}/{n}: the object turned by {math.degrees(yaw_rad):.1f} deg "
+              "from its first round's pose", flush=True)  # fmt: skip
     vps = None
     if viewpoints is not None:
         try:
@@ -377,6 +399,7 @@ def teach(
         "object_height_m": height,
         "wait_s": wait,
         "replace": replace,
+        "yaw_rad": yaw_rad,
     }
     if vps is not None:
         body["viewpoints"] = vps

@@ -49,6 +49,7 @@ from backend.inspection.pose import (
     plane_points,
     predict_along_belt,
 )
+from backend.inspection.roi import SideRoi, height_bound, side_query, side_roi
 from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
 from backend.recognition import thresholds
 from backend.recognition.images import encode_jpeg
@@ -348,6 +349,45 @@ def _footprint_radius(
     return float(min(0.5, np.linalg.norm(pts[:, :2] - centre[:2], axis=1).max() + 0.01))
 
 
+@dataclass(frozen=True, eq=False)
+class _SideView:
+    """A side viewpoint visited: the frame, its camera pose, the query's region, how long
+    planning and the region took (seconds) and the notes for the inspection's reason."""
+
+    frame: Any
+    T_base_cam: NDArray[np.float64]
+    roi: SideRoi
+    plan_s: float
+    roi_s: float
+    notes: tuple[str, ...]
+
+
+async def _side_view(ctx: _Ctx, vp: int, point: NDArray[np.float64], *, T_plan: NDArray[np.float64],
+                     top_mask: NDArray[np.bool_], T_cam_top: NDArray[np.float64], height_m: float,
+                     travel0: float | None, speed: float | None) -> _SideView:  # fmt: skip
+    """Viewpoint ``vp`` (2 or 3) planned at ``point`` (:func:`plan_viewpoints`), visited, and
+    the region of its image where the object found in the top view (``top_mask`` seen from
+    ``T_cam_top``) can be (:func:`backend.inspection.roi.side_roi`, up to ``height_m``; with
+    ``travel0`` -- the belt's travel at the top view's exposure, constant speed -- moved by
+    the belt's travel since).  A region that cannot be made is the whole frame, noted."""
+    t = time.monotonic()
+    plan = await asyncio.to_thread(plan_viewpoints, point, T_ee_cam=T_plan, views=(VIEW_NAMES[vp - 1],),
+                                   object_height_m=AIM_HEIGHT_M)  # fmt: skip
+    plan_s = time.monotonic() - t
+    notes = [f"viewpoint {vp}: {plan.views[0].reason}"] if plan.views[0].reason else []
+    f = await ctx.rt.cell.look(plan.views[0].q, speed=speed)
+    T_cam = _T_cam(f.robot_state.q, ctx.T_ee_cam)
+    moved = None if travel0 is None else np.array([0.0, _travel_of(f, ctx.rt) - travel0, 0.0])
+    t = time.monotonic()
+    roi = await asyncio.to_thread(
+        side_roi, top_mask, camera=ctx.camera, T_base_cam_top=T_cam_top, T_base_cam_side=T_cam,
+        surface_z_m=ctx.surface_z, height_m=height_m, image_shape=f.rgb.shape[:2], moved_m=moved,
+    )  # fmt: skip
+    if roi.mask is None:
+        notes.append(f"viewpoint {vp}: {roi.reason}")
+    return _SideView(f, T_cam, roi, plan_s, time.monotonic() - t, tuple(notes))
+
+
 async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
                          clear_first: bool = False,
                          db_wait_s: float | None = None) -> dict[str, Any]:  # fmt: skip
@@ -500,7 +540,10 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     }
     cams.append(T_cam_top)
 
-    planning: dict[str, Any] = {"s": 0.0, "notes": []}
+    planning: dict[str, Any] = {"s": 0.0, "roi_s": 0.0, "notes": []}
+    roi_height = height_bound(
+        (m.height_m for m in live.models().values()), default_m=UNKNOWN_MAX_HEIGHT_M
+    )
 
     async def look(vp: int) -> Any:
         if vp == 1:
@@ -510,17 +553,19 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
         point = found.copy()
         if mode == "continuous":
             point = point + np.array([0.0, _belt(rt)[2] - travel0 + 1.5 * speed_m_s, 0.0])
-        t_plan = time.monotonic()
-        plan = await asyncio.to_thread(plan_viewpoints, point, T_ee_cam=T_plan, views=(VIEW_NAMES[vp - 1],),
-                                       object_height_m=AIM_HEIGHT_M)  # fmt: skip
-        planning["s"] += time.monotonic() - t_plan
-        if plan.views[0].reason:
-            planning["notes"].append(f"viewpoint {vp}: {plan.views[0].reason}")
-        f = await cell.look(plan.views[0].q, speed=opts.speed)
-        _look_times(f, durations)
-        cams.append(_T_cam(f.robot_state.q, ctx.T_ee_cam))
-        frames[vp] = (f, None, "whole image (no empty-belt background for this viewpoint)")
-        return f.rgb
+        side = await _side_view(
+            ctx, vp, point, T_plan=T_plan, top_mask=region.mask, T_cam_top=T_cam_top,
+            height_m=roi_height, travel0=travel0 if mode == "continuous" else None,
+            speed=opts.speed,
+        )  # fmt: skip
+        planning["s"] += side.plan_s
+        planning["roi_s"] += side.roi_s
+        planning["notes"].extend(side.notes)
+        _look_times(side.frame, durations)
+        cams.append(side.T_base_cam)
+        frames[vp] = (side.frame, None if side.roi.mask is None else side.roi.mask.astype(bool),
+                      side.roi.reason)  # fmt: skip
+        return side_query(side.frame.rgb, side.roi)
 
     state["stage"] = "recognition"
     t = time.monotonic()
@@ -534,7 +579,9 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     match = sum(r.verification_s for r in res.views)
     _add(durations, "match", match)
     _add(durations, "plan", planning["s"])
-    _add(durations, "features", max(0.0, spent - move_like - planning["s"] - feat - match) + feat)
+    _add(durations, "segment", planning["roi_s"])  # the side views' regions
+    other = spent - move_like - planning["s"] - planning["roi_s"] - feat - match
+    _add(durations, "features", max(0.0, other) + feat)
     t = time.monotonic()
     state["viewpoints"] = res.viewpoints
     state["scores"] = {k: round(float(v), 4) for k, v in res.scores.items()}

@@ -102,3 +102,9 @@ def test_teach_names_an_unreachable_cell_and_bad_options(tmp_path):
     assert r.returncode == 2 and "'later'" in r.stderr
     r = _run(["teach", "gear", "--token", "t", "--url", url, "--viewpoints", "1,x"], tmp_path)
     assert r.returncode == 2 and "'1,x'" in r.stderr
+    for bad in ("2", "5/4", "0/4", "1/13", "a/b"):
+        r = _run(["teach", "gear", "--token", "t", "--url", url, "--round", bad], tmp_path)
+        assert r.returncode == 2 and f"'{bad}'" in r.stderr, (bad, r.stderr)
+    r = _run(["teach", "gear", "--token", "t", "--url", url, "--round", "2/4"], tmp_path)
+    assert "round 2/4: the object turned by 45.0 deg" in r.stdout
+    assert r.returncode == 2 and f"cannot reach the cell at {url}" in r.stderr
