@@ -47,6 +47,8 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
+from benchmarks import cpu_account
+
 os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering, before MuJoCo loads
 
 out = Console()
@@ -377,7 +379,9 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
     await _teach(rt, "gear-housing")
     ctx = await service.context(rt)
     await _cycles(rt, ctx, 1, "warm-up", rng, "gear-housing")
+    cpu0 = cpu_account.snapshot()
     before = await _cycles(rt, ctx, args.cycles, "no load", rng, "gear-housing")
+    cpu_no_load = cpu_account.usage(cpu0, cpu_account.snapshot())
     child = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "benchmarks.load", "--clients-only", "--base", base,
         "--token", token, "--clients", str(args.clients), "--sockets", str(args.sockets),
@@ -386,7 +390,10 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
     )  # fmt: skip
     try:
         await asyncio.sleep(WARMUP_S)  # the clients connect and reach their steady rate
+        kids = {"load clients (child process)": child.pid}
+        cpu1 = cpu_account.snapshot(kids)
         loaded = await _cycles(rt, ctx, args.cycles, "load", rng, "gear-housing")
+        cpu_load = cpu_account.usage(cpu1, cpu_account.snapshot(kids))
         assert child.stdin is not None
         child.stdin.close()
         stdout, _ = await asyncio.wait_for(child.communicate(), 120)
@@ -409,6 +416,8 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         "cycle_s_load": load_s,
         "cycle_slowdown": load_s / base_s,
         "load": clients,
+        "cpu_no_load": cpu_no_load,
+        "cpu_load": cpu_load,
         "database": "postgresql" if settings.database_url.startswith("postgresql") else "sqlite",
     }
 
@@ -550,6 +559,13 @@ def _print(res: dict[str, Any]) -> None:
     if load["ws_errors"]:
         c.add_row("WebSocket errors", str(len(load["ws_errors"])), load["ws_errors"][0])
     out.print(c)
+    u = Table(title=f"CPU, % of one core ({res['cpu_load']['cores']} cores), same run")
+    for col in ("where", "no load", "under load"):
+        u.add_column(col)
+    nl, ld = res["cpu_no_load"]["core_pct"], res["cpu_load"]["core_pct"]
+    for key in sorted(set(nl) | set(ld)):
+        u.add_row(key, _f(nl.get(key), "{:.0f}"), _f(ld.get(key), "{:.0f}"))
+    out.print(u)
 
 
 def main(argv: list[str] | None = None) -> None:
