@@ -91,27 +91,38 @@ async def _rest_client(
     k: int, c: Any, think_s: float, stop: asyncio.Event, lat: dict[str, list[float]],
     status: dict[str, dict[int, int]], routes: tuple[str, ...], measure_from: float,
 ) -> None:  # fmt: skip
+    """One console reading ``routes`` in turn through ``c`` (a :class:`LeanConnection` of
+    its own, or the shared ``httpx.AsyncClient``)."""
     import httpx
 
+    from benchmarks.leanhttp import HttpError
+
+    lean = not isinstance(c, httpx.AsyncClient)
     i = k % len(routes)
-    while not stop.is_set():
-        route = routes[i]
-        i = (i + 1) % len(routes)
-        t0 = time.perf_counter()
-        try:
-            r = await c.get(route)
-            code = r.status_code
-        except httpx.HTTPError:
-            code = 0  # no answer (counted, never a latency)
-        dt = time.perf_counter() - t0
-        if t0 >= measure_from:
-            name = route.split("?")[0]
-            status[name][code] = status[name].get(code, 0) + 1
-            if code == 200:
-                lat[name].append(dt * 1e3)
-        if think_s > 0:
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(stop.wait(), think_s)
+    try:
+        while not stop.is_set():
+            route = routes[i]
+            i = (i + 1) % len(routes)
+            t0 = time.perf_counter()
+            try:
+                if lean:
+                    code = (await c.get(route))[0]
+                else:
+                    code = (await c.get(route)).status_code
+            except (httpx.HTTPError, HttpError):
+                code = 0  # no answer (counted, never a latency)
+            dt = time.perf_counter() - t0
+            if t0 >= measure_from:
+                name = route.split("?")[0]
+                status[name][code] = status[name].get(code, 0) + 1
+                if code == 200:
+                    lat[name].append(dt * 1e3)
+            if think_s > 0:
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(stop.wait(), think_s)
+    finally:
+        if lean:
+            await c.close()
 
 
 async def _socket_client(
@@ -143,16 +154,23 @@ async def _socket_client(
 
 async def run_clients(
     base: str, token: str, *, clients: int, sockets: int, think_s: float, stop: asyncio.Event,
-    routes: tuple[str, ...] = ROUTES, warmup_s: float = 0.0,
+    routes: tuple[str, ...] = ROUTES, warmup_s: float = 0.0, http: str = "lean",
 ) -> dict[str, Any]:  # fmt: skip
     """Run ``clients`` REST readers and ``sockets`` console WebSockets until ``stop`` is set;
     return per-route latencies (ms, p50/p99/max), status counts and WebSocket lags, leaving
     out the first ``warmup_s`` seconds (connections being opened).
 
-    The REST clients share one httpx client with a connection each (``clients``
-    connections): one TLS context and pool instead of fifty, whose set-up alone kept a
-    loaded machine's client process busy for seconds."""
+    ``http="lean"`` (the default): each REST client has its own keep-alive connection
+    (:class:`benchmarks.leanhttp.LeanConnection`), less client CPU per request than httpx,
+    so that the load generator, which stands in for consoles on other machines,
+    takes less of the server's cores.  ``http="httpx"``: the REST clients share one httpx
+    client with a connection each (the earlier generator, kept to compare)."""
     import httpx
+
+    from benchmarks.leanhttp import LeanConnection
+
+    if http not in ("lean", "httpx"):
+        raise ValueError(f"http must be 'lean' or 'httpx', got {http!r}")
 
     if not (0 <= clients <= MAX_CLIENTS and 0 <= sockets <= MAX_SOCKETS):
         raise ValueError(f"clients 0..{MAX_CLIENTS}, sockets 0..{MAX_SOCKETS}")
@@ -174,10 +192,16 @@ async def run_clients(
     hdr = {"Authorization": f"Bearer {token}"}
     async with httpx.AsyncClient(
         base_url=base, headers=hdr, timeout=REQUEST_TIMEOUT_S, limits=limits
-    ) as c:
+    ) as shared:
+
+        def conn() -> Any:
+            if http == "httpx":
+                return shared
+            return LeanConnection(base, headers=hdr, timeout_s=REQUEST_TIMEOUT_S)
+
         tasks = [
             asyncio.create_task(
-                _rest_client(k, c, think_s, stop, lat, status, routes, measure_from)
+                _rest_client(k, conn(), think_s, stop, lat, status, routes, measure_from)
             )
             for k in range(clients)
         ] + [
@@ -228,7 +252,8 @@ async def _clients_main(args: argparse.Namespace) -> None:
 
     waiter = asyncio.create_task(wait_eof())
     res = await run_clients(args.base, args.token, clients=args.clients, sockets=args.sockets,
-                            think_s=args.think, stop=stop, warmup_s=WARMUP_S)  # fmt: skip
+                            think_s=args.think, stop=stop, warmup_s=WARMUP_S,
+                            http=args.http)  # fmt: skip
     waiter.cancel()
     print(json.dumps(res), flush=True)
 
@@ -385,7 +410,7 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
     child = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "benchmarks.load", "--clients-only", "--base", base,
         "--token", token, "--clients", str(args.clients), "--sockets", str(args.sockets),
-        "--think", str(args.think), stdin=asyncio.subprocess.PIPE,
+        "--think", str(args.think), "--http", args.http, stdin=asyncio.subprocess.PIPE,
         stdout=asyncio.subprocess.PIPE,
     )  # fmt: skip
     try:
@@ -409,6 +434,7 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         "clients": args.clients,
         "sockets": args.sockets,
         "think_s": args.think,
+        "http_client": args.http,
         "cycles": args.cycles,
         "cycle_s_no_load": base_s,
         "cycle_s_no_load_before": statistics.median(before),
@@ -573,6 +599,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--clients", type=int, default=50, help=f"REST clients, 0..{MAX_CLIENTS}")
     ap.add_argument("--sockets", type=int, default=10, help=f"WebSockets, 0..{MAX_SOCKETS}")
     ap.add_argument("--think", type=float, default=0.25, help="s between a client's requests")
+    ap.add_argument("--http", choices=("lean", "httpx"), default="lean",
+                    help="REST client of the load generator (httpx: the earlier one)")  # fmt: skip
     ap.add_argument("--cycles", type=int, default=12, help="inspections per phase")
     ap.add_argument("--time-scale", type=float, default=5.0)
     ap.add_argument("--seed", type=int, default=7)
