@@ -144,6 +144,16 @@ class Settings(BaseSettings):
         description="Simulator: start with a few catalogue objects on the belt, indexing at the station.",
     )
     log_level: Literal["debug", "info", "warning", "error"] = "info"
+    event_loop: Literal["auto", "uvloop", "asyncio"] = Field(
+        "auto",
+        description="Event loop of `visioncell serve`: uvloop when it is installed (auto), "
+        "required (uvloop), or the standard library's (asyncio).",
+    )
+    ws_compression: bool = Field(
+        False,
+        description="Offer per-message deflate on the console WebSocket (its messages are "
+        "small JSON: compressing them costs the server CPU for a few bytes saved).",
+    )
     recognition_method: Literal["sift", "orb", "akaze", "color-sift"] = Field(
         "sift",
         description="Feature method of trained views and inspections (changing it makes the "

@@ -105,10 +105,7 @@ async def _rest_client(
             i = (i + 1) % len(routes)
             t0 = time.perf_counter()
             try:
-                if lean:
-                    code = (await c.get(route))[0]
-                else:
-                    code = (await c.get(route)).status_code
+                code = (await c.get(route))[0] if lean else (await c.get(route)).status_code
             except (httpx.HTTPError, HttpError):
                 code = 0  # no answer (counted, never a latency)
             dt = time.perf_counter() - t0
@@ -283,6 +280,8 @@ def _settings(tmp: Path, args: argparse.Namespace) -> Any:
         http_host="127.0.0.1",
         http_port=_free_port(),
         cell_name="load-bench",
+        event_loop=getattr(args, "event_loop", "auto"),
+        ws_compression=getattr(args, "ws_compression", False),
     )
 
 
@@ -376,7 +375,7 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
         config = uvicorn.Config(
             create_app(settings, runtime=rt), host="127.0.0.1", port=settings.http_port,
             log_level="warning", timeout_graceful_shutdown=1, ws_ping_interval=10,
-            **uvicorn_options(),
+            **uvicorn_options(ws_compression=settings.ws_compression),
         )  # fmt: skip
         server = uvicorn.Server(config)
         serving = asyncio.create_task(server.serve())
@@ -396,6 +395,7 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
 async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) -> dict[str, Any]:
     import numpy as np
 
+    from backend.eventloop import loop_name
     from backend.inspection import service
 
     base = f"http://127.0.0.1:{settings.http_port}"
@@ -435,6 +435,8 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         "sockets": args.sockets,
         "think_s": args.think,
         "http_client": args.http,
+        "event_loop": loop_name(asyncio.get_running_loop()),
+        "ws_compression": settings.ws_compression,
         "cycles": args.cycles,
         "cycle_s_no_load": base_s,
         "cycle_s_no_load_before": statistics.median(before),
@@ -454,7 +456,7 @@ def _proc_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def route_cpu(requests: int = 40) -> dict[str, Any]:
+def route_cpu(requests: int = 40, *, event_loop: str = "auto") -> dict[str, Any]:
     """Server CPU per request of each route: ``visioncell serve`` (ideal arm, folder camera)
     in a child process, one client asking each route ``requests`` times in a row; the
     server's idle CPU over the same time is subtracted.  CPU time, unlike latency, hardly
@@ -469,6 +471,8 @@ def route_cpu(requests: int = 40) -> dict[str, Any]:
 
     if not 5 <= requests <= 10_000:
         raise ValueError(f"requests must be within 5..10000, got {requests!r}")
+    if event_loop not in ("auto", "uvloop", "asyncio"):
+        raise ValueError(f"event_loop must be auto, uvloop or asyncio, got {event_loop!r}")
     tmp = Path(tempfile.mkdtemp(prefix="bench-route-cpu-"))
     images = tmp / "images"
     images.mkdir()
@@ -485,6 +489,7 @@ def route_cpu(requests: int = 40) -> dict[str, Any]:
         "VISIONCELL_VISER_PORT": str(_free_port()), "VISIONCELL_VIEW3D_ENABLED": "false",
         "VISIONCELL_SECRET_KEY": settings.secret_key.get_secret_value(),
         "VISIONCELL_DRIVER": "ideal", "VISIONCELL_CAMERA": "folder",
+        "VISIONCELL_EVENT_LOOP": event_loop,
         "VISIONCELL_CAMERA_FOLDER": str(images), "VISIONCELL_BOOTSTRAP_OPERATOR": "false",
     }  # fmt: skip
     log = (tmp / "serve.log").open("w")
@@ -529,7 +534,8 @@ def route_cpu(requests: int = 40) -> dict[str, Any]:
             proc.kill()
             proc.wait()
         log.close()
-    return {"requests_per_route": requests, "idle_cpu_pct": idle * 100, "routes": out_rows}
+    return {"requests_per_route": requests, "idle_cpu_pct": idle * 100, "event_loop": event_loop,
+            "routes": out_rows}  # fmt: skip
 
 
 def _print_route_cpu(res: dict[str, Any]) -> None:
@@ -601,6 +607,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--think", type=float, default=0.25, help="s between a client's requests")
     ap.add_argument("--http", choices=("lean", "httpx"), default="lean",
                     help="REST client of the load generator (httpx: the earlier one)")  # fmt: skip
+    ap.add_argument("--event-loop", choices=("auto", "uvloop", "asyncio"), default="auto",
+                    help="the server's event loop (as VISIONCELL_EVENT_LOOP)")  # fmt: skip
+    ap.add_argument("--ws-compression", action=argparse.BooleanOptionalAction, default=False,
+                    help="per-message deflate on the console WebSocket (as VISIONCELL_WS_COMPRESSION)")  # fmt: skip
     ap.add_argument("--cycles", type=int, default=12, help="inspections per phase")
     ap.add_argument("--time-scale", type=float, default=5.0)
     ap.add_argument("--seed", type=int, default=7)
@@ -632,12 +642,14 @@ def main(argv: list[str] | None = None) -> None:
     if args.route_cpu is not None:
         if not 5 <= args.route_cpu <= 10_000:
             ap.error(f"--route-cpu must be in 5..10000, got {args.route_cpu}")
-        cpu = route_cpu(args.route_cpu)
+        cpu = route_cpu(args.route_cpu, event_loop=args.event_loop)
         _print_route_cpu(cpu)
         if args.json:
             print(json.dumps(cpu))
         return
-    res = asyncio.run(_run(args))
+    from backend.eventloop import run
+
+    res = run(_run(args), choice=args.event_loop)
     _print(res)
     if args.json:
         print(json.dumps(res, default=str))
