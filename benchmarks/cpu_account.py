@@ -10,7 +10,8 @@ the native thread id):
 * ``event loop``: the main thread, where uvicorn, the FastAPI handlers, the cell's async
   loop and the SQLAlchemy/aiosqlite callbacks run;
 * ``sim-physics``: the MuJoCo thread (physics steps and the camera renders);
-* ``to_thread workers``: asyncio's default executor (``asyncio_N``), where the inspection's
+* ``to_thread workers``: the loop's default executor (``asyncio_N`` under asyncio,
+  ``ThreadPoolExecutor-0_N`` under uvloop), where the inspection's
   vision (segmentation, matching, pose) and the JPEG encoding of frames run;
 * ``aiosqlite``: the database's connection threads;
 * ``other threads``: native threads without a Python name (OpenCV, EGL, BLAS), or Python
@@ -49,7 +50,7 @@ def group_of(name: str | None, *, is_main: bool) -> str:
         return "other threads"
     if name == "sim-physics":
         return "sim-physics"
-    if name.startswith("asyncio_"):
+    if name.startswith(("asyncio_", "ThreadPoolExecutor-")):  # asyncio's, uvloop's executor
         return "to_thread workers"
     if name.startswith("aiosqlite:") or "_connection_worker" in name:
         return "aiosqlite"
