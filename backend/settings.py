@@ -149,6 +149,14 @@ class Settings(BaseSettings):
         description="Event loop of `visioncell serve`: uvloop when it is installed (auto), "
         "required (uvloop), or the standard library's (asyncio).",
     )
+    read_cache_ttl_s: float = Field(
+        1.0,
+        ge=0.0,
+        le=10.0,
+        allow_inf_nan=False,
+        description="How long the hot list and status reads are reused, seconds (0: off); "
+        "a write by this process is seen at once, another process's within this time.",
+    )
     ws_compression: bool = Field(
         False,
         description="Offer per-message deflate on the console WebSocket (its messages are "

@@ -11,11 +11,12 @@ the native thread id):
   loop and the SQLAlchemy/aiosqlite callbacks run;
 * ``sim-physics``: the MuJoCo thread (physics steps and the camera renders);
 * ``to_thread workers``: the loop's default executor (``asyncio_N`` under asyncio,
-  ``ThreadPoolExecutor-0_N`` under uvloop), where the inspection's
+  ``uvloop_N`` under uvloop), where the inspection's
   vision (segmentation, matching, pose) and the JPEG encoding of frames run;
 * ``aiosqlite``: the database's connection threads;
-* ``other threads``: native threads without a Python name (OpenCV, EGL, BLAS), or Python
-  threads not named above; CPU of threads that ended between the snapshots is counted in
+* ``native NAME``: threads without a Python name (OpenCV, Mesa's ``llvmpipe`` renderer
+  under EGL, BLAS), by their kernel name;
+* ``other threads``: Python threads not named above; CPU of threads that ended between the snapshots is counted in
   ``ended threads`` (the process total minus the threads alive at the end).
 """
 
@@ -42,15 +43,18 @@ def _stat_cpu_s(path: Path) -> float | None:
     return (int(fields[11]) + int(fields[12])) * _TICK_S
 
 
-def group_of(name: str | None, *, is_main: bool) -> str:
-    """The role of a thread from its Python name (None for a native thread)."""
+def group_of(name: str | None, *, is_main: bool, comm: str = "") -> str:
+    """The role of a thread from its Python name (None for a native thread, then named by
+    its kernel name ``comm`` without digits: ``native llvmpipe-`` for Mesa's software
+    renderer under EGL, for instance)."""
     if is_main:
         return "event loop"
     if name is None:
-        return "other threads"
+        base = comm.strip().rstrip("0123456789:_-") or "?"
+        return f"native {base}"
     if name == "sim-physics":
         return "sim-physics"
-    if name.startswith(("asyncio_", "ThreadPoolExecutor-")):  # asyncio's, uvloop's executor
+    if name.startswith(("asyncio_", "uvloop_")):  # the default executor of each loop
         return "to_thread workers"
     if name.startswith("aiosqlite:") or "_connection_worker" in name:
         return "aiosqlite"
@@ -88,7 +92,14 @@ def snapshot(children: dict[str, int] | None = None) -> CpuSnapshot:
         tid = int(entry.name)
         cpu = _stat_cpu_s(entry / "stat")
         if cpu is not None:
-            threads[tid] = (group_of(names.get(tid), is_main=tid == main_id), cpu)
+            name = names.get(tid)
+            comm = ""
+            if name is None:
+                try:
+                    comm = (entry / "comm").read_text()
+                except (FileNotFoundError, ProcessLookupError):
+                    comm = ""
+            threads[tid] = (group_of(name, is_main=tid == main_id, comm=comm), cpu)
     process = _stat_cpu_s(Path("/proc/self/stat")) or 0.0
     kids = {label: _stat_cpu_s(Path(f"/proc/{pid}/stat")) or 0.0 for label, pid in children.items()}
     return CpuSnapshot(time.monotonic(), process, threads, kids)

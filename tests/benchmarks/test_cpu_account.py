@@ -71,9 +71,11 @@ def test_group_names() -> None:
     assert cpu_account.group_of("x", is_main=True) == "event loop"
     assert cpu_account.group_of("sim-physics", is_main=False) == "sim-physics"
     assert cpu_account.group_of("asyncio_3", is_main=False) == "to_thread workers"
-    assert cpu_account.group_of("ThreadPoolExecutor-0_1", is_main=False) == "to_thread workers"
+    assert cpu_account.group_of("uvloop_1", is_main=False) == "to_thread workers"
     assert cpu_account.group_of("aiosqlite:f", is_main=False) == "aiosqlite"
-    assert cpu_account.group_of(None, is_main=False) == "other threads"
+    assert cpu_account.group_of(None, is_main=False, comm="llvmpipe-3\n") == "native llvmpipe"
+    assert cpu_account.group_of(None, is_main=False) == "native ?"
+    assert cpu_account.group_of("worker", is_main=False) == "other threads"
 
 
 def test_bad_inputs_are_refused() -> None:
