@@ -13,6 +13,7 @@ bodies, answers up to :data:`MAX_BODY_BYTES`.  Anything else raises :class:`Http
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from urllib.parse import urlsplit
 
 __all__ = ["MAX_BODY_BYTES", "HttpError", "LeanConnection"]
@@ -134,7 +135,5 @@ class LeanConnection:
         writer, self._writer, self._reader = self._writer, None, None
         if writer is not None:
             writer.close()
-            try:
+            with contextlib.suppress(OSError):
                 await writer.wait_closed()
-            except OSError:
-                pass

@@ -282,6 +282,7 @@ def _settings(tmp: Path, args: argparse.Namespace) -> Any:
         cell_name="load-bench",
         event_loop=getattr(args, "event_loop", "auto"),
         ws_compression=getattr(args, "ws_compression", False),
+        read_cache_ttl_s=getattr(args, "read_cache_ttl", 1.0),
     )
 
 
@@ -437,6 +438,8 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         "http_client": args.http,
         "event_loop": loop_name(asyncio.get_running_loop()),
         "ws_compression": settings.ws_compression,
+        "read_cache_ttl_s": settings.read_cache_ttl_s,
+        "read_cache": {"hits": rt.read_cache.hits, "misses": rt.read_cache.misses},
         "cycles": args.cycles,
         "cycle_s_no_load": base_s,
         "cycle_s_no_load_before": statistics.median(before),
@@ -456,7 +459,9 @@ def _proc_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def route_cpu(requests: int = 40, *, event_loop: str = "auto") -> dict[str, Any]:
+def route_cpu(
+    requests: int = 40, *, event_loop: str = "auto", read_cache_ttl_s: float = 1.0
+) -> dict[str, Any]:
     """Server CPU per request of each route: ``visioncell serve`` (ideal arm, folder camera)
     in a child process, one client asking each route ``requests`` times in a row; the
     server's idle CPU over the same time is subtracted.  CPU time, unlike latency, hardly
@@ -490,6 +495,7 @@ def route_cpu(requests: int = 40, *, event_loop: str = "auto") -> dict[str, Any]
         "VISIONCELL_SECRET_KEY": settings.secret_key.get_secret_value(),
         "VISIONCELL_DRIVER": "ideal", "VISIONCELL_CAMERA": "folder",
         "VISIONCELL_EVENT_LOOP": event_loop,
+        "VISIONCELL_READ_CACHE_TTL_S": str(read_cache_ttl_s),
         "VISIONCELL_CAMERA_FOLDER": str(images), "VISIONCELL_BOOTSTRAP_OPERATOR": "false",
     }  # fmt: skip
     log = (tmp / "serve.log").open("w")
@@ -535,6 +541,7 @@ def route_cpu(requests: int = 40, *, event_loop: str = "auto") -> dict[str, Any]
             proc.wait()
         log.close()
     return {"requests_per_route": requests, "idle_cpu_pct": idle * 100, "event_loop": event_loop,
+            "read_cache_ttl_s": read_cache_ttl_s,
             "routes": out_rows}  # fmt: skip
 
 
@@ -611,6 +618,8 @@ def main(argv: list[str] | None = None) -> None:
                     help="the server's event loop (as VISIONCELL_EVENT_LOOP)")  # fmt: skip
     ap.add_argument("--ws-compression", action=argparse.BooleanOptionalAction, default=False,
                     help="per-message deflate on the console WebSocket (as VISIONCELL_WS_COMPRESSION)")  # fmt: skip
+    ap.add_argument("--read-cache-ttl", type=float, default=1.0,
+                    help="s the hot reads are reused, 0..10, 0 off (as VISIONCELL_READ_CACHE_TTL_S)")  # fmt: skip
     ap.add_argument("--cycles", type=int, default=12, help="inspections per phase")
     ap.add_argument("--time-scale", type=float, default=5.0)
     ap.add_argument("--seed", type=int, default=7)
@@ -632,6 +641,8 @@ def main(argv: list[str] | None = None) -> None:
         ap.error(f"--think must be in 0..60 s, got {args.think}")
     if not 1 <= args.cycles <= MAX_CYCLES:
         ap.error(f"--cycles must be in 1..{MAX_CYCLES}, got {args.cycles}")
+    if not (math.isfinite(args.read_cache_ttl) and 0.0 <= args.read_cache_ttl <= 10.0):
+        ap.error(f"--read-cache-ttl must be in 0..10 s, got {args.read_cache_ttl}")
     if not (math.isfinite(args.time_scale) and 1.0 <= args.time_scale <= 100.0):
         ap.error(f"--time-scale must be in [1, 100], got {args.time_scale}")
     if args.clients_only:
@@ -642,7 +653,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.route_cpu is not None:
         if not 5 <= args.route_cpu <= 10_000:
             ap.error(f"--route-cpu must be in 5..10000, got {args.route_cpu}")
-        cpu = route_cpu(args.route_cpu, event_loop=args.event_loop)
+        cpu = route_cpu(args.route_cpu, event_loop=args.event_loop,
+                        read_cache_ttl_s=args.read_cache_ttl)  # fmt: skip
         _print_route_cpu(cpu)
         if args.json:
             print(json.dumps(cpu))
