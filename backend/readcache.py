@@ -21,12 +21,16 @@ keeps it correct:
   role dependency has accepted the caller, and every entry carries the role it was read
   for; :meth:`ReadCache.get` refuses to return it to a weaker role.  Answers that depend
   on who asks are never cached;
+- one read per key at a time: requests that miss while a read of the same answer is in
+  flight wait for it (under load, a miss took long enough for every other console to
+  miss too and open its own session);
 - bounded: at most ``max_entries`` entries (the oldest go first); entries are the small
   JSON-ready dicts the routes answer.
 """
 
 from __future__ import annotations
 
+import asyncio
 import threading
 import time
 import weakref
@@ -53,6 +57,18 @@ _PENDING = "visioncell_readcache_tables"
 T = TypeVar("T")
 
 _caches: weakref.WeakSet[ReadCache] = weakref.WeakSet()
+
+
+@dataclass(frozen=True)
+class _Flight:
+    """A read in progress: its loop, the role and tables it reads for, the generation
+    it started at, and the future its waiters share."""
+
+    loop: asyncio.AbstractEventLoop
+    role: Role
+    tables: frozenset[str]
+    gen: tuple[int, ...]
+    future: asyncio.Future[Any]
 
 
 @dataclass(frozen=True)
@@ -89,8 +105,11 @@ class ReadCache:
         self._entries: dict[Hashable, _Entry] = {}
         self._lock = threading.Lock()
         self._generation: dict[str, int] = {}
+        self._inflight: dict[Hashable, _Flight] = {}
+        #: Answers served from an entry, read, and shared with a read in flight.
         self.hits = 0
         self.misses = 0
+        self.shared = 0
         _caches.add(self)
 
     def _gen(self, tables: Iterable[str]) -> tuple[int, ...]:
@@ -119,16 +138,50 @@ class ReadCache:
             if e is not None and now < e.until and e.tables == deps and role >= e.role:
                 self.hits += 1
                 return e.value  # type: ignore[no-any-return]
-            self.misses += 1
             gen = self._gen(deps)
-        value = await read()
-        if self.ttl_s > 0:
-            with self._lock:
-                if self._gen(deps) == gen:  # nothing it read was written meanwhile
-                    self._entries.pop(key, None)
-                    self._entries[key] = _Entry(now + self.ttl_s, role, deps, value)
-                    while len(self._entries) > self.max_entries:
-                        del self._entries[next(iter(self._entries))]
+        if self.ttl_s <= 0:
+            self.misses += 1
+            return await read()
+        # One read per key at a time: callers that miss while it is in flight share its
+        # answer (when read for a role no stronger than theirs, and not made stale by a
+        # commit since it started) instead of each opening a session of its own.
+        loop = asyncio.get_running_loop()
+        flight = self._inflight.get(key)
+        if (
+            flight is not None and flight.loop is loop and flight.tables == deps
+            and role >= flight.role and flight.gen == gen
+        ):  # fmt: skip
+            self.shared += 1
+            try:
+                return await asyncio.shield(flight.future)  # type: ignore[no-any-return]
+            except asyncio.CancelledError:
+                task = asyncio.current_task()
+                if not flight.future.cancelled() or (task is not None and task.cancelling()):
+                    raise  # this caller was cancelled, not the read it waited for
+            # The caller that read was cancelled (its client went away): read here.
+            return await self.get_or_read(key, role=role, tables=deps, read=read)
+        self.misses += 1
+        mine = _Flight(loop, role, deps, gen, loop.create_future())
+        self._inflight[key] = mine
+        try:
+            value = await read()
+        except asyncio.CancelledError:
+            mine.future.cancel()
+            raise
+        except BaseException as exc:
+            mine.future.set_exception(exc)
+            mine.future.exception()  # retrieved: no "never retrieved" warning
+            raise
+        finally:
+            if self._inflight.get(key) is mine:
+                del self._inflight[key]
+        mine.future.set_result(value)
+        with self._lock:
+            if self._gen(deps) == gen:  # nothing it read was written meanwhile
+                self._entries.pop(key, None)
+                self._entries[key] = _Entry(now + self.ttl_s, role, deps, value)
+                while len(self._entries) > self.max_entries:
+                    del self._entries[next(iter(self._entries))]
         return value
 
     def invalidate(self, tables: Iterable[str]) -> int:

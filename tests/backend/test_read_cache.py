@@ -220,3 +220,70 @@ def test_roles_are_checked_per_request_with_a_warm_cache(client, headers) -> Non
     assert r.status_code in (200, 204), r.text
     r = client.get("/api/cells", headers=headers["viewer"])
     assert r.status_code == 401 and r.json()["error"] == "unauthorized"
+
+
+# -- one read per key at a time ---------------------------------------------------------------
+def test_concurrent_misses_share_one_read_of_a_role_no_stronger_than_theirs() -> None:
+    cache = ReadCache(ttl_s=10.0)
+    calls = []
+
+    async def slow(value: str) -> str:
+        calls.append(value)
+        await asyncio.sleep(0.05)
+        return value
+
+    async def run() -> list[str]:
+        def get(role: Role, value: str):
+            return cache.get_or_read("k", role=role, tables=("cells",),
+                                     read=lambda: slow(value))  # fmt: skip
+
+        first = asyncio.create_task(get(Role.operator, "operator's"))
+        await asyncio.sleep(0)  # its read is in flight
+        rest = [get(Role.engineer, "e"), get(Role.operator, "o"), get(Role.viewer, "viewer's")]
+        got = await asyncio.gather(*rest)  # while the first read is still in flight
+        return [await first, *got]
+
+    got = asyncio.run(run())
+    # The engineer and the operator shared the operator's read; the viewer read its own.
+    assert got == ["operator's", "operator's", "operator's", "viewer's"]
+    assert sorted(calls) == ["operator's", "viewer's"]
+    assert (cache.shared, cache.hits, cache.misses) == (2, 0, 2)
+
+
+def test_a_failed_read_fails_its_waiters_and_is_not_kept() -> None:
+    cache = ReadCache(ttl_s=10.0)
+
+    async def boom() -> str:
+        await asyncio.sleep(0.02)
+        raise RuntimeError("database down")
+
+    async def run() -> list[object]:
+        get = lambda: cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=boom)  # noqa: E731
+        return await asyncio.gather(get(), get(), return_exceptions=True)
+
+    got = asyncio.run(run())
+    assert [type(g) for g in got] == [RuntimeError, RuntimeError] and len(cache) == 0
+
+
+def test_a_cancelled_reader_leaves_its_waiters_to_read_themselves() -> None:
+    cache = ReadCache(ttl_s=10.0)
+    calls = 0
+
+    async def slow() -> str:
+        nonlocal calls
+        calls += 1
+        await asyncio.sleep(0.1)
+        return "v"
+
+    async def run() -> str:
+        get = lambda: cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=slow)  # noqa: E731
+        owner = asyncio.create_task(get())
+        await asyncio.sleep(0)
+        waiter = asyncio.create_task(get())
+        await asyncio.sleep(0.02)
+        owner.cancel()  # its client went away
+        with pytest.raises(asyncio.CancelledError):
+            await owner
+        return await waiter
+
+    assert asyncio.run(run()) == "v" and calls == 2
