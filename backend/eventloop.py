@@ -31,7 +31,7 @@ def loop_factory(choice: LoopChoice = "auto") -> Callable[[], asyncio.AbstractEv
         if choice == "uvloop":
             raise RuntimeError("event loop 'uvloop' asked for: pip install uvloop") from exc
         return None
-    return uvloop.new_event_loop  # type: ignore[no-any-return]
+    return uvloop.new_event_loop
 
 
 def loop_name(loop: asyncio.AbstractEventLoop) -> str:

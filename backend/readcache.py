@@ -137,7 +137,7 @@ class ReadCache:
             e = self._entries.get(key)
             if e is not None and now < e.until and e.tables == deps and role >= e.role:
                 self.hits += 1
-                return e.value  # type: ignore[no-any-return]
+                return e.value
             gen = self._gen(deps)
         if self.ttl_s <= 0:
             self.misses += 1
@@ -153,7 +153,7 @@ class ReadCache:
         ):  # fmt: skip
             self.shared += 1
             try:
-                return await asyncio.shield(flight.future)  # type: ignore[no-any-return]
+                return await asyncio.shield(flight.future)
             except asyncio.CancelledError:
                 task = asyncio.current_task()
                 if not flight.future.cancelled() or (task is not None and task.cancelling()):

@@ -9,14 +9,21 @@ match, pose, store) with :func:`backend.inspection.service.inspect_object`, what
 operation runs per object.  The clients run in a child process (``--clients-only``), so
 their own CPU time is not the server's:
 
-* ``--clients`` REST clients (httpx, async), each looping over :data:`ROUTES` (what the
-  console reads) with ``--think`` seconds between its requests;
+* ``--clients`` REST clients, each looping over :data:`ROUTES` (what the console reads)
+  with ``--think`` seconds between its requests, on a keep-alive connection of its own
+  (:mod:`benchmarks.leanhttp`; ``--http httpx``: one shared httpx client, the earlier
+  generator, whose own CPU took a quarter of a core of the cell's machine);
 * ``--sockets`` console WebSockets (``/api/ws``); the lag of a message is its receipt time
   minus its ``at`` (when the server's event was made; one machine, one clock).
 
 ``--route-cpu N`` measures instead the server's CPU per request of each route (one client,
 ``N`` requests per route, a ``visioncell serve`` child on the ideal arm): a figure that,
 unlike latencies, hardly moves with the machine's load.
+
+The CPU of each phase is accounted per thread of the server and for the client process
+(:mod:`benchmarks.cpu_account`).  ``--event-loop``, ``--ws-compression`` and
+``--read-cache-ttl`` set the server as the matching ``VISIONCELL_*`` settings do, so each
+step can be measured against the configuration before it.
 
 Phases, in one run: ``--cycles`` inspections without load, the same with the clients
 running, and again without load; the baseline is the median over both unloaded phases and
@@ -439,8 +446,11 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         "event_loop": loop_name(asyncio.get_running_loop()),
         "ws_compression": settings.ws_compression,
         "read_cache_ttl_s": settings.read_cache_ttl_s,
-        "read_cache": {"hits": rt.read_cache.hits, "misses": rt.read_cache.misses,
-                       "shared": rt.read_cache.shared},
+        "read_cache": {
+            "hits": rt.read_cache.hits,
+            "misses": rt.read_cache.misses,
+            "shared": rt.read_cache.shared,
+        },
         "cycles": args.cycles,
         "cycle_s_no_load": base_s,
         "cycle_s_no_load_before": statistics.median(before),
