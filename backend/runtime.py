@@ -39,6 +39,7 @@ from backend.db.session import Database
 from backend.hardware import Hardware, make_hardware
 from backend.inspection import recovery
 from backend.jobs import JobManager
+from backend.readcache import ReadCache
 from backend.recognition.index import LiveIndex, load_live_index
 from backend.recognition.teach import BackgroundStore
 from backend.settings import Settings
@@ -155,6 +156,8 @@ class CellRuntime:
         #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).
         #: Successful sign-ins reused for 2 s (``backend.authcache``).
         self.auth_cache = AuthCache()
+        #: Hot list and status reads reused for ``read_cache_ttl_s`` (``backend.readcache``).
+        self.read_cache = ReadCache(ttl_s=settings.read_cache_ttl_s)
         #: On PostgreSQL: drops the sign-ins other processes revoke (``backend.authsync``).
         self.auth_sync: AuthSync | None = None
         self.signin_throttle = SignInThrottle(

@@ -144,6 +144,24 @@ class Settings(BaseSettings):
         description="Simulator: start with a few catalogue objects on the belt, indexing at the station.",
     )
     log_level: Literal["debug", "info", "warning", "error"] = "info"
+    event_loop: Literal["auto", "uvloop", "asyncio"] = Field(
+        "auto",
+        description="Event loop of `visioncell serve`: uvloop when it is installed (auto), "
+        "required (uvloop), or the standard library's (asyncio).",
+    )
+    read_cache_ttl_s: float = Field(
+        1.0,
+        ge=0.0,
+        le=10.0,
+        allow_inf_nan=False,
+        description="How long the hot list and status reads are reused, seconds (0: off); "
+        "a write by this process is seen at once, another process's within this time.",
+    )
+    ws_compression: bool = Field(
+        False,
+        description="Offer per-message deflate on the console WebSocket (its messages are "
+        "small JSON: compressing them costs the server CPU for a few bytes saved).",
+    )
     recognition_method: Literal["sift", "orb", "akaze", "color-sift"] = Field(
         "sift",
         description="Feature method of trained views and inspections (changing it makes the "

@@ -9,14 +9,21 @@ match, pose, store) with :func:`backend.inspection.service.inspect_object`, what
 operation runs per object.  The clients run in a child process (``--clients-only``), so
 their own CPU time is not the server's:
 
-* ``--clients`` REST clients (httpx, async), each looping over :data:`ROUTES` (what the
-  console reads) with ``--think`` seconds between its requests;
+* ``--clients`` REST clients, each looping over :data:`ROUTES` (what the console reads)
+  with ``--think`` seconds between its requests, on a keep-alive connection of its own
+  (:mod:`benchmarks.leanhttp`; ``--http httpx``: one shared httpx client, the earlier
+  generator, whose own CPU took a quarter of a core of the cell's machine);
 * ``--sockets`` console WebSockets (``/api/ws``); the lag of a message is its receipt time
   minus its ``at`` (when the server's event was made; one machine, one clock).
 
 ``--route-cpu N`` measures instead the server's CPU per request of each route (one client,
 ``N`` requests per route, a ``visioncell serve`` child on the ideal arm): a figure that,
 unlike latencies, hardly moves with the machine's load.
+
+The CPU of each phase is accounted per thread of the server and for the client process
+(:mod:`benchmarks.cpu_account`).  ``--event-loop``, ``--ws-compression`` and
+``--read-cache-ttl`` set the server as the matching ``VISIONCELL_*`` settings do, so each
+step can be measured against the configuration before it.
 
 Phases, in one run: ``--cycles`` inspections without load, the same with the clients
 running, and again without load; the baseline is the median over both unloaded phases and
@@ -46,6 +53,8 @@ from typing import Any
 
 from rich.console import Console
 from rich.table import Table
+
+from benchmarks import cpu_account
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering, before MuJoCo loads
 
@@ -89,27 +98,35 @@ async def _rest_client(
     k: int, c: Any, think_s: float, stop: asyncio.Event, lat: dict[str, list[float]],
     status: dict[str, dict[int, int]], routes: tuple[str, ...], measure_from: float,
 ) -> None:  # fmt: skip
+    """One console reading ``routes`` in turn through ``c`` (a :class:`LeanConnection` of
+    its own, or the shared ``httpx.AsyncClient``)."""
     import httpx
 
+    from benchmarks.leanhttp import HttpError
+
+    lean = not isinstance(c, httpx.AsyncClient)
     i = k % len(routes)
-    while not stop.is_set():
-        route = routes[i]
-        i = (i + 1) % len(routes)
-        t0 = time.perf_counter()
-        try:
-            r = await c.get(route)
-            code = r.status_code
-        except httpx.HTTPError:
-            code = 0  # no answer (counted, never a latency)
-        dt = time.perf_counter() - t0
-        if t0 >= measure_from:
-            name = route.split("?")[0]
-            status[name][code] = status[name].get(code, 0) + 1
-            if code == 200:
-                lat[name].append(dt * 1e3)
-        if think_s > 0:
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(stop.wait(), think_s)
+    try:
+        while not stop.is_set():
+            route = routes[i]
+            i = (i + 1) % len(routes)
+            t0 = time.perf_counter()
+            try:
+                code = (await c.get(route))[0] if lean else (await c.get(route)).status_code
+            except (httpx.HTTPError, HttpError):
+                code = 0  # no answer (counted, never a latency)
+            dt = time.perf_counter() - t0
+            if t0 >= measure_from:
+                name = route.split("?")[0]
+                status[name][code] = status[name].get(code, 0) + 1
+                if code == 200:
+                    lat[name].append(dt * 1e3)
+            if think_s > 0:
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(stop.wait(), think_s)
+    finally:
+        if lean:
+            await c.close()
 
 
 async def _socket_client(
@@ -141,16 +158,23 @@ async def _socket_client(
 
 async def run_clients(
     base: str, token: str, *, clients: int, sockets: int, think_s: float, stop: asyncio.Event,
-    routes: tuple[str, ...] = ROUTES, warmup_s: float = 0.0,
+    routes: tuple[str, ...] = ROUTES, warmup_s: float = 0.0, http: str = "lean",
 ) -> dict[str, Any]:  # fmt: skip
     """Run ``clients`` REST readers and ``sockets`` console WebSockets until ``stop`` is set;
     return per-route latencies (ms, p50/p99/max), status counts and WebSocket lags, leaving
     out the first ``warmup_s`` seconds (connections being opened).
 
-    The REST clients share one httpx client with a connection each (``clients``
-    connections): one TLS context and pool instead of fifty, whose set-up alone kept a
-    loaded machine's client process busy for seconds."""
+    ``http="lean"`` (the default): each REST client has its own keep-alive connection
+    (:class:`benchmarks.leanhttp.LeanConnection`), less client CPU per request than httpx,
+    so that the load generator, which stands in for consoles on other machines,
+    takes less of the server's cores.  ``http="httpx"``: the REST clients share one httpx
+    client with a connection each (the earlier generator, kept to compare)."""
     import httpx
+
+    from benchmarks.leanhttp import LeanConnection
+
+    if http not in ("lean", "httpx"):
+        raise ValueError(f"http must be 'lean' or 'httpx', got {http!r}")
 
     if not (0 <= clients <= MAX_CLIENTS and 0 <= sockets <= MAX_SOCKETS):
         raise ValueError(f"clients 0..{MAX_CLIENTS}, sockets 0..{MAX_SOCKETS}")
@@ -172,10 +196,16 @@ async def run_clients(
     hdr = {"Authorization": f"Bearer {token}"}
     async with httpx.AsyncClient(
         base_url=base, headers=hdr, timeout=REQUEST_TIMEOUT_S, limits=limits
-    ) as c:
+    ) as shared:
+
+        def conn() -> Any:
+            if http == "httpx":
+                return shared
+            return LeanConnection(base, headers=hdr, timeout_s=REQUEST_TIMEOUT_S)
+
         tasks = [
             asyncio.create_task(
-                _rest_client(k, c, think_s, stop, lat, status, routes, measure_from)
+                _rest_client(k, conn(), think_s, stop, lat, status, routes, measure_from)
             )
             for k in range(clients)
         ] + [
@@ -226,7 +256,8 @@ async def _clients_main(args: argparse.Namespace) -> None:
 
     waiter = asyncio.create_task(wait_eof())
     res = await run_clients(args.base, args.token, clients=args.clients, sockets=args.sockets,
-                            think_s=args.think, stop=stop, warmup_s=WARMUP_S)  # fmt: skip
+                            think_s=args.think, stop=stop, warmup_s=WARMUP_S,
+                            http=args.http)  # fmt: skip
     waiter.cancel()
     print(json.dumps(res), flush=True)
 
@@ -256,6 +287,9 @@ def _settings(tmp: Path, args: argparse.Namespace) -> Any:
         http_host="127.0.0.1",
         http_port=_free_port(),
         cell_name="load-bench",
+        event_loop=getattr(args, "event_loop", "auto"),
+        ws_compression=getattr(args, "ws_compression", False),
+        read_cache_ttl_s=getattr(args, "read_cache_ttl", 1.0),
     )
 
 
@@ -349,7 +383,7 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
         config = uvicorn.Config(
             create_app(settings, runtime=rt), host="127.0.0.1", port=settings.http_port,
             log_level="warning", timeout_graceful_shutdown=1, ws_ping_interval=10,
-            **uvicorn_options(),
+            **uvicorn_options(ws_compression=settings.ws_compression),
         )  # fmt: skip
         server = uvicorn.Server(config)
         serving = asyncio.create_task(server.serve())
@@ -369,6 +403,7 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
 async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) -> dict[str, Any]:
     import numpy as np
 
+    from backend.eventloop import loop_name
     from backend.inspection import service
 
     base = f"http://127.0.0.1:{settings.http_port}"
@@ -377,16 +412,21 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
     await _teach(rt, "gear-housing")
     ctx = await service.context(rt)
     await _cycles(rt, ctx, 1, "warm-up", rng, "gear-housing")
+    cpu0 = cpu_account.snapshot()
     before = await _cycles(rt, ctx, args.cycles, "no load", rng, "gear-housing")
+    cpu_no_load = cpu_account.usage(cpu0, cpu_account.snapshot())
     child = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "benchmarks.load", "--clients-only", "--base", base,
         "--token", token, "--clients", str(args.clients), "--sockets", str(args.sockets),
-        "--think", str(args.think), stdin=asyncio.subprocess.PIPE,
+        "--think", str(args.think), "--http", args.http, stdin=asyncio.subprocess.PIPE,
         stdout=asyncio.subprocess.PIPE,
     )  # fmt: skip
     try:
         await asyncio.sleep(WARMUP_S)  # the clients connect and reach their steady rate
+        kids = {"load clients (child process)": child.pid}
+        cpu1 = cpu_account.snapshot(kids)
         loaded = await _cycles(rt, ctx, args.cycles, "load", rng, "gear-housing")
+        cpu_load = cpu_account.usage(cpu1, cpu_account.snapshot(kids))
         assert child.stdin is not None
         child.stdin.close()
         stdout, _ = await asyncio.wait_for(child.communicate(), 120)
@@ -402,6 +442,15 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         "clients": args.clients,
         "sockets": args.sockets,
         "think_s": args.think,
+        "http_client": args.http,
+        "event_loop": loop_name(asyncio.get_running_loop()),
+        "ws_compression": settings.ws_compression,
+        "read_cache_ttl_s": settings.read_cache_ttl_s,
+        "read_cache": {
+            "hits": rt.read_cache.hits,
+            "misses": rt.read_cache.misses,
+            "shared": rt.read_cache.shared,
+        },
         "cycles": args.cycles,
         "cycle_s_no_load": base_s,
         "cycle_s_no_load_before": statistics.median(before),
@@ -409,6 +458,8 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         "cycle_s_load": load_s,
         "cycle_slowdown": load_s / base_s,
         "load": clients,
+        "cpu_no_load": cpu_no_load,
+        "cpu_load": cpu_load,
         "database": "postgresql" if settings.database_url.startswith("postgresql") else "sqlite",
     }
 
@@ -419,7 +470,9 @@ def _proc_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def route_cpu(requests: int = 40) -> dict[str, Any]:
+def route_cpu(
+    requests: int = 40, *, event_loop: str = "auto", read_cache_ttl_s: float = 1.0
+) -> dict[str, Any]:
     """Server CPU per request of each route: ``visioncell serve`` (ideal arm, folder camera)
     in a child process, one client asking each route ``requests`` times in a row; the
     server's idle CPU over the same time is subtracted.  CPU time, unlike latency, hardly
@@ -434,6 +487,8 @@ def route_cpu(requests: int = 40) -> dict[str, Any]:
 
     if not 5 <= requests <= 10_000:
         raise ValueError(f"requests must be within 5..10000, got {requests!r}")
+    if event_loop not in ("auto", "uvloop", "asyncio"):
+        raise ValueError(f"event_loop must be auto, uvloop or asyncio, got {event_loop!r}")
     tmp = Path(tempfile.mkdtemp(prefix="bench-route-cpu-"))
     images = tmp / "images"
     images.mkdir()
@@ -450,6 +505,8 @@ def route_cpu(requests: int = 40) -> dict[str, Any]:
         "VISIONCELL_VISER_PORT": str(_free_port()), "VISIONCELL_VIEW3D_ENABLED": "false",
         "VISIONCELL_SECRET_KEY": settings.secret_key.get_secret_value(),
         "VISIONCELL_DRIVER": "ideal", "VISIONCELL_CAMERA": "folder",
+        "VISIONCELL_EVENT_LOOP": event_loop,
+        "VISIONCELL_READ_CACHE_TTL_S": str(read_cache_ttl_s),
         "VISIONCELL_CAMERA_FOLDER": str(images), "VISIONCELL_BOOTSTRAP_OPERATOR": "false",
     }  # fmt: skip
     log = (tmp / "serve.log").open("w")
@@ -494,7 +551,9 @@ def route_cpu(requests: int = 40) -> dict[str, Any]:
             proc.kill()
             proc.wait()
         log.close()
-    return {"requests_per_route": requests, "idle_cpu_pct": idle * 100, "routes": out_rows}
+    return {"requests_per_route": requests, "idle_cpu_pct": idle * 100, "event_loop": event_loop,
+            "read_cache_ttl_s": read_cache_ttl_s,
+            "routes": out_rows}  # fmt: skip
 
 
 def _print_route_cpu(res: dict[str, Any]) -> None:
@@ -550,6 +609,13 @@ def _print(res: dict[str, Any]) -> None:
     if load["ws_errors"]:
         c.add_row("WebSocket errors", str(len(load["ws_errors"])), load["ws_errors"][0])
     out.print(c)
+    u = Table(title=f"CPU, % of one core ({res['cpu_load']['cores']} cores), same run")
+    for col in ("where", "no load", "under load"):
+        u.add_column(col)
+    nl, ld = res["cpu_no_load"]["core_pct"], res["cpu_load"]["core_pct"]
+    for key in sorted(set(nl) | set(ld)):
+        u.add_row(key, _f(nl.get(key), "{:.0f}"), _f(ld.get(key), "{:.0f}"))
+    out.print(u)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -557,6 +623,14 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--clients", type=int, default=50, help=f"REST clients, 0..{MAX_CLIENTS}")
     ap.add_argument("--sockets", type=int, default=10, help=f"WebSockets, 0..{MAX_SOCKETS}")
     ap.add_argument("--think", type=float, default=0.25, help="s between a client's requests")
+    ap.add_argument("--http", choices=("lean", "httpx"), default="lean",
+                    help="REST client of the load generator (httpx: the earlier one)")  # fmt: skip
+    ap.add_argument("--event-loop", choices=("auto", "uvloop", "asyncio"), default="auto",
+                    help="the server's event loop (as VISIONCELL_EVENT_LOOP)")  # fmt: skip
+    ap.add_argument("--ws-compression", action=argparse.BooleanOptionalAction, default=False,
+                    help="per-message deflate on the console WebSocket (as VISIONCELL_WS_COMPRESSION)")  # fmt: skip
+    ap.add_argument("--read-cache-ttl", type=float, default=1.0,
+                    help="s the hot reads are reused, 0..10, 0 off (as VISIONCELL_READ_CACHE_TTL_S)")  # fmt: skip
     ap.add_argument("--cycles", type=int, default=12, help="inspections per phase")
     ap.add_argument("--time-scale", type=float, default=5.0)
     ap.add_argument("--seed", type=int, default=7)
@@ -578,6 +652,8 @@ def main(argv: list[str] | None = None) -> None:
         ap.error(f"--think must be in 0..60 s, got {args.think}")
     if not 1 <= args.cycles <= MAX_CYCLES:
         ap.error(f"--cycles must be in 1..{MAX_CYCLES}, got {args.cycles}")
+    if not (math.isfinite(args.read_cache_ttl) and 0.0 <= args.read_cache_ttl <= 10.0):
+        ap.error(f"--read-cache-ttl must be in 0..10 s, got {args.read_cache_ttl}")
     if not (math.isfinite(args.time_scale) and 1.0 <= args.time_scale <= 100.0):
         ap.error(f"--time-scale must be in [1, 100], got {args.time_scale}")
     if args.clients_only:
@@ -588,12 +664,15 @@ def main(argv: list[str] | None = None) -> None:
     if args.route_cpu is not None:
         if not 5 <= args.route_cpu <= 10_000:
             ap.error(f"--route-cpu must be in 5..10000, got {args.route_cpu}")
-        cpu = route_cpu(args.route_cpu)
+        cpu = route_cpu(args.route_cpu, event_loop=args.event_loop,
+                        read_cache_ttl_s=args.read_cache_ttl)  # fmt: skip
         _print_route_cpu(cpu)
         if args.json:
             print(json.dumps(cpu))
         return
-    res = asyncio.run(_run(args))
+    from backend.eventloop import run
+
+    res = run(_run(args), choice=args.event_loop)
     _print(res)
     if args.json:
         print(json.dumps(res, default=str))

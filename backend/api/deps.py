@@ -8,8 +8,8 @@ handlers, the WebSocket and services get what they need from these dependencies.
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Callable, Coroutine
-from typing import TYPE_CHECKING, Annotated, Any
+from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine, Hashable, Iterable
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 from fastapi import Depends, FastAPI
 from fastapi.requests import HTTPConnection
@@ -21,6 +21,7 @@ from backend.auth import authenticate_with_expiry, hash_token, well_formed
 from backend.cell import Cell
 from backend.db.models import Role, User
 from backend.db.session import Database
+from backend.readcache import ReadCache
 from backend.settings import Settings
 from backend.throttle import SignInThrottle, TooManyAttempts
 
@@ -130,6 +131,31 @@ async def get_session(
         yield session
 
 
+def get_read_cache(conn: HTTPConnection) -> ReadCache:
+    cache: ReadCache = get_runtime(conn).read_cache
+    return cache
+
+
+_T = TypeVar("_T")
+
+
+async def read_through(
+    cache: ReadCache, db: Database, user: User, key: Hashable, *, tables: Iterable[str],
+    read: Callable[[AsyncSession], Awaitable[_T]],
+) -> _T:  # fmt: skip
+    """``read(session)`` through the runtime's read cache (:mod:`backend.readcache`): the
+    answer of ``key`` if fresh and read for a role no stronger than ``user``'s, else read
+    in a session of its own (an API connection slot only on a miss).  The caller's role
+    dependency has already accepted ``user``; the value returned is shared, not to be
+    mutated."""
+
+    async def fresh() -> _T:
+        async with db.api_slot(), db.session() as session:
+            return await read(session)
+
+    return await cache.get_or_read(key, role=Role[user.role], tables=tables, read=fresh)
+
+
 # Types the runtime's module would import at start-up are written as Any here (FastAPI only
 # needs the dependency); the functions above carry the precise types.
 RuntimeDep = Annotated[Any, Depends(get_runtime)]
@@ -139,6 +165,7 @@ SimDep = Annotated[Any, Depends(get_sim_or_none)]
 View3DDep = Annotated[Any, Depends(get_view3d)]
 SessionDep = Annotated[AsyncSession, Depends(get_session)]
 CellDep = Annotated[Cell, Depends(get_cell)]
+ReadCacheDep = Annotated[ReadCache, Depends(get_read_cache)]
 
 
 async def _signed_in(

@@ -150,9 +150,13 @@ class JsonErrorHttpProtocol(H11Protocol):
         self._linger_timer = self.loop.call_later(LINGER_S, self._end_linger)
 
 
-def uvicorn_options() -> dict[str, Any]:
-    """Keyword arguments for ``uvicorn.run`` / ``uvicorn.Config`` that give JSON errors."""
+def uvicorn_options(*, ws_compression: bool = False) -> dict[str, Any]:
+    """Keyword arguments for ``uvicorn.run`` / ``uvicorn.Config`` that give JSON errors;
+    ``ws_compression`` offers per-message deflate on WebSockets (``Settings.ws_compression``)."""
+    if not isinstance(ws_compression, bool):
+        raise TypeError(f"ws_compression must be a bool, got {ws_compression!r}")
     return {
         "http": JsonErrorHttpProtocol,
         "h11_max_incomplete_event_size": MAX_REQUEST_HEAD_BYTES,
+        "ws_per_message_deflate": ws_compression,
     }

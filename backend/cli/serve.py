@@ -59,10 +59,11 @@ def serve(
         print(f"  {token}", flush=True)
     out.print("Press Ctrl-C to stop.")
     sys.stdout.flush()
+    from backend.eventloop import run
     from backend.runtime import StartupError
 
     try:
-        asyncio.run(_serve(settings))
+        run(_serve(settings), choice=settings.event_loop)
     except StartupError as exc:
         err.print(f"[red]error:[/red] {exc}")
         raise typer.Exit(1) from None
@@ -93,7 +94,7 @@ async def _serve(settings: Settings) -> None:
             log_level="warning" if settings.log_level == "info" else settings.log_level,
             timeout_graceful_shutdown=1,
             ws_ping_interval=10,
-            **uvicorn_options(),  # JSON answers for over-long or malformed requests
+            **uvicorn_options(ws_compression=settings.ws_compression),  # JSON 400/414
         )
         from backend.logredact import install_redaction
 

@@ -35,6 +35,8 @@ def test_exhausted_pool_is_a_503_with_retry_after(settings, headers, monkeypatch
     monkeypatch.setattr(session_mod, "POOL_SIZE", 1)
     monkeypatch.setattr(session_mod, "POOL_OVERFLOW", 0)
     monkeypatch.setattr(session_mod, "POOL_TIMEOUT_S", 0.5)
+    # No read cache: the second read must reach the pool, not the answer of the first.
+    settings = settings.model_copy(update={"read_cache_ttl_s": 0.0})
     with TestClient(create_app(settings)) as client:
         assert client.get("/api/models", headers=headers["viewer"]).status_code == 200
         engine = client.app.state.runtime.database.engine

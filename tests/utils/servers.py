@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import socket
 import threading
@@ -14,6 +13,7 @@ from typing import Any
 import uvicorn
 
 from backend.api.limits import uvicorn_options
+from backend.eventloop import run
 
 
 @dataclass(frozen=True)
@@ -25,15 +25,20 @@ class RunningServer:
 
 
 @contextlib.contextmanager
-def run_uvicorn(app: Any, *, start_timeout_s: float = 60.0) -> Iterator[RunningServer]:
-    """Serve ``app`` (lifespan included) on 127.0.0.1 at a port the kernel picks; stop it after."""
+def run_uvicorn(
+    app: Any, *, start_timeout_s: float = 60.0, ws_compression: bool = False
+) -> Iterator[RunningServer]:
+    """Serve ``app`` (lifespan included) on 127.0.0.1 at a port the kernel picks, on the
+    event loop ``visioncell serve`` uses (uvloop when installed); stop it after."""
     sock = socket.socket()
     sock.bind(("127.0.0.1", 0))
     port = sock.getsockname()[1]
-    config = uvicorn.Config(app, log_level="warning", lifespan="on", **uvicorn_options())
+    config = uvicorn.Config(
+        app, log_level="warning", lifespan="on", **uvicorn_options(ws_compression=ws_compression)
+    )
     server = uvicorn.Server(config)
     thread = threading.Thread(
-        target=lambda: asyncio.run(server.serve(sockets=[sock])), name="uvicorn", daemon=True
+        target=lambda: run(server.serve(sockets=[sock])), name="uvicorn", daemon=True
     )
     thread.start()
     deadline = time.monotonic() + start_timeout_s

@@ -9,8 +9,16 @@ from fastapi import APIRouter
 from pydantic import BaseModel
 
 from backend import __version__
-from backend.api.deps import CellDep, DatabaseDep, SettingsDep, View3DDep, ViewerUser
+from backend.api.deps import (
+    CellDep,
+    DatabaseDep,
+    ReadCacheDep,
+    SettingsDep,
+    View3DDep,
+    ViewerUser,
+)
 from backend.db.migrate import current_revision, head_revision
+from backend.db.models import Role
 
 router = APIRouter(tags=["health"])
 
@@ -60,12 +68,25 @@ def _versions() -> dict[str, str]:
 
 @router.get("/status", summary="Driver, camera, database and versions", response_model=StatusOut)
 async def read_status(
-    _: ViewerUser, settings: SettingsDep, db: DatabaseDep, cell: CellDep, view: View3DDep
+    user: ViewerUser,
+    settings: SettingsDep,
+    db: DatabaseDep,
+    cell: CellDep,
+    view: View3DDep,
+    cache: ReadCacheDep,
 ) -> dict[str, Any]:
     state = cell.driver.state
     cam = cell.camera_status()
-    db_ok = await db.ping()
-    revision = await current_revision(db.engine) if db_ok else None
+
+    async def probe() -> tuple[bool, str | None]:
+        ok = await db.ping()
+        return ok, (await current_revision(db.engine) if ok else None)
+
+    # Two round trips to the database, reused for the read cache's TTL (a database that
+    # goes away shows within it); the cell's own state below is read on every request.
+    db_ok, revision = await cache.get_or_read(
+        "status-database", role=Role[user.role], tables=("alembic_version",), read=probe
+    )
     return {
         "driver": {
             "name": cell.driver.name,

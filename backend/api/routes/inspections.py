@@ -12,8 +12,18 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, Path, Query, status
 from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
+from sqlalchemy.ext.asyncio import AsyncSession
 
-from backend.api.deps import EngineerUser, OperatorUser, RuntimeDep, SessionDep, ViewerUser
+from backend.api.deps import (
+    DatabaseDep,
+    EngineerUser,
+    OperatorUser,
+    ReadCacheDep,
+    RuntimeDep,
+    SessionDep,
+    ViewerUser,
+    read_through,
+)
 from backend.api.types import DbId, Limit, Offset
 from backend.inspection import results, service
 
@@ -99,9 +109,10 @@ async def stop_run(_: OperatorUser, rt: RuntimeDep) -> dict[str, Any]:
 
 @router.get("/inspections", summary="Stored inspections of this cell, newest first")
 async def read_inspections(
-    _: ViewerUser,
+    user: ViewerUser,
     rt: RuntimeDep,
-    session: SessionDep,
+    db: DatabaseDep,
+    cache: ReadCacheDep,
     limit: Limit = 50,
     offset: Offset = 0,
     decision: Literal["recognized", "unknown", "failed"] | None = None,
@@ -110,10 +121,16 @@ async def read_inspections(
     since: datetime | None = None,
     until: datetime | None = None,
 ) -> dict[str, Any]:
-    data, total = await results.list_inspections(
-        session, cell_id=rt.cell_id, limit=limit, offset=offset, decision=decision,
-        model=model, policy=policy, since=since, until=until,
-    )  # fmt: skip
+    async def read(session: AsyncSession) -> tuple[list[dict[str, Any]], int]:
+        return await results.list_inspections(
+            session, cell_id=rt.cell_id, limit=limit, offset=offset, decision=decision,
+            model=model, policy=policy, since=since, until=until,
+        )  # fmt: skip
+
+    key = ("inspections", rt.cell_id, limit, offset, decision, model, policy, since, until)
+    data, total = await read_through(
+        cache, db, user, key, tables=("inspections", "inspection_images"), read=read
+    )
     return {"data": data, "count": total}
 
 

@@ -16,9 +16,19 @@ import numpy as np
 from fastapi import APIRouter, Depends, File, Form, Path, Query, UploadFile, status
 from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
+from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend import audit
-from backend.api.deps import CellDep, DatabaseDep, EngineerUser, RuntimeDep, SessionDep, ViewerUser
+from backend.api.deps import (
+    CellDep,
+    DatabaseDep,
+    EngineerUser,
+    ReadCacheDep,
+    RuntimeDep,
+    SessionDep,
+    ViewerUser,
+    read_through,
+)
 from backend.api.uploads import read_capped
 from backend.recognition import images as im
 from backend.recognition import models as svc
@@ -155,10 +165,17 @@ class ViewList(BaseModel):
 
 
 def _model_out(row: Any, counts: dict[int, int], live: LiveIndex) -> dict[str, Any]:
-    out = svc.model_public(row, counts)
-    out["indexed_views"] = len(live.views_of(row.id))
-    out["stale_views"] = sum(1 for s in live.stale.values() if s.model_id == row.id)
-    return out
+    return _live_out(svc.model_public(row, counts), live)
+
+
+def _live_out(public: dict[str, Any], live: LiveIndex) -> dict[str, Any]:
+    """A copy of a model's public dict with the live index's counts of its views."""
+    mid = public["id"]
+    return {
+        **public,
+        "indexed_views": len(live.views_of(mid)),
+        "stale_views": sum(1 for s in live.stale.values() if s.model_id == mid),
+    }
 
 
 def _view_out(row: Any, live: LiveIndex) -> dict[str, Any]:
@@ -174,16 +191,26 @@ def _view_out(row: Any, live: LiveIndex) -> dict[str, Any]:
 
 @router.get("", response_model=ModelList, summary="Object models, by name")
 async def read_models(
-    _: ViewerUser,
-    session: SessionDep,
+    user: ViewerUser,
+    db: DatabaseDep,
+    cache: ReadCacheDep,
     live: LiveIndexDep,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     offset: Annotated[int, Query(ge=0, le=DB_ID_MAX)] = 0,
     part: Annotated[str | None, Query(max_length=64)] = None,
 ) -> dict[str, Any]:
-    rows, total = await svc.list_models(session, limit=limit, offset=offset, part=part)
-    counts = await svc.view_counts(session, [r.id for r in rows])
-    return {"data": [_model_out(r, counts[r.id], live) for r in rows], "count": total}
+    async def read(session: AsyncSession) -> tuple[list[dict[str, Any]], int]:
+        rows, total = await svc.list_models(session, limit=limit, offset=offset, part=part)
+        counts = await svc.view_counts(session, [r.id for r in rows])
+        return [svc.model_public(r, counts[r.id]) for r in rows], total
+
+    # The rows and view counts from the database, cached; the live index's part (in
+    # memory, changed without a commit) per request.
+    data, total = await read_through(
+        cache, db, user, ("models", limit, offset, part),
+        tables=("object_models", "trained_views"), read=read,
+    )  # fmt: skip
+    return {"data": [_live_out(d, live) for d in data], "count": total}
 
 
 @router.post(

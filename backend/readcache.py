@@ -1,0 +1,255 @@
+"""A short-lived, in-process cache of the console's hot database reads (model, cell and
+inspection lists, the database part of ``/api/status``).
+
+Under load each of those reads opened a database session for two or three queries, 7 to
+11 ms of CPU per request (``benchmarks/load.py --route-cpu``), on the event loop that
+also runs the cell.  An answer read in the last :data:`TTL_S` seconds is reused.  What
+keeps it correct:
+
+- **a commit of this process invalidates at once**: every ORM flush records the tables
+  it wrote (``session.new``/``dirty``/``deleted``, and the table of a bulk
+  ``insert``/``update``/``delete``; a textual statement other than a ``SELECT`` counts
+  as "every table"); at
+  ``after_commit`` the entries that read one of those tables are dropped, so a write
+  through this cell's API is visible to the next read.  A rolled-back transaction
+  invalidates nothing;
+- a read that started before such a commit is not stored after it (a generation
+  counter per table, as :mod:`backend.authcache` does);
+- **another process** (a second ``visioncell serve`` of the plant on the same database,
+  the ``visioncell`` CLI) is seen within :data:`TTL_S` seconds, when the entry expires;
+- **roles are still checked per request**: the cache sits inside the handlers, after the
+  role dependency has accepted the caller, and every entry carries the role it was read
+  for; :meth:`ReadCache.get` refuses to return it to a weaker role.  Answers that depend
+  on who asks are never cached;
+- one read per key at a time: requests that miss while a read of the same answer is in
+  flight wait for it (under load, a miss took long enough for every other console to
+  miss too and open its own session);
+- bounded: at most ``max_entries`` entries (the oldest go first); entries are the small
+  JSON-ready dicts the routes answer.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+import weakref
+from collections.abc import Awaitable, Callable, Hashable, Iterable
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+from sqlalchemy import event
+from sqlalchemy import inspect as sa_inspect
+from sqlalchemy.orm import ORMExecuteState, Session
+
+from backend.db.models import Role
+
+__all__ = ["ALL_TABLES", "MAX_ENTRIES", "TTL_S", "ReadCache"]
+
+#: How long an answer is reused, seconds: the bound on seeing another process's writes.
+TTL_S = 1.0
+#: Most answers kept.
+MAX_ENTRIES = 512
+#: Stands for "every table" (a statement whose table is not known).
+ALL_TABLES = "*"
+_PENDING = "visioncell_readcache_tables"
+
+T = TypeVar("T")
+
+_caches: weakref.WeakSet[ReadCache] = weakref.WeakSet()
+
+
+@dataclass(frozen=True)
+class _Flight:
+    """A read in progress: its loop, the role and tables it reads for, the generation
+    it started at, and the future its waiters share."""
+
+    loop: asyncio.AbstractEventLoop
+    role: Role
+    tables: frozenset[str]
+    gen: tuple[int, ...]
+    future: asyncio.Future[Any]
+
+
+@dataclass(frozen=True)
+class _Entry:
+    until: float
+    role: Role
+    tables: frozenset[str]
+    value: Any
+
+
+class ReadCache:
+    """Answers by key for ``ttl_s`` seconds, dropped when a table they read is written
+    (see the module doc).
+
+    Parameters
+    ----------
+    ttl_s : float
+        Reuse time, seconds, in [0, 10]; 0 turns the cache off (every read is computed).
+    max_entries : int
+        Most entries kept, 1..100000.
+    """
+
+    def __init__(self, *, ttl_s: float = TTL_S, max_entries: int = MAX_ENTRIES) -> None:
+        if isinstance(ttl_s, bool) or not isinstance(ttl_s, int | float):
+            raise TypeError(f"ttl_s must be a number, got {ttl_s!r}")
+        if not 0.0 <= float(ttl_s) <= 10.0:
+            raise ValueError(f"ttl_s must be within 0..10 s, got {ttl_s!r}")
+        if isinstance(max_entries, bool) or not isinstance(max_entries, int):
+            raise TypeError(f"max_entries must be an int, got {max_entries!r}")
+        if not 1 <= max_entries <= 100_000:
+            raise ValueError(f"max_entries must be within 1..100000, got {max_entries!r}")
+        self.ttl_s = float(ttl_s)
+        self.max_entries = max_entries
+        self._entries: dict[Hashable, _Entry] = {}
+        self._lock = threading.Lock()
+        self._generation: dict[str, int] = {}
+        self._inflight: dict[Hashable, _Flight] = {}
+        #: Answers served from an entry, read, and shared with a read in flight.
+        self.hits = 0
+        self.misses = 0
+        self.shared = 0
+        _caches.add(self)
+
+    def _gen(self, tables: Iterable[str]) -> tuple[int, ...]:
+        star = self._generation.get(ALL_TABLES, 0)
+        return (star, *(self._generation.get(t, 0) for t in sorted(tables)))
+
+    async def get_or_read(
+        self, key: Hashable, *, role: Role, tables: Iterable[str],
+        read: Callable[[], Awaitable[T]],
+    ) -> T:  # fmt: skip
+        """The cached answer of ``key`` when fresh and read for a role no stronger than
+        ``role``; otherwise ``await read()``, stored for ``ttl_s`` seconds as read for
+        ``role``, to be dropped when one of ``tables`` is written.
+
+        The caller has checked ``role`` may read this answer; the value is returned as
+        stored (callers must not mutate it)."""
+        if not isinstance(role, Role):
+            raise TypeError(f"role must be a Role, got {role!r}")
+        deps = frozenset(tables)
+        if not deps or not all(isinstance(t, str) and t for t in deps):
+            raise ValueError(f"tables must name at least one table, got {tables!r}")
+        hash(key)  # a TypeError now, not inside the lock
+        now = time.monotonic()
+        with self._lock:
+            e = self._entries.get(key)
+            if e is not None and now < e.until and e.tables == deps and role >= e.role:
+                self.hits += 1
+                return e.value
+            gen = self._gen(deps)
+        if self.ttl_s <= 0:
+            self.misses += 1
+            return await read()
+        # One read per key at a time: callers that miss while it is in flight share its
+        # answer (when read for a role no stronger than theirs, and not made stale by a
+        # commit since it started) instead of each opening a session of its own.
+        loop = asyncio.get_running_loop()
+        flight = self._inflight.get(key)
+        if (
+            flight is not None and flight.loop is loop and flight.tables == deps
+            and role >= flight.role and flight.gen == gen
+        ):  # fmt: skip
+            self.shared += 1
+            try:
+                return await asyncio.shield(flight.future)
+            except asyncio.CancelledError:
+                task = asyncio.current_task()
+                if not flight.future.cancelled() or (task is not None and task.cancelling()):
+                    raise  # this caller was cancelled, not the read it waited for
+            # The caller that read was cancelled (its client went away): read here.
+            return await self.get_or_read(key, role=role, tables=deps, read=read)
+        self.misses += 1
+        mine = _Flight(loop, role, deps, gen, loop.create_future())
+        self._inflight[key] = mine
+        try:
+            value = await read()
+        except asyncio.CancelledError:
+            mine.future.cancel()
+            raise
+        except BaseException as exc:
+            mine.future.set_exception(exc)
+            mine.future.exception()  # retrieved: no "never retrieved" warning
+            raise
+        finally:
+            if self._inflight.get(key) is mine:
+                del self._inflight[key]
+        mine.future.set_result(value)
+        with self._lock:
+            if self._gen(deps) == gen:  # nothing it read was written meanwhile
+                self._entries.pop(key, None)
+                self._entries[key] = _Entry(now + self.ttl_s, role, deps, value)
+                while len(self._entries) > self.max_entries:
+                    del self._entries[next(iter(self._entries))]
+        return value
+
+    def invalidate(self, tables: Iterable[str]) -> int:
+        """Drop the entries that read one of ``tables`` (:data:`ALL_TABLES`: every entry);
+        a read in progress is not stored after this.  Returns how many were dropped."""
+        names = set(tables)
+        with self._lock:
+            for t in names:
+                self._generation[t] = self._generation.get(t, 0) + 1
+            if ALL_TABLES in names:
+                n = len(self._entries)
+                self._entries.clear()
+                return n
+            gone = [k for k, e in self._entries.items() if e.tables & names]
+            for k in gone:
+                del self._entries[k]
+            return len(gone)
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._entries)
+
+
+def invalidate_all(tables: Iterable[str]) -> None:
+    """:meth:`ReadCache.invalidate` on every cache of this process."""
+    names = set(tables)
+    for cache in list(_caches):
+        cache.invalidate(names)
+
+
+def _record(session: Session, tables: Iterable[str]) -> None:
+    session.info.setdefault(_PENDING, set()).update(tables)
+
+
+def _table_of(obj: Any) -> str:
+    table = sa_inspect(obj).mapper.local_table
+    return str(getattr(table, "name", ALL_TABLES))
+
+
+@event.listens_for(Session, "after_flush")
+def _after_flush(session: Session, _ctx: Any) -> None:
+    written = {_table_of(o) for o in (*session.new, *session.dirty, *session.deleted)}
+    if written:
+        _record(session, written)
+
+
+def _is_textual_read(statement: Any) -> bool:
+    """A ``text("SELECT ...")`` statement (its table is not known, but it writes none)."""
+    sql = getattr(statement, "text", None)
+    return isinstance(sql, str) and sql.lstrip().lower().startswith("select")
+
+
+@event.listens_for(Session, "do_orm_execute")
+def _do_orm_execute(state: ORMExecuteState) -> None:
+    if state.is_select or _is_textual_read(state.statement):
+        return
+    table = getattr(state.statement, "table", None)
+    name = getattr(table, "name", None)
+    _record(state.session, {name if isinstance(name, str) else ALL_TABLES})
+
+
+@event.listens_for(Session, "after_commit")
+def _after_commit(session: Session) -> None:
+    tables = session.info.pop(_PENDING, None)
+    if tables:
+        invalidate_all(tables)
+
+
+@event.listens_for(Session, "after_rollback")
+def _after_rollback(session: Session) -> None:
+    session.info.pop(_PENDING, None)
