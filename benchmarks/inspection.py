@@ -2,7 +2,7 @@
 
 The twelve trainable catalogue entries are taught through the services the API calls
 (``backend.recognition.teach``: 3d models, the top view at three camera rolls and both side
-views, each object at the station at ``--teach-yaws`` object yaws over a half turn
+views, each object at the station at ``--teach-yaws`` object yaws of the teach plan
 (:func:`backend.recognition.teach.teach_yaws_rad`), the operator turning it between rounds; the automatic threshold is chosen once, after
 the last round of the last model, over every view), then objects (random catalogue entry, the two
 untrained ones mixed in; random yaw, a few mm of lateral and along-belt jitter) are

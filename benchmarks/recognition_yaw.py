@@ -1,14 +1,14 @@
 """Genuine and impostor scores of the cell's recognition at random object yaw (issue 14).
 
     python -m benchmarks.recognition_yaw [--json] [--objects 12] [--queries 3] [--teach-yaws 4]
-        [--seed 0] [--cache DIR] [--no-baseline] [--no-roi] [--teach-spread half|full]
+        [--seed 0] [--cache DIR] [--no-baseline] [--no-roi] [--teach-spread plan|half] [--teach-yaws-deg 0,30,...]
 
 Procedure (simulated cell, rendered afresh, no database): every trainable catalogue entry
 is taught as the teach job teaches it (:func:`backend.recognition.teach.plan_shots`: the
 top view at the camera rolls of ``TOP_ROLLS_RAD`` and both side views, segmented by the
-active contour from the empty-belt background, at ``--teach-yaws`` object yaws spread over
-a half turn as the teach plan spreads them, :func:`backend.recognition.teach.teach_yaws_rad`;
-``--teach-spread full``: over the whole turn, as before); the automatic threshold is chosen from those views
+active contour from the empty-belt background, at ``--teach-yaws`` object yaws as the teach plan spreads them (:func:`backend.recognition.teach.teach_yaws_rad`:
+evenly over the whole turn; ``--teach-spread half``: evenly over a half turn;
+``--teach-yaws-deg``: any others); the automatic threshold is chosen from those views
 (:func:`vision.recognition.choose_threshold`, as after a teach).  Then each entry (and the
 two untrained ones) is put back at random yaws with a few mm of jitter and inspected as
 :func:`backend.inspection.service.inspect_object` does: the top view segmented, side views
@@ -78,7 +78,7 @@ def run(
     untrained: list[str] | None = None,
     baseline: bool = True,
     roi: bool = True,
-    spread: str = "half",
+    spread: str = "plan",
     teach_yaws_deg: list[float] | None = None,
 ) -> dict[str, Any]:
     """Teach, choose the threshold and inspect (module docstring); ``names`` and
@@ -125,12 +125,10 @@ def run(
         old_index = ViewIndex("sift", feature_options=old_options) if baseline else None
         if teach_yaws_deg is not None:  # an experiment's own yaws
             yaws = [math.radians(y) for y in teach_yaws_deg]
-        elif spread == "half":  # the teach job's plan (teach_yaws_rad)
+        elif spread == "half":  # evenly over a half turn (measured against the plan)
+            yaws = [math.pi * k / teach_yaws for k in range(teach_yaws)]
+        else:  # the teach job's plan (teach_yaws_rad)
             yaws = list(teach_yaws_rad(teach_yaws))
-        else:  # before: spread over the full turn
-            yaws = [
-                math.remainder(2 * math.pi * k / teach_yaws, 2 * math.pi) for k in range(teach_yaws)
-            ]
         t0 = time.perf_counter()
         for k, name in enumerate(names):
             _log(f"  teaching {k + 1}/{len(names)}: {name}")
@@ -264,7 +262,9 @@ def run(
                             for r in res.views[1:]
                         ],
                         "side_features": [int(r.n_features) for r in res.views[1:]],
-                        "side_roi": {vp: (round(r.fraction, 3), r.reason) for vp, r in rois.items()},
+                        "side_roi": {
+                            vp: (round(r.fraction, 3), r.reason) for vp, r in rois.items()
+                        },
                         "colour": {
                             k: round(v, 4)
                             for k, v in colour_support(
@@ -329,7 +329,9 @@ def run(
             "side_features_p50": float(np.median([n for r in rows for n in r["side_features"]]))
             if any(r["side_features"] for r in rows)
             else None,
-            "roi_fraction_p50": float(np.median([f for r in rows for f, _ in r["side_roi"].values()]))
+            "roi_fraction_p50": float(
+                np.median([f for r in rows for f, _ in r["side_roi"].values()])
+            )
             if roi
             else None,
             "roi_fallbacks": sum(
@@ -351,12 +353,22 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--seed", type=int, default=0, help="seed of the query yaws and jitter")
     ap.add_argument("--cache", type=Path, default=None, help="folder caching the rendered images")
     ap.add_argument("--no-baseline", action="store_true", help="skip the rule before the fix")
-    ap.add_argument("--no-roi", action="store_true",
-                    help="match side queries over the whole frame (before the side ROI)")
-    ap.add_argument("--teach-spread", choices=("half", "full"), default="half",
-                    help="teach yaws over a half turn (the teach plan) or the full turn (before)")
-    ap.add_argument("--teach-yaws-deg", default=None,
-                    help="explicit teach yaws, degrees, comma-separated (overrides the spread)")
+    ap.add_argument(
+        "--no-roi",
+        action="store_true",
+        help="match side queries over the whole frame (before the side ROI)",
+    )
+    ap.add_argument(
+        "--teach-spread",
+        choices=("plan", "half"),
+        default="plan",
+        help="teach yaws: the teach plan (teach_yaws_rad, the whole turn) or a half turn",
+    )
+    ap.add_argument(
+        "--teach-yaws-deg",
+        default=None,
+        help="explicit teach yaws, degrees, comma-separated (overrides the spread)",
+    )
     args = ap.parse_args(argv)
     yaws_deg = None
     if args.teach_yaws_deg is not None:
@@ -364,7 +376,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             yaws_deg = [float(v) for v in args.teach_yaws_deg.split(",")]
         except ValueError:
             ap.error(f"--teach-yaws-deg must be numbers, got {args.teach_yaws_deg!r}")
-        if not 1 <= len(yaws_deg) <= 12 or not all(math.isfinite(y) and abs(y) <= 180 for y in yaws_deg):
+        if not 1 <= len(yaws_deg) <= 12 or not all(
+            math.isfinite(y) and abs(y) <= 180 for y in yaws_deg
+        ):
             ap.error(f"--teach-yaws-deg: 1..12 yaws within +-180, got {args.teach_yaws_deg!r}")
         args.teach_yaws = len(yaws_deg)
     if not 1 <= args.objects <= 12 or not 1 <= args.queries <= 50 or not 1 <= args.teach_yaws <= 12:

@@ -71,25 +71,26 @@ MAX_ROUNDS = 12
 
 def teach_yaws_rad(rounds: int) -> tuple[float, ...]:
     """Object yaws of ``rounds`` teach rounds (the operator or the simulator turns the object
-    between rounds, :attr:`TeachOptions.yaw_rad`): ``k * 180 / rounds`` deg, k = 0..rounds-1,
-    spread evenly over a half turn.
+    between rounds, :attr:`TeachOptions.yaw_rad`): ``k * 360 / rounds`` deg, k = 0 ..
+    rounds-1, in (-180, 180], spread evenly over the whole turn.
 
-    The two side views look at the object from opposite sides of the vertical plane through
-    the column and the station (:mod:`backend.inspection.viewpoints`), so turning the object
-    by 180 deg only swaps what they see.  Over the full turn, an even number of rounds
-    taught only ``rounds / 2`` distinct pairs of side azimuths (0, 90, 180, -90 deg: the
-    pairs of 0 and 90 twice); over the half turn every round adds one (0, 45, 90, 135 deg).
-    The top view needs no more: its camera rolls (:data:`TOP_ROLLS_RAD`) cover the circle.
-    Measured (``benchmarks.recognition_yaw --teach-yaws 4 --queries 3``, seeds 0 and 1, side
-    ROI on): the own model's side score p50 0.37 -> 0.49 (p25 0.20 -> 0.23), but named
-    65/72 -> 64/72: the automatic top threshold rises (0.107 -> 0.131) over views without
-    the full turn's near-duplicates, and more trained objects fall below it from the top.
+    Other spreads were measured and lost (``benchmarks.recognition_yaw --teach-yaws 4
+    --queries 3``, seeds 0, 1 and 2, side ROI and own bars on, 108 trained and 18 untrained
+    queries; untrained all unknown in every plan): this plan (0, 90, 180, -90 deg) named
+    108; the half turn (0, 45, 90, 135: every round shows the side views a new pair of
+    faces, whereas here a 180 deg turn only swaps them) 106; a plan whose top rotations
+    (yaw + camera roll, :data:`TOP_ROLLS_RAD`) tile the circle every 30 deg with four
+    pairs of side faces (0, 30, -60, 90; ``--teach-yaws-deg``) 106, one of its misses a
+    wrong twin.  Both raise the automatic top threshold from 0.107 to 0.131 (the largest
+    impostor top score), and the objects they miss scored below it from the top.  With
+    3, 6, 9 or 12 rounds this plan repeats the rolls' rotations (0, 120, -120 deg teach the
+    top view three rotations thrice); those counts were not measured.
 
     Raises ``InvalidInput`` unless ``rounds`` is an integer in 1..:data:`MAX_ROUNDS`.
     """
     if isinstance(rounds, bool) or not isinstance(rounds, int) or not 1 <= rounds <= MAX_ROUNDS:
         raise InvalidInput(f"rounds must be an integer in 1..{MAX_ROUNDS}, got {rounds!r}")
-    return tuple(math.pi * k / rounds for k in range(rounds))
+    return tuple(math.remainder(2.0 * math.pi * k / rounds, 2.0 * math.pi) for k in range(rounds))
 
 
 class TeachTimeout(VisionCellError):
@@ -116,8 +117,7 @@ class TeachOptions:
     yaw_rad : float
         The object's yaw relative to its taught pose, when an operator turned it by hand
         for another round of views (stored with the views); :func:`teach_yaws_rad` gives
-        the yaws of a given number of rounds (over a half turn: the side views then see a
-        new pair of faces each round).
+        the yaws of a given number of rounds (over the whole turn).
     speed : float, optional
         Arm speed fraction (default: the cell's).
     wait_s : float

@@ -106,5 +106,5 @@ def test_teach_names_an_unreachable_cell_and_bad_options(tmp_path):
         r = _run(["teach", "gear", "--token", "t", "--url", url, "--round", bad], tmp_path)
         assert r.returncode == 2 and f"'{bad}'" in r.stderr, (bad, r.stderr)
     r = _run(["teach", "gear", "--token", "t", "--url", url, "--round", "2/4"], tmp_path)
-    assert "round 2/4: the object turned by 45.0 deg" in r.stdout
+    assert "round 2/4: the object turned by 90.0 deg" in r.stdout
     assert r.returncode == 2 and f"cannot reach the cell at {url}" in r.stderr
