@@ -69,6 +69,16 @@ Own bars (issue 14)
     contenders, and to shortlist models for them; a name from the top view alone still
     needs the top view's acceptance bar.
 
+Grey look-alikes (issue 14)
+    Two models whose grey features cannot be told apart at a side viewpoint (the confusion
+    table of :func:`choose_threshold`: each passes the candidate bar on more than
+    :data:`LOOKALIKE_SHARE` of the other's held-out views there; the 5-spoke wheel and its
+    red-band twin) differ in their grey side scores by chance only, and under dimmed light
+    or a colour cast the inspection named the wrong twin on such a difference. When the
+    model a side view would confirm or name has a look-alike there that verified too, the
+    side views stop deciding between them: the look ends and they go to the colour
+    tie-break as tied models, and without colour evidence the answer is ``ambiguous``.
+
 Colour tie-break (issue 14)
     The features are grey, so two models that differ only by colour (a red band on a tyre's
     tread) stay within the ambiguity margin after every side view. When the side views end
@@ -123,6 +133,12 @@ DEFAULT_CONFUSION_LIMIT = 0.05
 
 #: Side views are checked against at most this many contenders from an inconclusive top view.
 MAX_CONTENDERS = 8
+
+#: Two models are grey look-alikes at a side viewpoint when each passes the viewpoint's
+#: candidate bar on more than half of the other's held-out views there (the confusion table
+#: of :func:`choose_threshold`): more often than not the grey features cannot tell them
+#: apart, so their grey scores there never decide between them ("Grey look-alikes").
+LOOKALIKE_SHARE = 0.5
 
 #: Colour tie-break (module docstring), in the log units of ``colour_distance``: every other
 #: tied model must be at least ``COLOUR_MARGIN`` farther than the winner (0.7: about twice
@@ -422,10 +438,31 @@ async def recognise_views(
         s = side.scores.get(rival, 0.0)
         return s > bar(rival, vp) and s > side.scores.get(m, 0.0)
 
+    def lookalikes(m: str, side: Recognition, vp: int) -> list[str]:
+        """The models verified on this side view that are grey look-alikes of ``m`` at
+        ``vp`` (:data:`LOOKALIKE_SHARE`, module docstring): their grey scores there say
+        nothing about which of them it is, so a look-alike counts once it verifies at all."""
+        if choice is None:
+            return []
+        table = choice.confusion.get(vp, {})
+        return [
+            b
+            for b in models
+            if b != m
+            and side.scores.get(b, 0.0) > 0.0
+            and min(table.get(m, {}).get(b, 0.0), table.get(b, {}).get(m, 0.0)) > LOOKALIKE_SHARE
+        ]
+
+    alike_seen: set[str] = set()  # grey look-alikes of a side view's leader (colour decides)
+
     def colour_winner(fused: dict[str, float]) -> str | None:
         """The tied model colour singles out (module docstring), or ``None``."""
         best = max(fused.values(), default=0.0)
-        tied = [m for m, v in fused.items() if v > 0.0 and v >= (1.0 - margin) * best]
+        tied = [
+            m
+            for m, v in fused.items()
+            if v > 0.0 and (v >= (1.0 - margin) * best or m in alike_seen)
+        ]
         if len(tied) < 2:
             return None
         dist = colour_support(index, views, images, tied)
@@ -459,6 +496,14 @@ async def recognise_views(
         if named is not None:
             own = side.scores.get(named, 0.0)
             rivals = [m for m in models if m != named and won_by(m, named, side, vp)]
+            twins = lookalikes(named, side, vp) if own > bar(named, vp) else []
+            if twins:
+                # Grey cannot tell it from a look-alike that verified here too: colour
+                # decides among them (module docstring, "Grey look-alikes").
+                alike_seen.update([named, *twins])
+                models = [named, *twins]
+                named = None
+                break
             if rivals:
                 # Overturned: the top view's choice is contradicted; from here the models
                 # seen are decided like a top view that could not choose.
@@ -470,7 +515,12 @@ async def recognise_views(
             else:
                 continue  # nothing verified against it here: look again, if allowed
         if decision == "recognized" and side.scores.get(model, 0.0) > bar(model, vp):
-            return result(decision, model, fused, cont)
+            twins = lookalikes(model, side, vp)
+            if not twins:
+                return result(decision, model, fused, cont)
+            alike_seen.update([model, *twins])
+            models = [model, *twins]
+            break
         if cont:
             models = list(cont)
     if len(visited) == 1:  # no contender has side views: the top view is all there is
