@@ -37,6 +37,11 @@ def test_a_busy_worker_thread_is_counted_in_its_group() -> None:
     finally:
         release.set()
         t.join()
+    # join() returns when the Python thread is done; the kernel's task can outlive it for a
+    # moment (on a loaded machine, long enough to be read as alive): wait until it is gone.
+    deadline = time.monotonic() + 10.0
+    while os.path.exists(f"/proc/self/task/{t.native_id}") and time.monotonic() < deadline:
+        time.sleep(0.01)
     u = cpu_account.usage(a, alive)
     assert u["cpu_s"]["server: to_thread workers"] >= 0.25
     # Once it has ended, its CPU is still the process's, counted as an ended thread.
