@@ -108,6 +108,10 @@ class SimDriver:
         check_joints(trajectory.q, self.model)
         if self._busy:
             raise RobotBusy("a move is already executing")
+        if self.engine.controller.moving:
+            # A cancelled or stopped move still braking: busy, whatever its start point (a
+            # retry planned before the cancel would otherwise be refused for its start point).
+            raise RobotBusy("the previous move is still executing or stopping")
         q_now = self.engine.arm_state().q
         gap = float(np.abs(trajectory.start - q_now).max())
         if gap > _START_TOLERANCE_RAD:

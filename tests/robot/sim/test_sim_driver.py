@@ -28,12 +28,15 @@ async def driver(engine: SimEngine):
     d = SimDriver(engine, time_scale=8.0)
     await d.connect()
     yield d
+    await _settle(engine)
     await d.reset()
     await d.close()
 
 
-async def _settle(engine: SimEngine) -> None:
+async def _settle(engine: SimEngine, timeout_s: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout_s
     while engine.controller.moving:
+        assert time.monotonic() < deadline, "the arm did not come to rest"
         await asyncio.sleep(0.02)
 
 
@@ -139,6 +142,8 @@ async def test_cancelled_move_stops_the_arm(engine: SimEngine):
         await _settle(engine)
         assert np.abs(engine.arm_state().qd).max() < 2e-3
     finally:
+        # The module's engine is shared: the next test must find the arm at rest.
+        await _settle(engine)
         await driver.reset()
         await driver.close()
 
