@@ -100,14 +100,14 @@ class IdealDriver:
         if self._estopped:
             raise RobotBusy("emergency stop is active: reset before moving")
         check_joints(trajectory.q, self.model)
+        if self._lock.locked():  # busy first, as the other drivers: the arm is still moving
+            raise RobotBusy("a move is already executing")
         gap = float(np.abs(trajectory.start - self._q).max())
         if gap > _START_TOLERANCE_RAD:
             raise DriverError(
                 f"trajectory starts {gap:.4g} rad away from the current configuration "
                 f"(tolerance {_START_TOLERANCE_RAD} rad)"
             )
-        if self._lock.locked():
-            raise RobotBusy("a move is already executing")
         async with self._lock:
             self._halt.clear()
             self._halt_reason = ""
