@@ -196,6 +196,7 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
 
     tmp = Path(tempfile.mkdtemp(prefix="bench-inspect-"))
     settings = _settings(tmp, args.time_scale)
+    cached = _load_taught(args, tmp / "bench.db")
     await asyncio.to_thread(upgrade, settings.database_url)
     rng = np.random.default_rng(args.seed)
     trained = [n for n, e in CATALOGUE.items() if e.trainable]
@@ -207,7 +208,21 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
         from backend.recognition.teach import teach_yaws_rad
 
         yaws = tuple(math.degrees(y) for y in teach_yaws_rad(args.teach_yaws))
-        teach_s, threshold = await _teach_all(rt, trained, yaws)
+        if cached is not None and cached["descriptor_version"] != rt.live_index.version:
+            err.print(
+                f"[taught-db] {args.taught_db} holds descriptor version "
+                f"{cached['descriptor_version']!r}, this build {rt.live_index.version!r}: "
+                "use another file or delete it to teach again"
+            )
+            raise SystemExit(2)
+        if cached is not None:
+            teach_s, threshold = 0.0, cached["threshold"]
+            err.print(f"[taught-db] {len(trained)} models from {args.taught_db} "
+                      f"(taught by commit {cached['commit']}; teaching skipped)")  # fmt: skip
+        else:
+            teach_s, threshold = await _teach_all(rt, trained, yaws)
+            if args.taught_db is not None:
+                await _save_taught(args, tmp / "bench.db", threshold, rt.live_index.version)
         err.print(f"threshold: {threshold}")
         ctx = await service.context(rt)
 
@@ -244,8 +259,10 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
                     f"views={r['views']} pos={r['pos_err_mm']} {r['reason'][:60]}"
                 )
 
-        for _ in range(args.objects):
-            await index_object("index", ("naive", "two-views", "best-next"))
+        for k in range(args.objects):
+            if k % 10 == 0:
+                err.print(f"[index] object {k + 1} of {args.objects}")
+            await index_object("index", args.policies)
         # constant belt speed: the empty belt's background registered to its travel first
         if args.objects_constant:
             engine.clear_objects()
@@ -291,6 +308,56 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
         for _ in range(args.objects_sort):
             await index_object("sort", ("two-views",), sort=True)
     return {"teach_s": teach_s, "rows": rows, "n_models": len(trained), "threshold": threshold}
+
+
+def _taught_meta(path: Path) -> Path:
+    return path.with_name(path.name + ".json")
+
+
+def _load_taught(args: argparse.Namespace, db: Path) -> dict[str, Any] | None:
+    """The taught database of an earlier run with the same teach settings, copied to ``db``
+    (``--taught-db``: teaching the twelve models takes about ten minutes; the cache is for
+    iterating on inspection, not for figures after a change to teaching)."""
+    import shutil
+
+    path = args.taught_db
+    if path is None or not path.exists():
+        return None
+    meta = json.loads(_taught_meta(path).read_text())
+    if meta["teach_yaws"] != args.teach_yaws or meta["time_scale"] != args.time_scale:
+        err.print(
+            f"[taught-db] {path} was taught with --teach-yaws {meta['teach_yaws']} "
+            f"--time-scale {meta['time_scale']}: use another file or delete it"
+        )
+        raise SystemExit(2)
+    shutil.copyfile(path, db)
+    return meta
+
+
+async def _save_taught(
+    args: argparse.Namespace, db: Path, threshold: dict[str, Any], version: str
+) -> None:
+    import sqlite3
+    import subprocess
+
+    commit = (
+        subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
+        ).stdout.strip()
+        or "unknown"
+    )
+    args.taught_db.parent.mkdir(parents=True, exist_ok=True)
+    # A consistent copy while the runtime holds the file open (SQLite's online backup).
+    src, dst = sqlite3.connect(db), sqlite3.connect(args.taught_db)
+    try:
+        src.backup(dst)
+    finally:
+        src.close()
+        dst.close()
+    meta = {"teach_yaws": args.teach_yaws, "time_scale": args.time_scale, "commit": commit,
+            "descriptor_version": version, "threshold": threshold}  # fmt: skip
+    _taught_meta(args.taught_db).write_text(json.dumps(meta, default=str))
+    err.print(f"[taught-db] saved to {args.taught_db}")
 
 
 def _pct(x: list[bool]) -> float | None:
@@ -356,10 +423,25 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument(
         "--teach-yaws", type=int, default=4, help="teach rounds per model (object yaws)"
     )
+    ap.add_argument(
+        "--policies", default="naive,two-views,best-next",
+        help="index-mode policies, comma-separated (each sees the same objects)",
+    )  # fmt: skip
+    ap.add_argument(
+        "--taught-db", type=Path, default=None,
+        help="SQLite file: reuse the models taught by an earlier run with the same "
+        "--teach-yaws (taught and saved there when it does not exist)",
+    )  # fmt: skip
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
-    if not 1 <= args.objects <= 2000:
-        ap.error(f"--objects must be in 1..2000, got {args.objects}")
+    if not 0 <= args.objects <= 2000:
+        ap.error(f"--objects must be in 0..2000, got {args.objects}")
+    from vision.recognition.views import POLICIES
+
+    args.policies = tuple(p.strip() for p in args.policies.split(",") if p.strip())
+    bad = [p for p in args.policies if p not in POLICIES]
+    if bad or not args.policies:
+        ap.error(f"--policies: unknown {bad or 'empty'}; valid: {', '.join(POLICIES)}")
     if not (0.0 < args.belt_speed <= 0.5):
         ap.error(f"--belt-speed must be in (0, 0.5] m/s, got {args.belt_speed}")
     if not 1 <= args.teach_yaws <= 12:
