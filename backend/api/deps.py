@@ -127,6 +127,11 @@ def get_view3d(conn: HTTPConnection) -> View3D | None:
 async def get_session(
     db: Annotated[Database, Depends(get_database)],
 ) -> AsyncIterator[AsyncSession]:
+    """The request's unit of work: committed whole, or rolled back, *before* the response
+    is sent (``SessionDep`` has ``scope="function"``).  FastAPI's default for a dependency
+    with ``yield`` runs its exit after the response: a client could be told 201, read the
+    row back at once and get 404 (CI saw it on the calibration samples upload), and a
+    commit that failed then was lost without the client knowing."""
     async with db.api_slot(), db.session() as session:  # leave connections for the cell
         yield session
 
@@ -163,7 +168,7 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 DatabaseDep = Annotated[Database, Depends(get_database)]
 SimDep = Annotated[Any, Depends(get_sim_or_none)]
 View3DDep = Annotated[Any, Depends(get_view3d)]
-SessionDep = Annotated[AsyncSession, Depends(get_session)]
+SessionDep = Annotated[AsyncSession, Depends(get_session, scope="function")]
 CellDep = Annotated[Cell, Depends(get_cell)]
 ReadCacheDep = Annotated[ReadCache, Depends(get_read_cache)]
 

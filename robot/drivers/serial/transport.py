@@ -26,6 +26,28 @@ from robot.errors import LinkDown
 __all__ = ["SerialLink"]
 
 
+class _LinkTransport(serial_asyncio.SerialTransport):
+    """pyserial-asyncio's transport, with a failed write ending the connection as quietly
+    as a failed read does.
+
+    When the port vanishes (a USB adapter pulled, the pseudo-terminal's other end gone) the
+    first ``read`` or ``write`` fails with EIO.  pyserial-asyncio closes the connection on a
+    failed read, but reports a failed write to the event loop's exception handler ("Fatal
+    write error on serial transport", logged as an unhandled error) before closing: which of
+    the two sees the fault first is a race, so a routine outage sometimes looked like a bug
+    in the logs.  asyncio's own socket and pipe transports treat an ``OSError`` so (the
+    handler is reserved for the unexpected; ``SerialException`` is an ``OSError``): the
+    connection ends through ``connection_lost(exc)`` either way, and :class:`SerialLink`
+    reports it upwards with the reason.
+    """
+
+    def _fatal_error(self, exc: BaseException, message: str = "Fatal error on serial transport") -> None:  # fmt: skip
+        if isinstance(exc, OSError):
+            self._abort(exc)
+        else:
+            super()._fatal_error(exc, message)
+
+
 class SerialLink(asyncio.Protocol):
     """One open serial connection.
 
@@ -72,9 +94,7 @@ class SerialLink(asyncio.Protocol):
         loop = asyncio.get_running_loop()
         link = cls(port, on_bytes)
         try:
-            await serial_asyncio.create_serial_connection(
-                loop,
-                lambda: link,
+            ser = serial.serial_for_url(
                 port,
                 baudrate=baud,
                 bytesize=serial.EIGHTBITS,
@@ -86,6 +106,11 @@ class SerialLink(asyncio.Protocol):
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise LinkDown(f"cannot open serial port {port!r}: {exc}") from exc
+        try:
+            _LinkTransport(loop, link, ser)  # calls connection_made on the next iteration
+        except BaseException:
+            ser.close()
+            raise
         # connection_made runs on the next loop iteration; wait for it.
         while link._transport is None and not link.closed.done():
             await asyncio.sleep(0)
