@@ -285,8 +285,11 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
             )
             engine.configure_conveyor(running=False)
             rows.append(_record("constant", "two-views", name, row, {}))
+            r = rows[-1]
             err.print(
-                f"[constant {len(rows)}] {name} -> {row['decision']} {row['model']} {row['reason'][:60]}"
+                f"[constant {len(rows)}] {name} -> {row['decision']} {row['model']} "
+                f"views={r['views']} pos={r['pos_err_mm']} yaw={r['yaw_err_deg']} "
+                f"{row['reason'][:60]}"
             )
         # lights
         base = engine._light_base.copy()  # the benchmark changes the lights' colour directly
