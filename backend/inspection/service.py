@@ -143,6 +143,30 @@ class InspectOptions:
             raise InvalidInput(f"speed must be in (0, 1], got {sp!r}")
 
 
+class CarriedAway(VisionCellError):
+    """Constant speed: the belt carried the object past its end before a side view."""
+
+    code = "carried_away"
+    http_status = 409
+
+
+def carried_point(found: NDArray[np.float64], ahead_m: float, end_y_m: float,
+                  vp: int) -> NDArray[np.float64]:  # fmt: skip
+    """Where a side view (viewpoint ``vp``) looks for an object found at ``found`` in the
+    top view, carried ``ahead_m`` along the belt since (its travel since the top view's
+    exposure and during the move); :class:`CarriedAway` past the belt's end (``end_y_m``):
+    the object has left the belt there (the simulator's belt brings it round to its start),
+    so no view of it can be planned from the travel, and a point metres beyond the arm's
+    reach would only fail the viewpoint planner with a workspace error."""
+    point = np.asarray(found, dtype=np.float64) + np.array([0.0, float(ahead_m), 0.0])
+    if not math.isfinite(float(ahead_m)) or point[1] > end_y_m:
+        raise CarriedAway(
+            f"viewpoint {vp}: the belt carried the object {float(ahead_m):.2f} m on since the "
+            f"top view, past the belt's end (y {end_y_m:g} m): the views took too long"
+        )
+    return point
+
+
 class NoObject(VisionCellError):
     """No object came to the station in time."""
 
@@ -655,7 +679,8 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
         report(0.3 + 0.2 * len(frames), f"viewpoint {vp}")
         point = found.copy()
         if mode == "continuous":
-            point = point + np.array([0.0, _belt(rt)[2] - travel0 + 1.5 * speed_m_s, 0.0])
+            ahead = _belt(rt)[2] - travel0 + 1.5 * speed_m_s
+            point = carried_point(found, ahead, rt.sim.config.layout.conveyor.end_y_m, vp)
         side = await _side_view(
             ctx, vp, point, T_plan=T_plan, top_mask=region.mask, T_cam_top=T_cam_top,
             height_m=roi_height, travel0=travel0 if mode == "continuous" else None,

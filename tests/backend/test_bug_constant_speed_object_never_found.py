@@ -180,3 +180,14 @@ def test_approach_holds_a_frame_until_the_next_is_farther():
     c = service.Approach(start_m=0.0)
     assert c.take("f1", (True, -0.04), 0.01) is None
     assert c.take("f2", None, 0.05) == "f1"  # gone (segmentation failed): the held one
+
+
+def test_a_side_view_of_an_object_carried_past_the_belt_end_fails_saying_so():
+    # The benchmark's pipe flange: the top view's segmentation took 67 s under load, the
+    # belt ran 8.3 m on meanwhile, and the side view's point went to the viewpoint planner
+    # as y = 8.27 m ("outside the arm's workspace").  Now the reason says what happened.
+    found = np.array([0.803, 0.0, 0.45])
+    p = service.carried_point(found, 0.12, 1.3, 2)
+    assert p.tolist() == pytest.approx([0.803, 0.12, 0.45])
+    with pytest.raises(service.CarriedAway, match=r"viewpoint 3: .* 8\.27 m on .* belt's end"):
+        service.carried_point(found, 8.27, 1.3, 3)
