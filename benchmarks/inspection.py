@@ -284,12 +284,17 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
                 ctx, service.InspectOptions(policy="two-views", wait_s=20.0)
             )
             engine.configure_conveyor(running=False)
-            rows.append(_record("constant", "two-views", name, row, {}))
+            # How far from the station the top view saw it (the truth at the exposure): the
+            # camera's frames come a belt travel apart, and the pose's error grows with it.
+            off = None
+            if row["truth"] is not None:
+                off = (row["truth"]["T_base_obj"][1][3] - spec.station_point[1]) * 1e3
+            rows.append(_record("constant", "two-views", name, row, {"exposure_offset_mm": off}))
             r = rows[-1]
             err.print(
                 f"[constant {len(rows)}] {name} -> {row['decision']} {row['model']} "
                 f"views={r['views']} pos={r['pos_err_mm']} yaw={r['yaw_err_deg']} "
-                f"{row['reason'][:60]}"
+                f"offset_mm={off} {row['reason'][:60]}"
             )
         # lights
         base = engine._light_base.copy()  # the benchmark changes the lights' colour directly
