@@ -5,8 +5,9 @@ One inspection (:func:`inspect_object`):
 1. **find**: the top view (viewpoint 1) at the station, planned by
    :func:`backend.recognition.teach.plan_shots` as teaching plans it, so the empty-belt
    background grabbed by a teach applies.  Index mode: frames until an object lies still
-   (its region stable between two frames).  Constant speed (chapter 4.1): frames until the
-   moving object's region lies whole in the image near its centre; that frame is the top view;
+   (its region stable between two frames).  Constant speed (chapter 4.1): of the frames where
+   the moving object's region lies whole along the belt, the one nearest the station
+   (:class:`Approach`) is the top view;
 2. **segment**: the active contour initialised from the background difference, as teaching
    does (:func:`backend.recognition.segment.segment_object`);
 3. **recognise**: :func:`vision.recognition.recognise_views` with the live index and the
@@ -29,6 +30,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import logging
 import math
 import time
@@ -139,6 +141,30 @@ class InspectOptions:
         sp = self.speed
         if sp is not None and (isinstance(sp, bool) or not (math.isfinite(sp) and 0.0 < sp <= 1.0)):
             raise InvalidInput(f"speed must be in (0, 1], got {sp!r}")
+
+
+class CarriedAway(VisionCellError):
+    """Constant speed: the belt carried the object past its end before a side view."""
+
+    code = "carried_away"
+    http_status = 409
+
+
+def carried_point(found: NDArray[np.float64], ahead_m: float, end_y_m: float,
+                  vp: int) -> NDArray[np.float64]:  # fmt: skip
+    """Where a side view (viewpoint ``vp``) looks for an object found at ``found`` in the
+    top view, carried ``ahead_m`` along the belt since (its travel since the top view's
+    exposure and during the move); :class:`CarriedAway` past the belt's end (``end_y_m``):
+    the object has left the belt there (the simulator's belt brings it round to its start),
+    so no view of it can be planned from the travel, and a point metres beyond the arm's
+    reach would only fail the viewpoint planner with a workspace error."""
+    point = np.asarray(found, dtype=np.float64) + np.array([0.0, float(ahead_m), 0.0])
+    if not math.isfinite(float(ahead_m)) or point[1] > end_y_m:
+        raise CarriedAway(
+            f"viewpoint {vp}: the belt carried the object {float(ahead_m):.2f} m on since the "
+            f"top view, past the belt's end (y {end_y_m:g} m): the views took too long"
+        )
+    return point
 
 
 class NoObject(VisionCellError):
@@ -261,6 +287,99 @@ def _background_for(ctx: _Ctx, frame: Any, bg: NDArray[np.uint8]) -> NDArray[np.
     return bb.at(_travel_of(frame, ctx.rt))
 
 
+#: How close to the image border (pixels) a region may come and still count as whole.
+BORDER_PX = 3
+
+
+def along_belt(mask: NDArray[np.bool_], camera: Any, T_base_cam: NDArray[np.float64],
+               station: NDArray[np.float64], z_m: float) -> tuple[bool, float]:  # fmt: skip
+    """Where a region seen from ``T_base_cam`` lies along the belt: whether it is whole
+    *along* the belt, and its centre's offset along the belt's travel (base ``+y``, metres)
+    from the station, on the plane ``z_m``.
+
+    Whole along the belt means touching no image border the belt runs across (the ones
+    whose normal is within 60 degrees of the belt's direction in the image).  A border
+    along the belt does not count: how far the object reaches across the belt does not
+    change as the belt moves, and the top view taught at the station frames it the same
+    way (a wheel cut by the image's lower edge is cut there at every travel, and was cut
+    there when it was taught), so waiting for it to become whole there never ends.
+    """
+    h, w = mask.shape
+    ys, xs = np.nonzero(mask)
+    if xs.size == 0:
+        raise InvalidInput("along_belt needs a region with at least one pixel")
+    T_cam_base = np.linalg.inv(np.asarray(T_base_cam, dtype=np.float64))
+    a, b = station.copy(), station.copy()
+    a[2] = b[2] = z_m
+    b[1] += 0.05
+    uv = camera.project_world(np.stack([a, b]), T_cam_base)
+    e = uv[1] - uv[0]
+    n = float(np.hypot(*e))
+    e = e / n if math.isfinite(n) and n > 1e-9 else np.array([1.0, 0.0])
+    touches = {  # border normal -> region touches that border
+        (-1.0, 0.0): xs.min() < BORDER_PX,
+        (1.0, 0.0): xs.max() >= w - BORDER_PX,
+        (0.0, -1.0): ys.min() < BORDER_PX,
+        (0.0, 1.0): ys.max() >= h - BORDER_PX,
+    }
+    whole = not any(t and abs(nx * e[0] + ny * e[1]) > 0.5 for (nx, ny), t in touches.items())
+    centre = plane_points(np.array([[xs.mean(), ys.mean()]]), camera, T_base_cam, z_m)[0]
+    return whole, float(centre[1] - station[1])
+
+
+@dataclass
+class Approach:
+    """Which frame of an object carried along the moving belt is its top view (chapter 4.1).
+
+    The camera delivers frames at its own rate, so consecutive frames see the object a
+    belt travel ``step`` apart (at time scale 20 in the simulator, 5-20 cm); no fixed window
+    round the station is sure to hold one of them.  The top view is the frame nearest the
+    station among those where the object is whole along the belt: a frame is taken when the
+    next one (predicted one ``step`` -- the travel between the last two frames -- further)
+    would be farther from the station; otherwise it is held, and given back when the next
+    frame turns out farther (or no longer whole).  Only an object that was upstream of the
+    station when the search began (travel ``start_m``) counts: one that passed the station
+    while the arm came to the top view is taken at once, wherever it is as long as it is
+    whole, but one inspected before and leaving is not taken again.
+    """
+
+    start_m: float
+    seen_upstream: bool = False
+    last_travel: float | None = None
+    step: float | None = None
+    held: tuple[Any, float] | None = None
+
+    def take(self, frame: Any, region: tuple[bool, float] | None, travel_m: float) -> Any:
+        """The top view, or None to look at the next frame: ``frame`` itself or the one
+        held before it.  ``region`` is :func:`along_belt` of the frame's object (None: no
+        object), ``travel_m`` the belt's travel at its exposure."""
+        if self.last_travel is not None and travel_m > self.last_travel:
+            self.step = travel_m - self.last_travel
+        self.last_travel = travel_m
+        held, self.held = self.held, None
+        if region is not None and region[1] - (travel_m - self.start_m) < 0.0:
+            self.seen_upstream = True  # upstream of the station when the search began
+        if region is None or not (region[0] and self.seen_upstream):
+            return None if held is None else held[0]
+        offset = region[1]
+        if held is not None and abs(held[1]) <= abs(offset):
+            return held[0]
+        if offset >= 0.0 or (self.step is not None and abs(offset + self.step) >= abs(offset)):
+            return frame
+        self.held = (frame, offset)
+        return None
+
+
+async def _next_frame(cell: Any, prev: Any) -> Any:
+    """The camera's next frame after ``prev`` without moving or settling (the arm stays at
+    the top view): the newest frame exposed after ``prev`` -- not one exposed after now, as
+    ``look`` waits for, which would skip the frame already delivered while ``prev`` was
+    processed and double the belt's travel between the frames examined."""
+    f = await cell.next_frame(after=prev.stamp_s)
+    state = f.robot_state if f.robot_state is not None else prev.robot_state
+    return dataclasses.replace(f, robot_state=state, meta={**f.meta, "look": {}})
+
+
 async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg: NDArray[np.uint8],
                 durations: dict[str, float], clear_first: bool = False
                 ) -> tuple[Any, float, NDArray[np.uint8]]:  # fmt: skip
@@ -269,6 +388,8 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
     cell = ctx.rt.cell
     deadline = time.monotonic() + opts.wait_s
     last = None
+    approach = Approach(start_m=_belt(ctx.rt)[2])
+    z_mid = ctx.surface_z + AIM_HEIGHT_M / 2
     t0 = time.monotonic()
     frame = await cell.look(q_top, speed=opts.speed)
     _look_times(frame, durations)
@@ -290,20 +411,26 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
             mask = await asyncio.to_thread(foreground_mask, frame.rgb, bg_now)
         except SegmentationFailed:
             mask = None
-        if mask is not None:
-            h, w = mask.shape
-            ys, xs = np.nonzero(mask)
-            whole = xs.min() > 2 and ys.min() > 2 and xs.max() < w - 3 and ys.max() < h - 3
-            centred = abs(xs.mean() - w / 2) < 0.15 * w and abs(ys.mean() - h / 2) < 0.15 * h
-            if mode == "continuous" and whole and centred:
+        if mode == "continuous":
+            region = None
+            if mask is not None:
+                T_cam = _T_cam(frame.robot_state.q, ctx.T_ee_cam)
+                region = along_belt(mask, ctx.camera, T_cam, ctx.station, z_mid)
+            chosen = approach.take(frame, region, _travel_of(frame, ctx.rt))
+            if chosen is not None:
+                frame = chosen
+                bg_now = _background_for(ctx, frame, bg)
                 break
-            if mode == "index" and last is not None and iou(mask, last) > 0.97:
-                break
+        elif mask is not None and last is not None and iou(mask, last) > 0.97:
+            break
         last = mask
         if time.monotonic() >= deadline:
             raise NoObject(f"no object came to the station within {opts.wait_s:g} s")
-        await asyncio.sleep(0.02 if mode == "continuous" else 0.2)
-        frame = await cell.look(None)
+        if mode == "continuous":
+            frame = await _next_frame(cell, frame)
+        else:
+            await asyncio.sleep(0.2)
+            frame = await cell.look(None)
     _add(
         durations,
         "wait",
@@ -552,7 +679,8 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
         report(0.3 + 0.2 * len(frames), f"viewpoint {vp}")
         point = found.copy()
         if mode == "continuous":
-            point = point + np.array([0.0, _belt(rt)[2] - travel0 + 1.5 * speed_m_s, 0.0])
+            ahead = _belt(rt)[2] - travel0 + 1.5 * speed_m_s
+            point = carried_point(found, ahead, rt.sim.config.layout.conveyor.end_y_m, vp)
         side = await _side_view(
             ctx, vp, point, T_plan=T_plan, top_mask=region.mask, T_cam_top=T_cam_top,
             height_m=roi_height, travel0=travel0 if mode == "continuous" else None,
