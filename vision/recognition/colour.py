@@ -20,7 +20,9 @@ Signature
     of an illuminant change, by its colour too. A pixel is *chromatic* when that difference
     is longer than :data:`CHROMA_MIN`. The signature is the share of usable pixels that are
     achromatic, then the share of chromatic ones in each of :data:`HUE_BINS` hue sectors (the
-    difference's angle): :data:`SIGNATURE_SIZE` values summing to 1. A colour band that
+    difference's angle; each pixel's vote split between the two sectors whose centres
+    enclose its hue, so that a hue on a sector boundary does not jump sectors under a small
+    shift): :data:`SIGNATURE_SIZE` values summing to 1. A colour band that
     covers 2 % of the region moves 2 % of the mass out of the first value, however large the
     grey part is (a histogram of all pixels compared by overlap would hardly notice it).
     Regions with fewer than :data:`MIN_PIXELS` usable pixels have no signature (``None``).
