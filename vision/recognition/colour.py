@@ -20,7 +20,9 @@ Signature
     of an illuminant change, by its colour too. A pixel is *chromatic* when that difference
     is longer than :data:`CHROMA_MIN`. The signature is the share of usable pixels that are
     achromatic, then the share of chromatic ones in each of :data:`HUE_BINS` hue sectors (the
-    difference's angle): :data:`SIGNATURE_SIZE` values summing to 1. A colour band that
+    difference's angle; each pixel's vote split between the two sectors whose centres
+    enclose its hue, so that a hue on a sector boundary does not jump sectors under a small
+    shift): :data:`SIGNATURE_SIZE` values summing to 1. A colour band that
     covers 2 % of the region moves 2 % of the mass out of the first value, however large the
     grey part is (a histogram of all pixels compared by overlap would hardly notice it).
     Regions with fewer than :data:`MIN_PIXELS` usable pixels have no signature (``None``).
@@ -50,6 +52,7 @@ __all__ = [
     "check_signature",
     "colour_distance",
     "colour_signature",
+    "held_sectors",
     "region_from_outline",
 ]
 
@@ -114,11 +117,21 @@ def colour_signature(image: NDArray[np.uint8], region: ArrayLike) -> NDArray[np.
     u = u - np.median(u)  # equation 17 against the region's median colour
     v = v - np.median(v)
     chromatic = np.hypot(u, v) > CHROMA_MIN
-    sector = np.floor((np.arctan2(v, u) + np.pi) / (2.0 * np.pi) * HUE_BINS).astype(np.int64)
-    sector = np.clip(sector, 0, HUE_BINS - 1)
+    # Each chromatic pixel votes for the two sectors whose centres enclose its hue, in
+    # proportion to its nearness (a linearly interpolated histogram): with hard sectors a
+    # colour on a sector boundary (the red band of the twin wheel, half in each of two
+    # sectors) moved wholly into one sector under a small hue shift, which the comparison
+    # read as a colour appearing and another vanishing (issue 14, colour cast).
+    pos = (np.arctan2(v[chromatic], u[chromatic]) + np.pi) / (2.0 * np.pi) * HUE_BINS - 0.5
+    low = np.floor(pos)
+    frac = pos - low
+    k0 = low.astype(np.int64) % HUE_BINS
+    k1 = (k0 + 1) % HUE_BINS
     out = np.zeros(SIGNATURE_SIZE, dtype=np.float64)
     out[0] = np.count_nonzero(~chromatic)
-    out[1:] = np.bincount(sector[chromatic], minlength=HUE_BINS)
+    out[1:] = np.bincount(k0, weights=1.0 - frac, minlength=HUE_BINS) + np.bincount(
+        k1, weights=frac, minlength=HUE_BINS
+    )
     return (out / n).astype(np.float32)
 
 
@@ -133,12 +146,38 @@ def check_signature(signature: object) -> NDArray[np.float32]:
     return a
 
 
-def colour_distance(a: ArrayLike, b: ArrayLike) -> float:
+def colour_distance(a: ArrayLike, b: ArrayLike, *, sectors: ArrayLike | None = None) -> float:
     """Distance of two signatures (module docstring): 0 for the same colours, larger the more
-    the shares of the hues differ (log units summed over the hue sectors)."""
+    the shares of the hues differ (log units summed over the hue sectors).
+
+    ``sectors`` (bool, :data:`HUE_BINS`) restricts the sum to those hue sectors (all when
+    ``None``), e.g. to the hues that tell the compared models apart (:func:`held_sectors`).
+    """
     p, q = check_signature(a), check_signature(b)
     ratio = (p[1:].astype(np.float64) + CHROMA_FLOOR) / (q[1:].astype(np.float64) + CHROMA_FLOOR)
-    return float(np.abs(np.log(ratio)).sum())
+    terms = np.abs(np.log(ratio))
+    if sectors is not None:
+        keep = np.asarray(sectors, dtype=bool).reshape(-1)
+        if keep.size != HUE_BINS:
+            raise ValueError(f"sectors must have {HUE_BINS} values, got {keep.size}")
+        terms = terms[keep]
+    return float(terms.sum())
+
+
+def held_sectors(signatures: list[ArrayLike]) -> NDArray[np.bool_]:
+    """Hue sectors that at least one of ``signatures`` holds above :data:`CHROMA_FLOOR`.
+
+    A tie-break between models compares a query with each model's trained views; a colour
+    the query shows that none of those views holds (a tint the light's colour left on a
+    shaded or highlighted face that the region's median does not cancel: under a warm lamp
+    beside a white ambient light, 6 % of a wheel's side view in one hue) adds the same
+    distance to every model and decides nothing, but it pushed the right model past the
+    distance at which it is taken to resemble its views (issue 14, colour cast).
+    """
+    if not signatures:
+        return np.zeros(HUE_BINS, dtype=bool)
+    shares = np.stack([check_signature(s)[1:] for s in signatures])
+    return np.asarray((shares > CHROMA_FLOOR).any(axis=0), dtype=bool)
 
 
 def region_from_outline(

@@ -103,7 +103,7 @@ from types import MappingProxyType
 import numpy as np
 
 from vision.features import Features
-from vision.recognition.colour import colour_distance
+from vision.recognition.colour import colour_distance, held_sectors
 from vision.recognition.index import ViewIndex, view_colour
 from vision.recognition.recognise import (
     DEFAULT_MARGIN,
@@ -237,10 +237,10 @@ def colour_support(
 ) -> dict[str, float]:
     """Mean colour distance of each of ``models`` over the side views where it was verified
     and both the query region and its best trained view have a colour signature (module
-    docstring); models without one are left out."""
-    out: dict[str, float] = {}
+    docstring), summed over the hue sectors that at least one of the compared trained views
+    holds (:func:`vision.recognition.colour.held_sectors`); models without one are left out."""
+    pairs: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     for m in models:
-        dists = []
         for r, image in zip(views, images, strict=True):
             if r.viewpoint not in (2, 3) or image is None:
                 continue
@@ -252,10 +252,13 @@ def colour_support(
                 continue
             q = view_colour(image, view.outline, H=cand.H)
             if q is not None:
-                dists.append(colour_distance(q, view.colour))
-        if dists:
-            out[m] = float(np.mean(dists))
-    return out
+                pairs.setdefault(m, []).append((q, view.colour))
+    # Only the hues some compared view holds tell the models apart (held_sectors).
+    held = held_sectors([v for ps in pairs.values() for _, v in ps])
+    return {
+        m: float(np.mean([colour_distance(q, v, sectors=held) for q, v in ps]))
+        for m, ps in pairs.items()
+    }
 
 
 def _top_confusers(choice: ThresholdChoice, model: str, limit: float) -> tuple[str, ...]:
