@@ -356,6 +356,4 @@ def predict_along_belt(
     d = np.array([0.0, 1.0, 0.0]) if direction is None else np.asarray(direction, dtype=float)
     T = pose.T_base_obj.copy()
     T[:3, 3] += travel_m * d / np.linalg.norm(d)
-    return ObjectPose(
-        T, pose.yaw_rad, pose.residual_m, pose.n_points, pose.method, pose.reproj_px
-    )
+    return ObjectPose(T, pose.yaw_rad, pose.residual_m, pose.n_points, pose.method, pose.reproj_px)

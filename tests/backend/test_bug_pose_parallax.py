@@ -111,7 +111,7 @@ def test_noisy_correspondences_with_an_outlier_stay_within_a_millimetre():
 
 
 def test_few_correspondences_or_a_runaway_fit_keep_the_plane_answer():
-    H, pairs, kw, truth = _scene(math.radians(45), 0.0, 0.0, 2.094)
+    H, pairs, kw, _ = _scene(math.radians(45), 0.0, 0.0, 2.094)
     few = estimate_pose(H, **kw, inlier_xy=pairs[:5], z_floor_m=SURFACE)
     assert few.method == "plane" and few.reproj_px is None
     # Correspondences of another scene entirely: the fit would have to move the answer far.
