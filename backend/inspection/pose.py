@@ -276,14 +276,9 @@ def refine_with_parallax(
     :data:`PARALLAX_F_SCALE_PX`), and a weak pull of every height towards the top face
     (0.1 px per 50 mm) so that heights the views cannot tell apart (no parallax: the two
     cameras at the same place relative to the object) stay where the plane fit put them
-    instead of wandering.  Solved by variable projection: for a given motion every height
-    has its own one-unknown least-squares problem (a few vectorised Gauss-Newton steps),
-    and the three motion parameters are fitted on what remains (reweighted Gauss-Newton
-    with backtracking), 10-25 ms for 100 correspondences where scipy's sparse trust region
-    over all 3 + n unknowns took 250 ms on the loaded cell computer.  Returns ``(T_delta,
-    RMS reprojection error in px)``; ``None`` when it does not converge in 30 steps, or
-    when it moved the start by more than :data:`MAX_REFINE_SHIFT_M` /
-    :data:`MAX_REFINE_YAW_RAD`.
+    instead of wandering.  Returns ``(T_delta, RMS reprojection error in px)``; ``None``
+    when the solver fails, or when it moved the start by more than
+    :data:`MAX_REFINE_SHIFT_M` / :data:`MAX_REFINE_YAW_RAD`.
     """
     pairs = np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4)[:MAX_PARALLAX_POINTS]
     n = len(pairs)
