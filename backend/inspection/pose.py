@@ -280,6 +280,9 @@ def refine_with_parallax(
     when the solver fails, or when it moved the start by more than
     :data:`MAX_REFINE_SHIFT_M` / :data:`MAX_REFINE_YAW_RAD`.
     """
+    from scipy.optimize import least_squares
+    from scipy.sparse import lil_matrix
+
     pairs = np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4)[:MAX_PARALLAX_POINTS]
     n = len(pairs)
     Tv = np.asarray(T_base_cam_view, dtype=np.float64)
@@ -295,81 +298,38 @@ def refine_with_parallax(
     lo, hi = z_floor_m - 0.001, z_top_m + 0.001
     w_prior = 1.0 / 0.5  # px per metre of height away from the top face
 
-    def project(m: NDArray[np.float64], z: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Pixel residuals (n, 2) of the features at heights ``z`` under motion ``m``."""
+    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        yaw, tx, ty, z = x[0], x[1], x[2], x[3:]
         s = (z - Cv[2]) / d[:, 2]
         P = Cv + s[:, None] * d
-        c, si = math.cos(m[0]), math.sin(m[0])
-        Q = np.stack(
-            [c * P[:, 0] - si * P[:, 1] + m[1], si * P[:, 0] + c * P[:, 1] + m[2], P[:, 2]], 1
-        )
+        c, si = math.cos(yaw), math.sin(yaw)
+        Q = np.stack([c * P[:, 0] - si * P[:, 1] + tx, si * P[:, 0] + c * P[:, 1] + ty, P[:, 2]], 1)
         pc = (Q - Cn) @ Rn_T.T
         pc_z = np.where(np.abs(pc[:, 2]) < 1e-9, 1e-9, pc[:, 2])
-        return f * (pc[:, :2] / pc_z[:, None] - obs)
+        uv = pc[:, :2] / pc_z[:, None]
+        return np.concatenate([f * (uv - obs).ravel(), w_prior * (z - z_top_m)])
 
-    def heights(m: NDArray[np.float64], z: NDArray[np.float64]) -> NDArray[np.float64]:
-        # Each feature's best height for this motion: Gauss-Newton on one unknown per
-        # feature (vectorised), with the weak pull towards the top face, kept in bounds.
-        for _ in range(4):
-            r = project(m, z)
-            g = (project(m, z + 1e-6) - r) / 1e-6
-            num = (g * r).sum(1) + w_prior**2 * (z - z_top_m)
-            den = (g * g).sum(1) + w_prior**2
-            z = np.clip(z - num / den, lo, hi)
-        return z
-
-    def solve(m: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        z = heights(m, z_start)
-        return project(m, z).ravel(), z
-
-    # Variable projection: the heights are solved for each motion, and the motion (yaw,
-    # tx, ty) by iteratively reweighted Gauss-Newton on the remaining residuals (soft-L1
-    # weights: matches off by more than PARALLAX_F_SCALE_PX count less).
+    sparsity = lil_matrix((3 * n, 3 + n), dtype=int)
+    rows = np.arange(n)
+    sparsity[: 2 * n, :3] = 1
+    sparsity[2 * rows, 3 + rows] = 1
+    sparsity[2 * rows + 1, 3 + rows] = 1
+    sparsity[2 * n + rows, 3 + rows] = 1
     yaw0 = math.atan2(T_delta0[1, 0], T_delta0[0, 0])
-    m = np.array([yaw0, T_delta0[0, 3], T_delta0[1, 3]])
-    z_start = np.full(n, z_top_m)
-    steps = np.array([1e-6, 1e-6, 1e-6])
-
-    def cost(r: NDArray[np.float64]) -> float:
-        return float(np.sum(np.sqrt(1.0 + (r / PARALLAX_F_SCALE_PX) ** 2) - 1.0))
-
-    r, z_start = solve(m)
-    c_now = cost(r)
-    converged = False
-    for _ in range(30):
-        J = np.empty((2 * n, 3))
-        for k in range(3):
-            mk = m.copy()
-            mk[k] += steps[k]
-            J[:, k] = (solve(mk)[0] - r) / steps[k]
-        w = 1.0 / np.sqrt(np.sqrt(1.0 + (r / PARALLAX_F_SCALE_PX) ** 2))  # soft-L1 IRLS
-        try:
-            delta = np.linalg.lstsq(J * w[:, None], -r * w, rcond=None)[0]
-        except np.linalg.LinAlgError:
-            return None
-        if not np.all(np.isfinite(delta)):
-            return None
-        # Backtracking: the heights are clipped to their bounds, so the projected problem
-        # is not smooth everywhere and a full step can overshoot.
-        for _half in range(10):
-            r_new, z_new = solve(m + delta)
-            c_new = cost(r_new)
-            if c_new <= c_now:
-                break
-            delta = delta / 2.0
-        else:
-            converged = True  # no step lowers the cost: at the minimum (to the step's size)
-            break
-        m, r, z_start = m + delta, r_new, z_new
-        small = abs(delta[0]) < 1e-7 and math.hypot(delta[1], delta[2]) < 1e-7
-        c_now, done = c_new, small or c_now - c_new < 1e-9 * max(1.0, c_now)
-        if done:
-            converged = True
-            break
-    if not converged:
+    x0 = np.concatenate([[yaw0, T_delta0[0, 3], T_delta0[1, 3]], np.full(n, z_top_m)])
+    lb = np.concatenate([[-np.inf] * 3, np.full(n, lo)])
+    ub = np.concatenate([[np.inf] * 3, np.full(n, hi)])
+    x0[3:] = np.clip(x0[3:], lo + 1e-9, hi - 1e-9)
+    try:
+        sol = least_squares(
+            residuals, x0, bounds=(lb, ub), jac_sparsity=sparsity, loss="soft_l1",
+            f_scale=PARALLAX_F_SCALE_PX, x_scale="jac", max_nfev=200,
+        )  # fmt: skip
+    except (ValueError, np.linalg.LinAlgError):
         return None
-    r, _ = solve(m)
-    yaw, tx, ty = (float(v) for v in m)
+    if not sol.success or not np.all(np.isfinite(sol.x)):
+        return None
+    yaw, tx, ty = (float(v) for v in sol.x[:3])
     T = np.eye(4)
     c, si = math.cos(yaw), math.sin(yaw)
     T[:2, :2] = [[c, -si], [si, c]]
@@ -383,7 +343,7 @@ def refine_with_parallax(
         or abs(math.remainder(yaw - yaw0, 2 * math.pi)) > MAX_REFINE_YAW_RAD
     ):
         return None
-    reproj = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2) * 2))
+    reproj = float(np.sqrt(np.mean(sol.fun[: 2 * n].reshape(-1, 2) ** 2) * 2))
     return T, reproj
 
 
