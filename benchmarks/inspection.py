@@ -49,7 +49,12 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering, before MuJoCo l
 out = Console()
 err = Console(stderr=True)
 
-SYMMETRIC = {"wheel"}  # parts whose yaw is not defined by their outline
+#: Catalogue kinds whose yaw is not defined by their outline (surfaces of revolution; the
+#: rim's spoke or hole pattern repeats every 360/n degrees).  A kind, not a part: a wheel's
+#: part is its own name (``wheel-steel``), so testing the part against ``{"wheel"}`` used to
+#: count every wheel's yaw, the 180-degree "error" of ``wheel-steel`` (8 holes, 4 bolts)
+#: among them.
+SYMMETRIC = {"wheel"}
 
 
 def _settings(tmp: Path, time_scale: float) -> Any:
@@ -130,7 +135,7 @@ async def _teach_all(
     return time.perf_counter() - t0, last
 
 
-def _errors(row: dict[str, Any], part: str) -> tuple[float | None, float | None]:
+def _errors(row: dict[str, Any], kind: str) -> tuple[float | None, float | None]:
     """Position (mm) and yaw (deg) errors; at constant speed those of the pose predicted
     forward by the belt's travel against the truth moved forward by the same travel."""
     if row["pose"] is None or row["truth"] is None:
@@ -142,7 +147,7 @@ def _errors(row: dict[str, Any], part: str) -> tuple[float | None, float | None]
         T = np.array(row["pose"]["T_base_obj"])
         Tt[1, 3] += float(travel)
     pos = float(np.linalg.norm(T[:2, 3] - Tt[:2, 3]) * 1e3)
-    if part in SYMMETRIC:
+    if kind in SYMMETRIC:
         return pos, None
     d = math.atan2(T[1, 0], T[0, 0]) - math.atan2(Tt[1, 0], Tt[0, 0])
     return pos, abs(math.degrees(math.remainder(d, 2 * math.pi)))
@@ -154,7 +159,7 @@ def _record(
     from robot.sim.catalogue import CATALOGUE
 
     entry = CATALOGUE[name]
-    pos, yaw = _errors(row, entry.base_of)
+    pos, yaw = _errors(row, entry.kind)
     n = max(1, len(row["viewpoints_visited"]))
     d = row["durations"]
     vision = sum(d.get(k, 0.0) for k in ("segment", "features", "match", "decide"))

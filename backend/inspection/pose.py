@@ -17,6 +17,19 @@ without scale) is the object's motion since it was taught: ``T_base_obj = T_delt
 T_base_obj_taught``, its yaw the rotation about the belt normal.  The residual of the fit
 (RMS, metres) says how well the points agree.
 
+That plane is only right for a flat top.  The camera of the top view sits about 50 mm off
+the station's vertical (the 5-DOF wrist, the camera beside the flange) and moves on a
+circle with the camera roll, and the object turns under it, so the trained and the current
+camera see the object from places up to 100 mm apart: features below the top face (a
+wheel's spokes and hub, a bracket's base plate) shift by parallax, ``H`` averages them into
+one plane's map, and back-projecting at the top face's height put the pose 3-5 mm off
+(measured, ``benchmarks.inspection`` seeds 7, 1, 2: the error followed the plane height by
+1-5 mm per 2 cm).  With the verification's inlier correspondences
+(:attr:`vision.recognition.recognise.Candidate.inlier_xy`) the motion is therefore refined
+by :func:`refine_with_parallax`: the planar motion and every feature's own height (on its
+trained viewing ray, bounded between the belt and the top face) minimising the
+reprojection error in the current image, started from the plane's answer.
+
 With the belt running (constant-speed mode, section 4.1) the pose is that at exposure;
 :func:`predict_along_belt` moves it forward by the belt's travel since then.
 """
@@ -33,10 +46,29 @@ from numpy.typing import NDArray
 from vision.camera import PinholeCamera
 from vision.errors import VisionCellError
 
-__all__ = ["ObjectPose", "PoseFailed", "estimate_pose", "plane_points", "predict_along_belt"]
+__all__ = [
+    "ObjectPose",
+    "PoseFailed",
+    "estimate_pose",
+    "plane_points",
+    "predict_along_belt",
+    "refine_with_parallax",
+]
 
 #: Largest residual of the planar fit accepted, metres.
 MAX_RESIDUAL_M = 0.01
+#: Fewest inlier correspondences the parallax refinement uses (below: the plane's answer;
+#: each feature adds one unknown, its height, to the three of the motion).
+MIN_PARALLAX_POINTS = 8
+#: Most correspondences used (the best spread subset beyond it would gain little).
+MAX_PARALLAX_POINTS = 400
+#: The refinement may move the plane's answer at most this far, metres, and turn it at most
+#: :data:`MAX_REFINE_YAW_RAD`: a larger change means a failed fit, not a better one.
+MAX_REFINE_SHIFT_M = 0.02
+MAX_REFINE_YAW_RAD = math.radians(5.0)
+#: Pixels beyond which a correspondence counts as an outlier in the robust loss (the
+#: verification's inlier threshold is 3 px).
+PARALLAX_F_SCALE_PX = 1.5
 
 
 class PoseFailed(VisionCellError):
@@ -60,12 +92,18 @@ class ObjectPose:
         RMS distance between the mapped and the back-projected points on the plane.
     n_points : int
         Points used in the fit.
+    method : {"plane", "parallax"}
+        The top-face plane fit alone, or refined with the features' heights.
+    reproj_px : float or None
+        With ``"parallax"``: RMS reprojection error of the correspondences, pixels.
     """
 
     T_base_obj: NDArray[np.float64]
     yaw_rad: float
     residual_m: float
     n_points: int
+    method: str = "plane"
+    reproj_px: float | None = None
 
     def public(self) -> dict[str, object]:
         """JSON-friendly form (metres and radians)."""
@@ -75,6 +113,8 @@ class ObjectPose:
             "yaw_rad": self.yaw_rad,
             "residual_m": self.residual_m,
             "n_points": self.n_points,
+            "method": self.method,
+            "reproj_px": self.reproj_px,
         }
 
 
@@ -130,6 +170,8 @@ def estimate_pose(
     z_plane_m: float,
     view_mask: NDArray[np.bool_] | None,
     view_shape: tuple[int, int],
+    inlier_xy: NDArray[np.float64] | None = None,
+    z_floor_m: float | None = None,
 ) -> ObjectPose:
     """The object's pose now from the homography of the trained top view (module docstring).
 
@@ -149,6 +191,12 @@ def estimate_pose(
         The object's region in the trained view (points are sampled inside it).
     view_shape : (int, int)
         Trained image height and width.
+    inlier_xy : ndarray of shape (N, 4), optional
+        The correspondences behind ``H`` (trained ``x, y``, current ``x, y``, pixels): with
+        at least :data:`MIN_PARALLAX_POINTS` of them and ``z_floor_m`` the plane's answer is
+        refined by :func:`refine_with_parallax`.
+    z_floor_m : float, optional
+        Lowest height a feature can have (the belt surface), metres.
 
     Raises
     ------
@@ -181,9 +229,122 @@ def estimate_pose(
     T_delta = np.eye(4)
     T_delta[:2, :2] = R2
     T_delta[:2, 3] = t2
+    method, n, reproj = "plane", len(src), None
+    if inlier_xy is not None and z_floor_m is not None:
+        pairs = np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4)
+        if len(pairs) >= MIN_PARALLAX_POINTS and np.all(np.isfinite(pairs)):
+            refined = refine_with_parallax(
+                pairs, camera=camera, T_base_cam_view=T_base_cam_view,
+                T_base_cam_now=T_base_cam_now, T_delta0=T_delta, z_floor_m=z_floor_m,
+                z_top_m=z_plane_m,
+            )  # fmt: skip
+            if refined is not None:
+                T_delta, reproj = refined
+                method, n = "parallax", min(len(pairs), MAX_PARALLAX_POINTS)
     T = T_delta @ np.asarray(T_base_obj_taught, dtype=np.float64)
     yaw = math.atan2(T[1, 0], T[0, 0])
-    return ObjectPose(T, yaw, resid, len(src))
+    return ObjectPose(T, yaw, resid, n, method, reproj)
+
+
+def _rays(
+    px: NDArray[np.float64], camera: PinholeCamera, T_base_cam: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Undistorted viewing rays (N, 3) of pixels in the base frame (not normalised)."""
+    pts = np.asarray(px, dtype=np.float64).reshape(-1, 1, 2)
+    norm = cv2.undistortPoints(pts, camera.K, np.asarray(camera.dist, dtype=np.float64))
+    rays = np.concatenate([norm.reshape(-1, 2), np.ones((len(pts), 1))], axis=1)
+    return rays @ np.asarray(T_base_cam, dtype=np.float64)[:3, :3].T
+
+
+def refine_with_parallax(
+    inlier_xy: NDArray[np.float64],
+    *,
+    camera: PinholeCamera,
+    T_base_cam_view: NDArray[np.float64],
+    T_base_cam_now: NDArray[np.float64],
+    T_delta0: NDArray[np.float64],
+    z_floor_m: float,
+    z_top_m: float,
+) -> tuple[NDArray[np.float64], float] | None:
+    """The planar motion ``T_delta`` (taught to now, base frame) fitted to correspondences
+    with each feature at its own height (module docstring); ``None`` when the fit fails.
+
+    Unknowns: the motion's yaw and translation and, per correspondence, the height ``z_i``
+    of the feature on its trained viewing ray, bounded to ``[z_floor_m, z_top_m]`` (1 mm
+    slack each side).  Residuals: the feature moved by the motion and projected into the
+    current camera against where it was seen, in undistorted pixels (robust soft-L1 loss,
+    :data:`PARALLAX_F_SCALE_PX`), and a weak pull of every height towards the top face
+    (0.1 px per 50 mm) so that heights the views cannot tell apart (no parallax: the two
+    cameras at the same place relative to the object) stay where the plane fit put them
+    instead of wandering.  Returns ``(T_delta, RMS reprojection error in px)``; ``None``
+    when the solver fails, or when it moved the start by more than
+    :data:`MAX_REFINE_SHIFT_M` / :data:`MAX_REFINE_YAW_RAD`.
+    """
+    from scipy.optimize import least_squares
+    from scipy.sparse import lil_matrix
+
+    pairs = np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4)[:MAX_PARALLAX_POINTS]
+    n = len(pairs)
+    Tv = np.asarray(T_base_cam_view, dtype=np.float64)
+    Tn = np.asarray(T_base_cam_now, dtype=np.float64)
+    d = _rays(pairs[:, :2], camera, Tv)
+    if np.any(d[:, 2] > -1e-6):
+        return None  # a trained ray that does not go down to the belt
+    obs = cv2.undistortPoints(
+        pairs[:, 2:].reshape(-1, 1, 2), camera.K, np.asarray(camera.dist, dtype=np.float64)
+    ).reshape(-1, 2)
+    f = float(camera.K[0, 0])
+    Cv, Rn_T, Cn = Tv[:3, 3], Tn[:3, :3].T, Tn[:3, 3]
+    lo, hi = z_floor_m - 0.001, z_top_m + 0.001
+    w_prior = 1.0 / 0.5  # px per metre of height away from the top face
+
+    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        yaw, tx, ty, z = x[0], x[1], x[2], x[3:]
+        s = (z - Cv[2]) / d[:, 2]
+        P = Cv + s[:, None] * d
+        c, si = math.cos(yaw), math.sin(yaw)
+        Q = np.stack([c * P[:, 0] - si * P[:, 1] + tx, si * P[:, 0] + c * P[:, 1] + ty, P[:, 2]], 1)
+        pc = (Q - Cn) @ Rn_T.T
+        pc_z = np.where(np.abs(pc[:, 2]) < 1e-9, 1e-9, pc[:, 2])
+        uv = pc[:, :2] / pc_z[:, None]
+        return np.concatenate([f * (uv - obs).ravel(), w_prior * (z - z_top_m)])
+
+    sparsity = lil_matrix((3 * n, 3 + n), dtype=int)
+    rows = np.arange(n)
+    sparsity[: 2 * n, :3] = 1
+    sparsity[2 * rows, 3 + rows] = 1
+    sparsity[2 * rows + 1, 3 + rows] = 1
+    sparsity[2 * n + rows, 3 + rows] = 1
+    yaw0 = math.atan2(T_delta0[1, 0], T_delta0[0, 0])
+    x0 = np.concatenate([[yaw0, T_delta0[0, 3], T_delta0[1, 3]], np.full(n, z_top_m)])
+    lb = np.concatenate([[-np.inf] * 3, np.full(n, lo)])
+    ub = np.concatenate([[np.inf] * 3, np.full(n, hi)])
+    x0[3:] = np.clip(x0[3:], lo + 1e-9, hi - 1e-9)
+    try:
+        sol = least_squares(
+            residuals, x0, bounds=(lb, ub), jac_sparsity=sparsity, loss="soft_l1",
+            f_scale=PARALLAX_F_SCALE_PX, x_scale="jac", max_nfev=200,
+        )  # fmt: skip
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    if not sol.success or not np.all(np.isfinite(sol.x)):
+        return None
+    yaw, tx, ty = (float(v) for v in sol.x[:3])
+    T = np.eye(4)
+    c, si = math.cos(yaw), math.sin(yaw)
+    T[:2, :2] = [[c, -si], [si, c]]
+    T[:2, 3] = (tx, ty)
+    # The shift is that of the features' centre (T_delta turns about the base origin, so
+    # its own translation moves by metres per radian).
+    centre = np.append((Cv + ((z_top_m - Cv[2]) / d[:, 2])[:, None] * d).mean(axis=0)[:2], 1.0)
+    shift = (T[:2, [0, 1, 3]] - T_delta0[:2, [0, 1, 3]]) @ centre
+    if (
+        float(np.linalg.norm(shift)) > MAX_REFINE_SHIFT_M
+        or abs(math.remainder(yaw - yaw0, 2 * math.pi)) > MAX_REFINE_YAW_RAD
+    ):
+        return None
+    reproj = float(np.sqrt(np.mean(sol.fun[: 2 * n].reshape(-1, 2) ** 2) * 2))
+    return T, reproj
 
 
 def predict_along_belt(
@@ -195,4 +356,4 @@ def predict_along_belt(
     d = np.array([0.0, 1.0, 0.0]) if direction is None else np.asarray(direction, dtype=float)
     T = pose.T_base_obj.copy()
     T[:3, 3] += travel_m * d / np.linalg.norm(d)
-    return ObjectPose(T, pose.yaw_rad, pose.residual_m, pose.n_points)
+    return ObjectPose(T, pose.yaw_rad, pose.residual_m, pose.n_points, pose.method, pose.reproj_px)

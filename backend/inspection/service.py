@@ -836,7 +836,7 @@ async def _pose(
     return await asyncio.to_thread(
         estimate_pose, cand.H, camera=ctx.camera, T_base_cam_view=_T_cam(joints, ctx.T_ee_cam),
         T_base_cam_now=T_cam_now, T_base_obj_taught=T_taught, z_plane_m=ctx.surface_z + height,
-        view_mask=mask, view_shape=shape,
+        view_mask=mask, view_shape=shape, inlier_xy=cand.inlier_xy, z_floor_m=ctx.surface_z,
     )  # fmt: skip
 
 

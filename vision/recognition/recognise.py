@@ -114,6 +114,12 @@ class Candidate:
     H : ndarray of shape (3, 3) or None
         Map from pixels of the trained view to pixels of the query (``x_q ~ H @ x_view``);
         ``None`` when verification found no model.
+    inlier_xy : ndarray of shape (n_inliers, 4) or None
+        The inlier correspondences behind ``H``: trained-view ``x, y`` then query ``x, y``,
+        pixels.  The pose (:mod:`backend.inspection.pose`) fits the object's motion to them
+        with each feature's own height: ``H`` is one plane's map, and the features of a
+        wheel or a bracket lie at several heights seen from cameras tens of millimetres
+        apart.
     """
 
     model: str
@@ -128,6 +134,7 @@ class Candidate:
     n_matches: int
     votes: float
     H: np.ndarray | None
+    inlier_xy: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -297,6 +304,9 @@ def verify_view(index: ViewIndex, view_id: int, query: Features, votes: float = 
             view.model, view_id, view.viewpoint, 0.0, 0.0, 0.0, 0.0, 1.0, 0, len(m), votes, None
         )
     n = ver.n_inliers
+    keep = m.index_a[ver.inliers], m.index_b[ver.inliers]
+    pairs = np.hstack([a.keypoints.xy[keep[0]], query.keypoints.xy[keep[1]]]).astype(np.float64)
+    pairs.setflags(write=False)
     return Candidate(
         view.model,
         view_id,
@@ -310,6 +320,7 @@ def verify_view(index: ViewIndex, view_id: int, query: Features, votes: float = 
         len(m),
         votes,
         ver.H,
+        pairs,
     )
 
 
