@@ -458,6 +458,7 @@ def main(argv: list[str] | None = None) -> None:
         "--teach-yaws (taught and saved there when it does not exist)",
     )  # fmt: skip
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--rows", action="store_true", help="with --json: every inspection's row")
     args = ap.parse_args(argv)
     if not 0 <= args.objects <= 2000:
         ap.error(f"--objects must be in 0..2000, got {args.objects}")
@@ -512,7 +513,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.json:
         print(json.dumps({"summary": summary, "teach_s": res["teach_s"], "wall_s": time.perf_counter() - t0,
                           "threshold": res["threshold"],
-                          "wrong": wrong}, default=str))  # fmt: skip
+                          "wrong": wrong, "rows": res["rows"] if args.rows else None},
+                         default=str))  # fmt: skip
 
 
 if __name__ == "__main__":
