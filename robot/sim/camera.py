@@ -68,18 +68,6 @@ def _default_mount() -> NDArray[np.float64]:
 DEFAULT_T_EE_CAM = _default_mount()
 #: Default lens: moderate barrel distortion of a 6-8 mm machine-vision lens.
 DEFAULT_DIST = (-0.12, 0.03, 0.0008, -0.0005, 0.0)
-#: The scene is rendered with every light (and the headlight's ambient) divided by this and
-#: the sensor multiplies the render back by it (:class:`Sensor`).  MuJoCo's fixed-function
-#: lighting clamps each fragment's summed lighting to 1 before the texture multiplies it;
-#: the cell's lights add up to about 1.5 (plus specular) on a surface facing them, so at
-#: their default intensity most of an object's faces rendered at exactly their texture
-#: colour (no shading) and a change of the lights changed faces by different ratios
-#: (issue 14: halving every light scaled the gear housing's pixels by 0.67-0.73 and the
-#: belt's by 0.53, rather than all by 0.5).  With the headroom the render stays below the
-#: clamp and is linear in the lights (halved lights give half the image within 1 %), as
-#: a real scene's radiance is; brightness then clips where a real camera's does, at the
-#: sensor's full scale.
-LIGHT_HEADROOM = 2.0
 
 
 @dataclass(frozen=True)
@@ -264,17 +252,9 @@ class Sensor:
         self._lut_for: float | None = None
         self._lut = np.zeros((1, 256), np.float32)
 
-    def apply(
-        self, image: NDArray[np.uint8], spec: CameraSpec, *, render_gain: float = 1.0
-    ) -> NDArray[np.uint8]:
-        """The recorded image for the ideal exposure ``image`` (uint8, H x W x 3).
-
-        ``render_gain`` multiplies the brightness before the sensor's own gain: a render
-        made with the lights divided by :data:`LIGHT_HEADROOM` is given that value.
-        """
-        if not (math.isfinite(render_gain) and 0.0 < render_gain <= 16.0):
-            raise ValueError(f"render_gain must be in (0, 16], got {render_gain!r}")
-        scale = render_gain * spec.gain * spec.exposure_s / spec.reference_exposure_s
+    def apply(self, image: NDArray[np.uint8], spec: CameraSpec) -> NDArray[np.uint8]:
+        """The recorded image for the ideal exposure ``image`` (uint8, H x W x 3)."""
+        scale = spec.gain * spec.exposure_s / spec.reference_exposure_s
         img = (
             image
             if abs(scale - 1.0) < 1e-9

@@ -35,7 +35,7 @@ from robot.kinematics import T_base_ee
 from robot.model import ASEA, ArmModel, check_joints
 from robot.sim.boards import BoardSpec
 from robot.sim.builder import quat_from_matrix
-from robot.sim.camera import LIGHT_HEADROOM, Lens
+from robot.sim.camera import Lens
 from robot.sim.catalogue import CATALOGUE
 from robot.sim.config import SimConfig
 from robot.sim.controller import JointController
@@ -650,9 +650,9 @@ class SimEngine:
             diffuse = self._light_base.copy()
             specular = self._light_base_spec.copy()
             for name, lid in self._light_ids.items():
-                diffuse[lid] *= self._intensity[name] / LIGHT_HEADROOM
-                specular[lid] *= self._intensity[name] / LIGHT_HEADROOM
-            ambient = self.config.layout.ambient * self._intensity["ambient"] / LIGHT_HEADROOM
+                diffuse[lid] *= self._intensity[name]
+                specular[lid] *= self._intensity[name]
+            ambient = self.config.layout.ambient * self._intensity["ambient"]
             return Snapshot(
                 float(d.time),
                 time.monotonic(),

@@ -20,14 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robot.model import ASEA, ArmModel
-from robot.sim.camera import (
-    LIGHT_HEADROOM,
-    CameraSpec,
-    Lens,
-    Sensor,
-    exposure_end_poses,
-    motion_blur,
-)
+from robot.sim.camera import CameraSpec, Lens, Sensor, exposure_end_poses, motion_blur
 from robot.sim.engine import SimEngine, Snapshot
 from robot.sim.render import RenderWorker
 
@@ -87,9 +80,7 @@ class Imager:
             out = motion_blur(ideal, depth, self.lens.K_ideal, T0, T1)
             blurred = out is not ideal
             ideal = out
-        # Rendered with the lights divided by LIGHT_HEADROOM (SimEngine.snapshot), below
-        # the renderer's clamp: the sensor gains it back.
-        rgb = self.sensor.apply(self.lens.distort(ideal), spec, render_gain=LIGHT_HEADROOM)
+        rgb = self.sensor.apply(self.lens.distort(ideal), spec)
         return CameraImage(rgb, snap, blurred)
 
     def geom_ids(self, worker: RenderWorker, snap: Snapshot) -> NDArray[np.int32]:
