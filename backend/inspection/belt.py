@@ -27,24 +27,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from backend.inspection.pose import plane_points
-from vision.errors import InvalidInput, VisionCellError
+from vision.errors import InvalidInput
 
-__all__ = [
-    "Approach",
-    "BeltBackground",
-    "BeltGeometry",
-    "CarriedAway",
-    "along_belt",
-    "build_belt_background",
-    "carried_point",
-]
+__all__ = ["BeltBackground", "BeltGeometry", "build_belt_background"]
 
 #: Mosaic cell, metres.
 CELL_M = 0.002
@@ -196,113 +187,3 @@ def build_belt_background(
     ratio_img = ratio.reshape(nv, nu, 3).astype(np.float32)
     T = np.asarray(T_base_cam, dtype=np.float64).copy()
     return BeltBackground(static, ratio_img, u0, v, geometry, T, len(frames))
-
-
-# -- an object carried along the moving belt (constant speed, chapter 4.1) ---------------
-
-
-class CarriedAway(VisionCellError):
-    """Constant speed: the belt carried the object past its end before a side view."""
-
-    code = "carried_away"
-    http_status = 409
-
-
-def carried_point(found: NDArray[np.float64], ahead_m: float, end_y_m: float,
-                  vp: int) -> NDArray[np.float64]:  # fmt: skip
-    """Where a side view (viewpoint ``vp``) looks for an object found at ``found`` in the
-    top view, carried ``ahead_m`` along the belt since (its travel since the top view's
-    exposure and during the move); :class:`CarriedAway` past the belt's end (``end_y_m``):
-    the object has left the belt there (the simulator's belt brings it round to its start),
-    so no view of it can be planned from the travel, and a point metres beyond the arm's
-    reach would only fail the viewpoint planner with a workspace error."""
-    point = np.asarray(found, dtype=np.float64) + np.array([0.0, float(ahead_m), 0.0])
-    if not math.isfinite(float(ahead_m)) or point[1] > end_y_m:
-        raise CarriedAway(
-            f"viewpoint {vp}: the belt carried the object {float(ahead_m):.2f} m on since the "
-            f"top view, past the belt's end (y {end_y_m:g} m): the views took too long"
-        )
-    return point
-
-
-#: How close to the image border (pixels) a region may come and still count as whole.
-BORDER_PX = 3
-
-
-def along_belt(mask: NDArray[np.bool_], camera: Any, T_base_cam: NDArray[np.float64],
-               station: NDArray[np.float64], z_m: float) -> tuple[bool, float]:  # fmt: skip
-    """Where a region seen from ``T_base_cam`` lies along the belt: whether it is whole
-    *along* the belt, and its centre's offset along the belt's travel (base ``+y``, metres)
-    from the station, on the plane ``z_m``.
-
-    Whole along the belt means touching no image border the belt runs across (the ones
-    whose normal is within 60 degrees of the belt's direction in the image).  A border
-    along the belt does not count: how far the object reaches across the belt does not
-    change as the belt moves, and the top view taught at the station frames it the same
-    way (a wheel cut by the image's lower edge is cut there at every travel, and was cut
-    there when it was taught), so waiting for it to become whole there never ends.
-    """
-    h, w = mask.shape
-    ys, xs = np.nonzero(mask)
-    if xs.size == 0:
-        raise InvalidInput("along_belt needs a region with at least one pixel")
-    T_cam_base = np.linalg.inv(np.asarray(T_base_cam, dtype=np.float64))
-    a, b = station.copy(), station.copy()
-    a[2] = b[2] = z_m
-    b[1] += 0.05
-    uv = camera.project_world(np.stack([a, b]), T_cam_base)
-    e = uv[1] - uv[0]
-    n = float(np.hypot(*e))
-    e = e / n if math.isfinite(n) and n > 1e-9 else np.array([1.0, 0.0])
-    touches = {  # border normal -> region touches that border
-        (-1.0, 0.0): xs.min() < BORDER_PX,
-        (1.0, 0.0): xs.max() >= w - BORDER_PX,
-        (0.0, -1.0): ys.min() < BORDER_PX,
-        (0.0, 1.0): ys.max() >= h - BORDER_PX,
-    }
-    whole = not any(t and abs(nx * e[0] + ny * e[1]) > 0.5 for (nx, ny), t in touches.items())
-    centre = plane_points(np.array([[xs.mean(), ys.mean()]]), camera, T_base_cam, z_m)[0]
-    return whole, float(centre[1] - station[1])
-
-
-@dataclass
-class Approach:
-    """Which frame of an object carried along the moving belt is its top view (chapter 4.1).
-
-    The camera delivers frames at its own rate, so consecutive frames see the object a
-    belt travel ``step`` apart (at time scale 20 in the simulator, 5-20 cm); no fixed window
-    round the station is sure to hold one of them.  The top view is the frame nearest the
-    station among those where the object is whole along the belt: a frame is taken when the
-    next one (predicted one ``step`` -- the travel between the last two frames -- further)
-    would be farther from the station; otherwise it is held, and given back when the next
-    frame turns out farther (or no longer whole).  Only an object that was upstream of the
-    station when the search began (travel ``start_m``) counts: one that passed the station
-    while the arm came to the top view is taken at once, wherever it is as long as it is
-    whole, but one inspected before and leaving is not taken again.
-    """
-
-    start_m: float
-    seen_upstream: bool = False
-    last_travel: float | None = None
-    step: float | None = None
-    held: tuple[Any, float] | None = None
-
-    def take(self, frame: Any, region: tuple[bool, float] | None, travel_m: float) -> Any:
-        """The top view, or None to look at the next frame: ``frame`` itself or the one
-        held before it.  ``region`` is :func:`along_belt` of the frame's object (None: no
-        object), ``travel_m`` the belt's travel at its exposure."""
-        if self.last_travel is not None and travel_m > self.last_travel:
-            self.step = travel_m - self.last_travel
-        self.last_travel = travel_m
-        held, self.held = self.held, None
-        if region is not None and region[1] - (travel_m - self.start_m) < 0.0:
-            self.seen_upstream = True  # upstream of the station when the search began
-        if region is None or not (region[0] and self.seen_upstream):
-            return None if held is None else held[0]
-        offset = region[1]
-        if held is not None and abs(held[1]) <= abs(offset):
-            return held[0]
-        if offset >= 0.0 or (self.step is not None and abs(offset + self.step) >= abs(offset)):
-            return frame
-        self.held = (frame, offset)
-        return None

@@ -118,16 +118,6 @@ class ObjectPose:
         }
 
 
-def _rays(
-    px: NDArray[np.float64], camera: PinholeCamera, T_base_cam: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """Undistorted viewing rays (N, 3) of pixels in the base frame (not normalised)."""
-    pts = np.asarray(px, dtype=np.float64).reshape(-1, 1, 2)
-    norm = cv2.undistortPoints(pts, camera.K, np.asarray(camera.dist, dtype=np.float64))
-    rays = np.concatenate([norm.reshape(-1, 2), np.ones((len(pts), 1))], axis=1)
-    return rays @ np.asarray(T_base_cam, dtype=np.float64)[:3, :3].T
-
-
 def plane_points(
     px: NDArray[np.float64],
     camera: PinholeCamera,
@@ -139,8 +129,11 @@ def plane_points(
     The pixels are undistorted with ``camera``'s ``K`` and ``dist`` (eq. 2-4), the rays
     turned into the base frame with ``T_base_cam`` and cut with the plane.  Returns (N, 3).
     """
-    t = np.asarray(T_base_cam, dtype=np.float64)[:3, 3]
-    d = _rays(px, camera, T_base_cam)
+    pts = np.asarray(px, dtype=np.float64).reshape(-1, 1, 2)
+    norm = cv2.undistortPoints(pts, camera.K, np.asarray(camera.dist, dtype=np.float64))
+    rays = np.concatenate([norm.reshape(-1, 2), np.ones((len(pts), 1))], axis=1)
+    R, t = T_base_cam[:3, :3], T_base_cam[:3, 3]
+    d = rays @ R.T
     if np.any(np.abs(d[:, 2]) < 1e-6):
         raise PoseFailed("a viewing ray is parallel to the belt plane")
     s = (z_plane_m - t[2]) / d[:, 2]
@@ -251,6 +244,16 @@ def estimate_pose(
     T = T_delta @ np.asarray(T_base_obj_taught, dtype=np.float64)
     yaw = math.atan2(T[1, 0], T[0, 0])
     return ObjectPose(T, yaw, resid, n, method, reproj)
+
+
+def _rays(
+    px: NDArray[np.float64], camera: PinholeCamera, T_base_cam: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Undistorted viewing rays (N, 3) of pixels in the base frame (not normalised)."""
+    pts = np.asarray(px, dtype=np.float64).reshape(-1, 1, 2)
+    norm = cv2.undistortPoints(pts, camera.K, np.asarray(camera.dist, dtype=np.float64))
+    rays = np.concatenate([norm.reshape(-1, 2), np.ones((len(pts), 1))], axis=1)
+    return rays @ np.asarray(T_base_cam, dtype=np.float64)[:3, :3].T
 
 
 def refine_with_parallax(

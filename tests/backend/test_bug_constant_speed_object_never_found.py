@@ -26,23 +26,47 @@ import numpy as np
 import pytest
 
 from backend.inspection import service
-from backend.inspection.belt import (
-    Approach,
-    CarriedAway,
-    along_belt,
-    build_belt_background,
-    carried_point,
-)
+from backend.inspection.belt import BeltGeometry, build_belt_background
+from backend.inspection.pose import plane_points
 from robot.kinematics import T_base_ee
-from tests.utils.belt import CAM, GEO, T_cam, render
+from vision.camera import PinholeCamera
 from vision.sources import Frame
 
+GEO = BeltGeometry(centre_x_m=0.8, start_y_m=-1.3, width_m=0.44, surface_z_m=0.45, loop_m=2.6)
+PITCH = 2.6 / 9
+CAM = PinholeCamera(np.array([[500.0, 0, 160], [0, 500.0, 120], [0, 0, 1]]), (0.0,) * 5)
 STATION = np.array([0.8, 0.0, 0.45])
 Q = np.zeros(5)
 
 
-_T_cam, _render = T_cam, render
+def _T_cam() -> np.ndarray:
+    """Camera 0.4 m above the belt at the station, looking straight down (the belt runs
+    up the image, across it is the image's x)."""
+    T = np.eye(4)
+    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    T[:3, 3] = (0.8, 0.0, 0.85)
+    return T
+
+
 T_EE_CAM = np.linalg.inv(T_base_ee(Q)) @ _T_cam()
+
+
+def _render(travel: float, box: tuple[float, float, float, float] | None = None) -> np.ndarray:
+    """The belt at ``travel``; ``box`` = (x, y, half-width x, half-length y) on it, metres."""
+    h, w = 240, 320
+    ys, xs = np.mgrid[0:h, 0:w]
+    px = np.stack([xs.ravel(), ys.ravel()], axis=1).astype(float)
+    p = plane_points(px, CAM, _T_cam(), GEO.surface_z_m).reshape(h, w, 3)
+    u = np.mod(p[..., 1] - GEO.start_y_m - travel, GEO.loop_m)
+    stripe = np.mod(u, PITCH) < 0.016
+    on = np.abs(p[..., 0] - GEO.centre_x_m) < GEO.width_m / 2
+    img = np.where(on, np.where(stripe, 110.0, 42.0), 150.0)
+    img = np.repeat(img[..., None], 3, axis=2)
+    if box is not None:
+        x, y, hx, hy = box
+        inside = (np.abs(p[..., 0] - x) < hx) & (np.abs(p[..., 1] - y) < hy)
+        img[inside] = (30.0, 60.0, 170.0)
+    return np.clip(img, 0, 255).astype(np.uint8)
 
 
 class _Cell:
@@ -135,25 +159,25 @@ def test_an_object_leaving_the_station_is_not_taken_again(belt):
 def test_along_belt_counts_only_the_borders_the_belt_crosses():
     mask = np.zeros((240, 320), bool)
     mask[100:140, 250:320] = True  # touches the right edge: across the belt (x)
-    whole, offset = along_belt(mask, CAM, _T_cam(), STATION, GEO.surface_z_m)
+    whole, offset = service.along_belt(mask, CAM, _T_cam(), STATION, GEO.surface_z_m)
     assert whole
     assert offset == pytest.approx(0.0, abs=0.002)  # rows 100..139 centre on the station
     mask[:] = False
     mask[0:40, 100:200] = True  # touches the top edge: where the belt leaves the view
-    whole, offset = along_belt(mask, CAM, _T_cam(), STATION, GEO.surface_z_m)
+    whole, offset = service.along_belt(mask, CAM, _T_cam(), STATION, GEO.surface_z_m)
     assert not whole
     assert offset == pytest.approx((120 - 19.5) / 500 * 0.4, abs=0.002)
 
 
 def test_approach_holds_a_frame_until_the_next_is_farther():
-    a = Approach(start_m=0.0)
+    a = service.Approach(start_m=0.0)
     assert a.take("f1", (False, -0.12), 0.01) is None  # entering the view
     assert a.take("f2", (True, -0.05), 0.08) is None  # step known, next predicted at +0.02
     assert a.take("f3", (True, 0.02), 0.15) == "f3"  # nearer than the held one
-    b = Approach(start_m=0.0)
+    b = service.Approach(start_m=0.0)
     assert b.take("f1", (True, -0.03), 0.01) is None  # no step yet: held
     assert b.take("f2", (True, 0.09), 0.13) == "f1"  # the next was farther: the held one
-    c = Approach(start_m=0.0)
+    c = service.Approach(start_m=0.0)
     assert c.take("f1", (True, -0.04), 0.01) is None
     assert c.take("f2", None, 0.05) == "f1"  # gone (segmentation failed): the held one
 
@@ -163,7 +187,7 @@ def test_a_side_view_of_an_object_carried_past_the_belt_end_fails_saying_so():
     # belt ran 8.3 m on meanwhile, and the side view's point went to the viewpoint planner
     # as y = 8.27 m ("outside the arm's workspace").  Now the reason says what happened.
     found = np.array([0.803, 0.0, 0.45])
-    p = carried_point(found, 0.12, 1.3, 2)
+    p = service.carried_point(found, 0.12, 1.3, 2)
     assert p.tolist() == pytest.approx([0.803, 0.12, 0.45])
-    with pytest.raises(CarriedAway, match=r"viewpoint 3: .* 8\.27 m on .* belt's end"):
-        carried_point(found, 8.27, 1.3, 3)
+    with pytest.raises(service.CarriedAway, match=r"viewpoint 3: .* 8\.27 m on .* belt's end"):
+        service.carried_point(found, 8.27, 1.3, 3)

@@ -10,16 +10,39 @@ import pytest
 from backend.inspection.belt import BeltBackground, BeltGeometry, build_belt_background
 from backend.inspection.pose import plane_points
 from backend.recognition.segment import SegmentationFailed, foreground_mask
-from tests.utils.belt import CAM, GEO, T_cam, render
+from vision.camera import PinholeCamera
 from vision.errors import InvalidInput
+
+GEO = BeltGeometry(centre_x_m=0.8, start_y_m=-1.3, width_m=0.44, surface_z_m=0.45, loop_m=2.6)
+PITCH = 2.6 / 9  # stripes evenly spaced round the loop, as the simulator's
+CAM = PinholeCamera(np.array([[500.0, 0, 160], [0, 500.0, 120], [0, 0, 1]]), (0.0,) * 5)
+
+
+def _T_cam() -> np.ndarray:
+    """Camera 0.4 m above the belt at the station, looking straight down."""
+    T = np.eye(4)
+    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    T[:3, 3] = (0.8, 0.0, 0.85)
+    return T
 
 
 def _render(travel: float, obj_at: float | None = None) -> np.ndarray:
-    """The belt under a light falling off across the view; a box on it if asked."""
-    return render(travel, None if obj_at is None else (0.8, obj_at, 0.05, 0.04), falloff=True)
-
-
-_T_cam = T_cam
+    """The belt (dark, light cross stripes 16 mm wide moving with the travel) under a
+    light falling off across the view, the floor beside it; a box on the belt if asked."""
+    h, w = 240, 320
+    ys, xs = np.mgrid[0:h, 0:w]
+    px = np.stack([xs.ravel(), ys.ravel()], axis=1).astype(float)
+    p = plane_points(px, CAM, _T_cam(), GEO.surface_z_m).reshape(h, w, 3)
+    u = np.mod(p[..., 1] - GEO.start_y_m - travel, GEO.loop_m)
+    stripe = np.mod(u, PITCH) < 0.016
+    on = np.abs(p[..., 0] - GEO.centre_x_m) < GEO.width_m / 2
+    light = 0.8 + 0.2 * np.cos((xs - 160) / 300.0)[..., None]
+    img = np.where(on[..., None], np.where(stripe[..., None], 110.0, 42.0), 150.0) * light
+    img = np.broadcast_to(img, (h, w, 3)).copy()
+    if obj_at is not None:
+        box = (np.abs(p[..., 0] - 0.8) < 0.05) & (np.abs(p[..., 1] - obj_at) < 0.04)
+        img[box] = (30.0, 60.0, 170.0)
+    return np.clip(img, 0, 255).astype(np.uint8)
 
 
 @pytest.fixture(scope="module")

@@ -44,7 +44,10 @@ def _cam(roll: float) -> np.ndarray:
 
 
 def _project(T_base_cam, pts):
-    return CAM.project_world(pts, np.linalg.inv(T_base_cam))
+    T = np.linalg.inv(T_base_cam)
+    pc = pts @ T[:3, :3].T + T[:3, 3]
+    uv = pc @ K.T
+    return uv[:, :2] / uv[:, 2:]
 
 
 def _planar(yaw, x, y):
