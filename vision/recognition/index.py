@@ -84,10 +84,10 @@ def _mask_crop(mask: np.ndarray) -> tuple[slice, slice] | None:
     the top), and SIFT's cost grows with the image it builds its pyramid over (doubled for
     the first octave, Lowe 2004, 3.3): detecting in the crop is 3-4x cheaper, and with the
     crop's corner on the octave grid the keypoints and descriptors are the whole image's
-    (measured on 27 taught views of the twelve parts: median 100 % of the keypoints at the
-    same place, at least 92 %, with the same descriptors but for large keypoints near the
-    crop's edge; 29 against 66 ms of CPU in median, 42 against 199 ms at p95; with the
-    corner off the grid only 90 % of the keypoints were found again).
+    (``benchmarks.features_crop``, 40 taught views of the twelve parts: median 100 % of the
+    keypoints at the same place, at least 88 %, 96 % of them with the same descriptor, the
+    others large keypoints near the crop's edge; 39 against 104 ms of CPU in median; with
+    the corner off the grid only 90 % of the keypoints were found again).
     """
     ys, xs = np.nonzero(mask)
     if xs.size == 0:
