@@ -17,7 +17,10 @@ runs for each object:
   (real time by default: the vision's wall seconds are the belt's seconds);
 * ``half light`` and ``colour cast``: index mode, ``two-views``, every light at half
   intensity / a warm cast (green x0.85, blue x0.6), with the empty-belt background
-  grabbed again under that light (the models were taught under the normal light);
+  grabbed again under that light (the models were taught under the normal light); each
+  object is inspected with the light balance (the product's default: the views' channels
+  scaled back to the teach light by the belt's colour, :mod:`vision.recognition.light`)
+  and again without it (``... unbalanced``, the baseline; ``--no-light-baseline`` skips it);
 * ``sort``: index mode, ``two-views``, picked and sorted; a pick counts when the object
   landed in its part's bin (the reject bin for untrained parts).
 
@@ -235,7 +238,9 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
         def pick_name() -> str:
             return str(rng.choice(untrained if rng.uniform() < 0.15 else trained))
 
-        async def index_object(cond: str, policies: tuple[str, ...], sort: bool = False) -> None:
+        async def index_object(
+            cond: str, policies: tuple[str, ...], sort: bool = False, baseline: bool = False
+        ) -> None:
             name = pick_name()
             engine.clear_objects()
             engine.configure_conveyor(running=False, mode="index", dwell_s=None)
@@ -245,8 +250,13 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
                 lateral_m=float(rng.uniform(-0.004, 0.004)),
                 yaw_rad=float(rng.uniform(-math.pi, math.pi)),
             )
-            for policy in policies:
-                opts = service.InspectOptions(policy=policy, sort=sort, wait_s=20.0)
+            runs = [(cond, p, True) for p in policies]
+            if baseline:  # the same object without the light balance
+                runs += [(cond + " unbalanced", p, False) for p in policies]
+            for cond_label, policy, balance in runs:
+                opts = service.InspectOptions(
+                    policy=policy, sort=sort, wait_s=20.0, balance_light=balance
+                )
                 row = await service.inspect_object(ctx, opts)
                 extra: dict[str, Any] = {}
                 if sort:
@@ -258,10 +268,10 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
                         and bool(row["pick"] and row["pick"].get("ok")),
                         "pick_reason": (row["pick"] or {}).get("reason", ""),
                     }
-                rows.append(_record(cond, policy, name, row, extra))
+                rows.append(_record(cond_label, policy, name, row, extra))
                 r = rows[-1]
                 err.print(
-                    f"[{cond} {len(rows)}] {policy}: {name} -> {r['decision']} {r['model']} "
+                    f"[{cond_label} {len(rows)}] {policy}: {name} -> {r['decision']} {r['model']} "
                     f"views={r['views']} pos={r['pos_err_mm']} {r['reason'][:60]}"
                 )
 
@@ -322,8 +332,10 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
                 engine._light_base[:] = base * np.array([1.0, 0.85, 0.6], dtype=np.float32)
             engine.clear_objects()
             await service.grab_background(rt)
-            for _ in range(args.objects_light):
-                await index_object(cond, ("two-views",))
+            for k in range(args.objects_light):
+                if k % 10 == 0:
+                    err.print(f"[{cond}] object {k + 1} of {args.objects_light}")
+                await index_object(cond, ("two-views",), baseline=args.light_baseline)
         engine._light_base[:] = base
         engine.clear_objects()
         await service.grab_background(rt)
@@ -456,6 +468,11 @@ def main(argv: list[str] | None = None) -> None:
         "--taught-db", type=Path, default=None,
         help="SQLite file: reuse the models taught by an earlier run with the same "
         "--teach-yaws (taught and saved there when it does not exist)",
+    )  # fmt: skip
+    ap.add_argument(
+        "--no-light-baseline", dest="light_baseline", action="store_false",
+        help="under half light and the colour cast, do not inspect each object a second "
+        "time without the light balance (the baseline)",
     )  # fmt: skip
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--rows", action="store_true", help="with --json: every inspection's row")

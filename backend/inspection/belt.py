@@ -26,7 +26,8 @@ The travel of a frame is the encoder reading latched with its exposure (the fram
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -83,6 +84,9 @@ class BeltBackground:
         The camera pose it was grabbed from (it applies to that view only).
     frames : int
         Frames it was built from.
+    taken_at : float
+        When it was built (``time.time()``): an empty-belt background grabbed later (the
+        lights changed) makes it stale.
     """
 
     static: NDArray[np.uint8]
@@ -92,6 +96,7 @@ class BeltBackground:
     geometry: BeltGeometry
     T_base_cam: NDArray[np.float64]
     frames: int
+    taken_at: float = field(default_factory=time.time)
 
     def matches(self, T_base_cam: NDArray[np.float64], *, tol_m: float = 0.002) -> bool:
         """Whether a camera pose is the one this background was grabbed from."""

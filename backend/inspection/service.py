@@ -62,6 +62,7 @@ from robot.errors import Unreachable
 from robot.kinematics import T_base_ee
 from vision.errors import Conflict, InvalidInput, VisionCellError
 from vision.recognition import POLICIES, recognise_views
+from vision.recognition.light import apply_gain, light_gain, surround_colour
 from vision.segmentation import iou
 
 __all__ = ["InspectOptions", "InspectionDone", "InspectionRun", "hold_until_ready", "inspect_object", "readiness", "start_inspection", "start_run"]  # fmt: skip
@@ -119,6 +120,10 @@ class InspectOptions:
         Longest wait for an object at the station, seconds.
     speed : float, optional
         Arm speed fraction (default: the cell's).
+    balance_light : bool
+        Scale the views' channels back to the light the models were taught under, by the
+        belt's colour round the object (:mod:`vision.recognition.light`); off only to
+        measure what it does.
     """
 
     policy: str = "two-views"
@@ -126,12 +131,15 @@ class InspectOptions:
     max_views: int = 3
     wait_s: float = 60.0
     speed: float | None = None
+    balance_light: bool = True
 
     def __post_init__(self) -> None:
         if self.policy not in POLICIES:
             raise InvalidInput(f"policy must be one of {', '.join(POLICIES)}, got {self.policy!r}")
         if not isinstance(self.sort, bool):
             raise InvalidInput(f"sort must be true or false, got {self.sort!r}")
+        if not isinstance(self.balance_light, bool):
+            raise InvalidInput(f"balance_light must be true or false, got {self.balance_light!r}")
         mv = self.max_views
         if isinstance(mv, bool) or not isinstance(mv, int) or not 1 <= mv <= 3:
             raise InvalidInput(f"max_views must be an integer in 1..3, got {mv!r}")
@@ -277,10 +285,20 @@ def _travel_of(frame: Any, rt: Any) -> float:
 def _background_for(ctx: _Ctx, frame: Any, bg: NDArray[np.uint8]) -> NDArray[np.uint8]:
     """The empty-belt background for ``frame``: the belt background registered to the
     belt's travel at its exposure (:mod:`backend.inspection.belt`) when one was grabbed
-    from this camera pose, else the still background ``bg`` (right while the belt stands
-    where it stood when ``bg`` was grabbed)."""
+    from this camera pose and no still background was grabbed after it, else the still
+    background ``bg`` (right while the belt stands where it stood when ``bg`` was grabbed).
+
+    A still background grabbed later makes the belt background stale: it is grabbed when
+    the lights changed (:func:`grab_background`), and the belt background still holds the
+    old light.  Preferring it whatever its age segmented the objects under half light and
+    a colour cast against the belt of the normal light (issue 14's campaign: 96.9 % and
+    80.6 % named, after the constant-speed run had grabbed a belt background).
+    """
     bb = getattr(ctx.rt, "belt_background", None)
     if bb is None or frame.robot_state is None:
+        return bg
+    store = getattr(ctx.rt, "teach_backgrounds", None)
+    if store is not None and store.taken_at > bb.taken_at:
         return bg
     if not bb.matches(_T_cam(frame.robot_state.q, ctx.T_ee_cam)):
         return bg
@@ -662,6 +680,12 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     found[2] = ctx.surface_z
     state["_found"] = found
     state["truth"] = _truth_near(rt, found, _belt(rt)[2] - travel0)
+    # The light: every view's channels scaled back to the light the views were taught
+    # under, by the belt round the object now against the belt in the trained top views.
+    gain = None
+    if opts.balance_light:
+        gain = light_gain(live.light_reference(), surround_colour(frame.rgb, region.mask))
+    state["light_gain"] = None if gain is None else [round(float(g), 4) for g in gain]
     frames: dict[int, tuple[Any, NDArray[np.bool_] | None, str]] = {
         1: (frame, region.mask, region.method)
     }
@@ -674,7 +698,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
 
     async def look(vp: int) -> Any:
         if vp == 1:
-            return frame.rgb, region.mask.astype(np.uint8)
+            return apply_gain(frame.rgb, gain), region.mask.astype(np.uint8)
         state["stage"] = f"viewpoint {vp}"
         report(0.3 + 0.2 * len(frames), f"viewpoint {vp}")
         point = found.copy()
@@ -693,7 +717,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
         cams.append(side.T_base_cam)
         frames[vp] = (side.frame, None if side.roi.mask is None else side.roi.mask.astype(bool),
                       side.roi.reason)  # fmt: skip
-        return side_query(side.frame.rgb, side.roi)
+        return side_query(apply_gain(side.frame.rgb, gain), side.roi)
 
     state["stage"] = "recognition"
     t = time.monotonic()
@@ -718,6 +742,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
         label = f"vp{vp} {r.best_model or '-'} {r.score:.2f}"
         views.append(results.ViewRecord(vp, await asyncio.to_thread(_draw, f.rgb, m, label),
                                         {"segmentation": how, "decision": r.decision,
+                                         "light_gain": state["light_gain"],
                                          "scores": {k: round(float(s), 4) for k, s in r.scores.items()}}))  # fmt: skip
     if res.decision == "recognized":
         state["decision"], state["model"], state["score"] = (
@@ -947,7 +972,9 @@ async def _station_top(rt: Any) -> tuple[_Ctx, Any]:
 
 async def grab_background(rt: Any, *, speed: float | None = None) -> None:
     """Grab the empty-belt background of the top view at the station (the station must be
-    empty), e.g. after the lights changed; stored with the teaches' backgrounds."""
+    empty), e.g. after the lights changed; stored with the teaches' backgrounds.  A belt
+    background grabbed before it is no longer used (it holds the old light): grab that
+    again too for constant belt speed."""
     _ctx, top = await _station_top(rt)
     frame = await rt.cell.look(top.q, speed=speed)
     rt.teach_backgrounds.put(top, frame.rgb)

@@ -37,6 +37,7 @@ from vision.errors import InvalidInput, VisionCellError
 from vision.features import Features
 from vision.recognition import ViewIndex
 from vision.recognition.index import view_colour, view_outline
+from vision.recognition.light import surround_colour
 
 __all__ = [
     "IndexDiff",
@@ -200,6 +201,9 @@ class LiveIndex:
         self._models: dict[int, IndexedModel] = {}
         self._view_model: dict[int, int] = {}
         self._stale: dict[int, StaleView] = {}
+        #: The belt's colour round the object in each indexed top view (the light it was
+        #: taught under, :func:`vision.recognition.light.surround_colour`).
+        self._belt: dict[int, NDArray[np.float64]] = {}
         #: Count of changes made through the change methods (see :meth:`apply`).
         self._generation = 0
         #: When this process added each recent view (``time.monotonic()``), see :meth:`diff`.
@@ -227,6 +231,16 @@ class LiveIndex:
         """Hold the lock and yield the index (do not keep it beyond the ``with``)."""
         with self._lock:
             yield self._index
+
+    def light_reference(self) -> NDArray[np.float64] | None:
+        """The belt's colour under the light the views were taught under: the per-channel
+        median over the indexed top views that have one (None without any).  Inspections
+        scale a query's channels by its ratio to the belt's colour now
+        (:func:`vision.recognition.light.light_gain`)."""
+        with self._lock:
+            if not self._belt:
+                return None
+            return np.median(np.stack(list(self._belt.values())), axis=0)
 
     def model(self, model_id: int) -> IndexedModel | None:
         """What the index knows about a model (None if it holds no entry for it)."""
@@ -285,12 +299,13 @@ class LiveIndex:
         async with db.session() as session:
             models = list(await session.scalars(select(ObjectModel)))
             rows = (await session.execute(select(*VIEW_ROW_COLUMNS).order_by(TrainedView.id))).all()
-            # Side views' images, for their colour signatures (the twins' tie-break).
+            # The views' images: side views' colour signatures (the twins' tie-break) and
+            # the belt's colour round each top view (the light it was taught under).
             images = (
                 await session.execute(
-                    select(TrainedView.id, TrainedView.image_png, TrainedView.mask_png)
-                    .where(TrainedView.viewpoint.in_((2, 3)))
-                    .order_by(TrainedView.id)
+                    select(TrainedView.id, TrainedView.image_png, TrainedView.mask_png).order_by(
+                        TrainedView.id
+                    )
                 )
             ).all()
         by_id = {m.id: IndexedModel.of(m) for m in models}
@@ -318,7 +333,8 @@ class LiveIndex:
         return report
 
     def _colour_from_png(self, view_id: int, png: bytes, mask_png: bytes | None) -> None:
-        """Give an indexed view the colour signature of its stored image (lock held)."""
+        """Give an indexed view what its stored image says of colour (lock held): a side
+        view its colour signature, a top view the belt's colour round the object."""
         if view_id not in self._view_model:
             return
         view = self._index.view(view_id)
@@ -328,9 +344,27 @@ class LiveIndex:
         except (ValueError, VisionCellError) as exc:
             log.warning("view %d: no colour signature (%s)", view_id, exc)
             return
+        if view.viewpoint == 1:
+            self._set_belt(view_id, rgb, mask)
+            return
         colour, outline = colour_of(view.viewpoint, view.features, rgb, mask)
         if colour is not None and outline is not None:
             self._index.set_colour(view_id, colour, outline)
+
+    def _set_belt(
+        self, view_id: int, rgb: NDArray[np.uint8] | None, mask: NDArray[np.bool_] | None
+    ) -> None:
+        """Keep a top view's belt colour (lock held); none without an RGB image and mask."""
+        self._belt.pop(view_id, None)
+        if rgb is None:
+            return
+        try:
+            belt = surround_colour(rgb, mask)
+        except VisionCellError as exc:
+            log.warning("view %d: no belt colour (%s)", view_id, exc)
+            return
+        if belt is not None:
+            self._belt[view_id] = belt
 
     def _index_row(self, model: IndexedModel, row: ViewRow) -> bool:
         """Index one stored view (lock held), or list it as stale; True if indexed."""
@@ -399,8 +433,8 @@ class LiveIndex:
         images: Mapping[int, tuple[bytes, bytes | None]] | None = None,
     ) -> bool:
         """Apply ``diff`` with the stored ``rows`` of its :attr:`IndexDiff.load_views`
-        (and the stored image and mask PNGs of its side views, by view id, for their colour
-        signatures).
+        (and the stored image and mask PNGs of its views, by view id: side views' colour
+        signatures, top views' belt colour).
 
         Returns False, changing nothing, if the index took a change since the diff was
         taken (the snapshot may predate it: take a new diff).  Rows of views whose model
@@ -461,6 +495,7 @@ class LiveIndex:
             for vid in gone:
                 self._index.remove_view(vid)
                 del self._view_model[vid]
+                self._belt.pop(vid, None)
             for vid in [v for v, s in self._stale.items() if s.model_id == model_id]:
                 del self._stale[vid]
             if model is not None:
@@ -479,7 +514,8 @@ class LiveIndex:
     ) -> None:
         """Index one stored view (its features must be of the index's method and version);
         a view already indexed under this id is replaced.  With the view's RGB ``image``
-        (and ``mask``), a side view also gets its colour signature (:func:`colour_of`)."""
+        (and ``mask``), a side view also gets its colour signature (:func:`colour_of`) and
+        a top view its belt colour (:meth:`light_reference`)."""
         colour, outline = colour_of(viewpoint, features, image, mask)
         if features.method != self.method or features.version != self.feature_version:
             self.check_features(features.method, features.version, what=f"view {view_id}")
@@ -488,6 +524,7 @@ class LiveIndex:
             if view_id in self._view_model:
                 self._index.remove_view(view_id)
                 del self._view_model[view_id]
+            self._belt.pop(view_id, None)
             self._models[model.id] = model
             self._added_at[view_id] = time.monotonic()
             try:
@@ -505,12 +542,15 @@ class LiveIndex:
                 raise InvalidInput(str(exc)) from exc
             self._view_model[view_id] = model.id
             self._stale.pop(view_id, None)
+            if viewpoint == 1:
+                self._set_belt(view_id, image, mask)
 
     def remove_view(self, view_id: int) -> bool:
         """Take one view out of the index; False if it was not in it."""
         with self._lock:
             self._generation += 1
             self._stale.pop(view_id, None)
+            self._belt.pop(view_id, None)
             if view_id not in self._view_model:
                 return False
             self._index.remove_view(view_id)

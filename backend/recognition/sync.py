@@ -167,8 +167,8 @@ class IndexSync:
         for _ in range(APPLY_ATTEMPTS):
             diff = self.live.diff(*await self._snapshot())
             rows = await self._load(diff.load_views) if diff.load_views else []
-            side = tuple(r[0] for r in rows if r[2] in (2, 3))
-            images = await self._load_images(side) if side else {}
+            ids = tuple(r[0] for r in rows)
+            images = await self._load_images(ids) if ids else {}
             # The index's lock may be held by a recognition thread: wait for it off the loop.
             if await asyncio.to_thread(self.live.apply, diff, rows, images):
                 # A deferred diff kept views this process added that the snapshot lacked:
@@ -226,7 +226,8 @@ class IndexSync:
         return out
 
     async def _load_images(self, ids: tuple[int, ...]) -> dict[int, tuple[bytes, bytes | None]]:
-        """Stored image and mask of the side views ``ids`` (their colour signatures)."""
+        """Stored image and mask of the views ``ids`` (side views' colour signatures, top
+        views' belt colour)."""
         out: dict[int, tuple[bytes, bytes | None]] = {}
         for i in range(0, len(ids), LOAD_CHUNK):
             chunk = ids[i : i + LOAD_CHUNK]

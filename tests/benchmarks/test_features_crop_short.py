@@ -17,7 +17,9 @@ def test_crop_keeps_the_keypoints_of_the_whole_image(tmp_path):
     migrate(settings)
     hdr = {"Authorization": f"Bearer {make_tokens(settings)['engineer']}"}
     with TestClient(create_app(settings)) as client:
-        mid = client.post("/api/models", json={"name": "part", "kind": "3d"}, headers=hdr).json()["id"]
+        mid = client.post("/api/models", json={"name": "part", "kind": "3d"}, headers=hdr).json()[
+            "id"
+        ]
         for seed in range(3):
             img = textured_rgb(seed, size=(480, 640))
             mask = np.zeros(img.shape[:2], np.uint8)

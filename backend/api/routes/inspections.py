@@ -44,6 +44,9 @@ class InspectIn(BaseModel):
     max_views: int = Field(3, ge=1, le=3)
     wait_s: float = Field(60.0, ge=0.0, le=service.MAX_WAIT_S, allow_inf_nan=False)
     speed: float | None = Field(None, gt=0.0, le=1.0, allow_inf_nan=False)
+    balance_light: bool = Field(
+        True, description="Scale the views back to the teach light by the belt's colour"
+    )
 
     def options(self) -> service.InspectOptions:
         return service.InspectOptions(**self.model_dump())
