@@ -30,6 +30,16 @@ by :func:`refine_with_parallax`: the planar motion and every feature's own heigh
 trained viewing ray, bounded between the belt and the top face) minimising the
 reprojection error in the current image, started from the plane's answer.
 
+One view cannot tell a feature's height from the object's shift when the two cameras
+moved parallel to the belt (the parallax is then a shift too), so a part whose features
+lie far below its height (the valve block's top face, 62 mm under its solenoid's cap) kept
+a pose 4-17 mm off.  :func:`estimate_pose_views` therefore takes the model's other trained
+top views that verify on the current one as well (taught at other object yaws and camera
+rolls, they see the parallax in other directions), keeps the views whose answers agree
+(a view registered on the wrong features, the pipe flange's bolt circle a sixth of a turn
+off, is outvoted) and fits their correspondences together: one motion, every feature at
+its own height on its own view's ray.
+
 With the belt running (constant-speed mode, section 4.1) the pose is that at exposure;
 :func:`predict_along_belt` moves it forward by the belt's travel since then.
 """
@@ -49,7 +59,9 @@ from vision.errors import VisionCellError
 __all__ = [
     "ObjectPose",
     "PoseFailed",
+    "ViewMatch",
     "estimate_pose",
+    "estimate_pose_views",
     "plane_points",
     "predict_along_belt",
     "refine_with_parallax",
@@ -104,6 +116,8 @@ class ObjectPose:
     n_points: int
     method: str = "plane"
     reproj_px: float | None = None
+    views: int = 1
+    """Trained top views whose correspondences the pose was fitted to."""
 
     def public(self) -> dict[str, object]:
         """JSON-friendly form (metres and radians)."""
@@ -115,6 +129,7 @@ class ObjectPose:
             "n_points": self.n_points,
             "method": self.method,
             "reproj_px": self.reproj_px,
+            "views": self.views,
         }
 
 
@@ -212,15 +227,7 @@ def estimate_pose(
     dst = cv2.perspectiveTransform(src.reshape(-1, 1, 2), Hm).reshape(-1, 2)
     src_px: np.ndarray = np.asarray(src, dtype=np.float64)
     dst_px: np.ndarray = np.asarray(dst, dtype=np.float64)
-    a = plane_points(src_px, camera, T_base_cam_view, z_plane_m)[:, :2]
-    b = plane_points(dst_px, camera, T_base_cam_now, z_plane_m)[:, :2]
-    ca, cb = a.mean(axis=0), b.mean(axis=0)
-    M = (b - cb).T @ (a - ca)
-    U, _, Vt = np.linalg.svd(M)
-    D = np.diag([1.0, np.sign(np.linalg.det(U @ Vt))])
-    R2 = U @ D @ Vt
-    t2 = cb - R2 @ ca
-    resid = float(np.sqrt(np.mean(np.sum((a @ R2.T + t2 - b) ** 2, axis=1))))
+    R2, t2, resid = _plane_fit(src_px, dst_px, camera, T_base_cam_view, T_base_cam_now, z_plane_m)
     if resid > MAX_RESIDUAL_M:
         raise PoseFailed(
             f"the top view's points disagree by {resid * 1e3:.1f} mm RMS after the planar fit "
@@ -233,8 +240,8 @@ def estimate_pose(
     if inlier_xy is not None and z_floor_m is not None:
         pairs = np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4)
         if len(pairs) >= MIN_PARALLAX_POINTS and np.all(np.isfinite(pairs)):
-            refined = refine_with_parallax(
-                pairs, camera=camera, T_base_cam_view=T_base_cam_view,
+            refined = _refine(
+                [(pairs, T_base_cam_view, np.eye(4))], camera=camera,
                 T_base_cam_now=T_base_cam_now, T_delta0=T_delta, z_floor_m=z_floor_m,
                 z_top_m=z_plane_m,
             )  # fmt: skip
@@ -244,6 +251,28 @@ def estimate_pose(
     T = T_delta @ np.asarray(T_base_obj_taught, dtype=np.float64)
     yaw = math.atan2(T[1, 0], T[0, 0])
     return ObjectPose(T, yaw, resid, n, method, reproj)
+
+
+def _plane_fit(
+    src_px: NDArray[np.float64],
+    dst_px: NDArray[np.float64],
+    camera: PinholeCamera,
+    T_view: NDArray[np.float64],
+    T_now: NDArray[np.float64],
+    z: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """Planar rigid motion (Kabsch without scale) between the trained pixels and their
+    mapped pixels back-projected on the plane ``z``: ``(R 2x2, t 2, RMS residual m)``."""
+    a = plane_points(src_px, camera, T_view, z)[:, :2]
+    b = plane_points(dst_px, camera, T_now, z)[:, :2]
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    M = (b - cb).T @ (a - ca)
+    U, _, Vt = np.linalg.svd(M)
+    D = np.diag([1.0, np.sign(np.linalg.det(U @ Vt))])
+    R2 = U @ D @ Vt
+    t2 = cb - R2 @ ca
+    resid = float(np.sqrt(np.mean(np.sum((a @ R2.T + t2 - b) ** 2, axis=1))))
+    return R2, t2, resid
 
 
 def _rays(
@@ -280,28 +309,65 @@ def refine_with_parallax(
     when the solver fails, or when it moved the start by more than
     :data:`MAX_REFINE_SHIFT_M` / :data:`MAX_REFINE_YAW_RAD`.
     """
+    return _refine(
+        [(np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4), T_base_cam_view, np.eye(4))],
+        camera=camera, T_base_cam_now=T_base_cam_now, T_delta0=T_delta0, z_floor_m=z_floor_m,
+        z_top_m=z_top_m,
+    )  # fmt: skip
+
+
+#: One trained view's share of a joint fit: its correspondences (trained ``x, y``, current
+#: ``x, y``), its camera pose, and the planar map from its teach-time object frame to the
+#: reference view's (``T_taught_ref @ inv(T_taught_view)``; identity for the reference).
+_Group = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+
+
+def _refine(
+    groups: list[_Group],
+    *,
+    camera: PinholeCamera,
+    T_base_cam_now: NDArray[np.float64],
+    T_delta0: NDArray[np.float64],
+    z_floor_m: float,
+    z_top_m: float,
+) -> tuple[NDArray[np.float64], float] | None:
+    """:func:`refine_with_parallax` over the correspondences of one or several trained
+    views at once: one motion of the reference view's object frame, each feature on its
+    own view's trained ray, moved into the reference frame by its group's map first."""
     from scipy.optimize import least_squares
     from scipy.sparse import lil_matrix
 
-    pairs = np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4)[:MAX_PARALLAX_POINTS]
-    n = len(pairs)
-    Tv = np.asarray(T_base_cam_view, dtype=np.float64)
+    per_view = max(MIN_PARALLAX_POINTS, MAX_PARALLAX_POINTS // max(1, len(groups)))
+    P0, D = [], []
+    obs_all = []
+    for pairs, T_view, T_align in groups:
+        pairs = pairs[:per_view]
+        Tv = np.asarray(T_view, dtype=np.float64)
+        d = _rays(pairs[:, :2], camera, Tv)
+        if np.any(d[:, 2] > -1e-6):
+            return None  # a trained ray that does not go down to the belt
+        A = np.asarray(T_align, dtype=np.float64)
+        # The ray in the reference frame: origin and direction through the group's map
+        # (a turn about z and a shift, so heights are kept).
+        P0.append(np.broadcast_to(A[:3, :3] @ Tv[:3, 3] + A[:3, 3], d.shape))
+        D.append(d @ A[:3, :3].T)
+        obs_all.append(
+            cv2.undistortPoints(
+                pairs[:, 2:].reshape(-1, 1, 2), camera.K, np.asarray(camera.dist, np.float64)
+            ).reshape(-1, 2)
+        )
+    C0, d, obs = np.concatenate(P0), np.concatenate(D), np.concatenate(obs_all)
+    n = len(d)
     Tn = np.asarray(T_base_cam_now, dtype=np.float64)
-    d = _rays(pairs[:, :2], camera, Tv)
-    if np.any(d[:, 2] > -1e-6):
-        return None  # a trained ray that does not go down to the belt
-    obs = cv2.undistortPoints(
-        pairs[:, 2:].reshape(-1, 1, 2), camera.K, np.asarray(camera.dist, dtype=np.float64)
-    ).reshape(-1, 2)
     f = float(camera.K[0, 0])
-    Cv, Rn_T, Cn = Tv[:3, 3], Tn[:3, :3].T, Tn[:3, 3]
+    Rn_T, Cn = Tn[:3, :3].T, Tn[:3, 3]
     lo, hi = z_floor_m - 0.001, z_top_m + 0.001
     w_prior = 1.0 / 0.5  # px per metre of height away from the top face
 
     def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
         yaw, tx, ty, z = x[0], x[1], x[2], x[3:]
-        s = (z - Cv[2]) / d[:, 2]
-        P = Cv + s[:, None] * d
+        s = (z - C0[:, 2]) / d[:, 2]
+        P = C0 + s[:, None] * d
         c, si = math.cos(yaw), math.sin(yaw)
         Q = np.stack([c * P[:, 0] - si * P[:, 1] + tx, si * P[:, 0] + c * P[:, 1] + ty, P[:, 2]], 1)
         pc = (Q - Cn) @ Rn_T.T
@@ -336,7 +402,7 @@ def refine_with_parallax(
     T[:2, 3] = (tx, ty)
     # The shift is that of the features' centre (T_delta turns about the base origin, so
     # its own translation moves by metres per radian).
-    centre = np.append((Cv + ((z_top_m - Cv[2]) / d[:, 2])[:, None] * d).mean(axis=0)[:2], 1.0)
+    centre = np.append((C0 + ((z_top_m - C0[:, 2]) / d[:, 2])[:, None] * d).mean(axis=0)[:2], 1.0)
     shift = (T[:2, [0, 1, 3]] - T_delta0[:2, [0, 1, 3]]) @ centre
     if (
         float(np.linalg.norm(shift)) > MAX_REFINE_SHIFT_M
@@ -345,6 +411,133 @@ def refine_with_parallax(
         return None
     reproj = float(np.sqrt(np.mean(sol.fun[: 2 * n].reshape(-1, 2) ** 2) * 2))
     return T, reproj
+
+
+@dataclass(frozen=True, eq=False)
+class ViewMatch:
+    """One trained top view of the recognised model verified on the current top view.
+
+    Attributes
+    ----------
+    H : ndarray of shape (3, 3)
+        Trained-view pixels to current pixels.
+    inlier_xy : ndarray of shape (N, 4)
+        The correspondences behind ``H`` (trained ``x, y``, current ``x, y``, pixels).
+    T_base_cam_view : ndarray of shape (4, 4)
+        The camera pose the view was taken from.
+    T_base_obj_taught : ndarray of shape (4, 4)
+        The model frame as the view saw it (the station, turned by the view's yaw).
+    view_mask : ndarray of shape (H, W), bool, or None
+    view_shape : (int, int)
+    """
+
+    H: NDArray[np.float64]
+    inlier_xy: NDArray[np.float64]
+    T_base_cam_view: NDArray[np.float64]
+    T_base_obj_taught: NDArray[np.float64]
+    view_mask: NDArray[np.bool_] | None
+    view_shape: tuple[int, int]
+
+
+#: Two trained views' plane poses agree when within this distance and turn of each other
+#: (the plane answer alone is 3-5 mm off for parts with features below the top face; a
+#: view registered on the wrong features, the pipe flange's bolt circle a sixth of a turn
+#: off or the valve block on a handful of look-alike corners, is tens of millimetres or
+#: degrees away).
+AGREE_M = 0.008
+AGREE_YAW_RAD = math.radians(4.0)
+
+
+def _yaw_of(T: NDArray[np.float64]) -> float:
+    return math.atan2(T[1, 0], T[0, 0])
+
+
+def estimate_pose_views(
+    matches: list[ViewMatch],
+    *,
+    camera: PinholeCamera,
+    T_base_cam_now: NDArray[np.float64],
+    z_plane_m: float,
+    z_floor_m: float,
+) -> ObjectPose:
+    """The object's pose from several trained top views verified on the current one.
+
+    One view's homography can rest on a handful of inliers (a plain part) or on the wrong
+    features (a part with a repeating pattern); several views taught at other yaws and
+    camera rolls give independent answers.  Each view's plane answer is computed
+    (:func:`estimate_pose` without refinement); the views whose answers agree within
+    :data:`AGREE_M` / :data:`AGREE_YAW_RAD` of one another form groups, and the group with
+    the most correspondences wins (ties: the earlier view, so list the best-scored view
+    first).  The winning group's correspondences are then fitted together with each
+    feature at its own height (:func:`refine_with_parallax`'s model, one motion for all
+    views); with fewer than :data:`MIN_PARALLAX_POINTS` of them, or a failed fit, the
+    first view of the group gives the answer alone (:func:`estimate_pose`).
+
+    Raises
+    ------
+    PoseFailed
+        No view gives a plane answer.
+    """
+    if not matches:
+        raise PoseFailed("no verified trained top view to compute the pose from")
+    planes: list[tuple[ViewMatch, ObjectPose]] = []
+    first_error: PoseFailed | None = None
+    for m in matches:
+        try:
+            p = estimate_pose(
+                m.H, camera=camera, T_base_cam_view=m.T_base_cam_view,
+                T_base_cam_now=T_base_cam_now, T_base_obj_taught=m.T_base_obj_taught,
+                z_plane_m=z_plane_m, view_mask=m.view_mask, view_shape=m.view_shape,
+            )  # fmt: skip
+        except PoseFailed as exc:
+            first_error = first_error or exc
+            continue
+        planes.append((m, p))
+    if not planes:
+        assert first_error is not None
+        raise first_error
+
+    def agree(a: ObjectPose, b: ObjectPose) -> bool:
+        d = float(np.linalg.norm(a.T_base_obj[:2, 3] - b.T_base_obj[:2, 3]))
+        dyaw = abs(math.remainder(a.yaw_rad - b.yaw_rad, 2 * math.pi))
+        return d <= AGREE_M and dyaw <= AGREE_YAW_RAD
+
+    best: list[tuple[ViewMatch, ObjectPose]] = []
+    best_n = -1
+    for _seed_m, seed in planes:
+        group = [(m, p) for m, p in planes if agree(seed, p)]
+        n = sum(len(m.inlier_xy) for m, _ in group)
+        if n > best_n:
+            best, best_n = group, n
+    lead_m, lead = best[0]
+
+    def single() -> ObjectPose:
+        return estimate_pose(
+            lead_m.H, camera=camera, T_base_cam_view=lead_m.T_base_cam_view,
+            T_base_cam_now=T_base_cam_now, T_base_obj_taught=lead_m.T_base_obj_taught,
+            z_plane_m=z_plane_m, view_mask=lead_m.view_mask, view_shape=lead_m.view_shape,
+            inlier_xy=lead_m.inlier_xy, z_floor_m=z_floor_m,
+        )  # fmt: skip
+
+    if len(best) == 1 or best_n < MIN_PARALLAX_POINTS:
+        return single()
+    T_ref = np.asarray(lead_m.T_base_obj_taught, dtype=np.float64)
+    groups: list[_Group] = []
+    for m, _p in best:
+        pairs = np.asarray(m.inlier_xy, dtype=np.float64).reshape(-1, 4)
+        if len(pairs) and np.all(np.isfinite(pairs)):
+            A = T_ref @ np.linalg.inv(np.asarray(m.T_base_obj_taught, dtype=np.float64))
+            groups.append((pairs, m.T_base_cam_view, A))
+    T_delta0 = lead.T_base_obj @ np.linalg.inv(T_ref)
+    refined = _refine(groups, camera=camera, T_base_cam_now=T_base_cam_now, T_delta0=T_delta0,
+                      z_floor_m=z_floor_m, z_top_m=z_plane_m)  # fmt: skip
+    if refined is None:
+        return single()
+    T_delta, reproj = refined
+    T = T_delta @ T_ref
+    n_used = sum(min(len(g[0]), max(MIN_PARALLAX_POINTS, MAX_PARALLAX_POINTS // len(groups)))
+                 for g in groups)  # fmt: skip
+    return ObjectPose(T, _yaw_of(T), lead.residual_m, n_used, "parallax", reproj, len(groups))
 
 
 def predict_along_belt(
@@ -356,4 +549,5 @@ def predict_along_belt(
     d = np.array([0.0, 1.0, 0.0]) if direction is None else np.asarray(direction, dtype=float)
     T = pose.T_base_obj.copy()
     T[:3, 3] += travel_m * d / np.linalg.norm(d)
-    return ObjectPose(T, pose.yaw_rad, pose.residual_m, pose.n_points, pose.method, pose.reproj_px)
+    return ObjectPose(T, pose.yaw_rad, pose.residual_m, pose.n_points, pose.method,
+                      pose.reproj_px, pose.views)  # fmt: skip

@@ -40,6 +40,7 @@ from typing import Any
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from sqlalchemy import select
 
 from backend.cell.events import CellEvent
 from backend.db.models import TrainedView, utcnow
@@ -47,7 +48,8 @@ from backend.inspection import recovery, results
 from backend.inspection.pose import (
     ObjectPose,
     PoseFailed,
-    estimate_pose,
+    ViewMatch,
+    estimate_pose_views,
     plane_points,
     predict_along_belt,
 )
@@ -696,9 +698,13 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
         (m.height_m for m in live.models().values()), default_m=UNKNOWN_MAX_HEIGHT_M
     )
 
+    top_features: list[Any] = []  # the top view's query features, for the pose
+
     async def look(vp: int) -> Any:
         if vp == 1:
-            return apply_gain(frame.rgb, gain), region.mask.astype(np.uint8)
+            feats = await asyncio.to_thread(live.extract, apply_gain(frame.rgb, gain), region.mask)
+            top_features.append(feats)
+            return feats
         state["stage"] = f"viewpoint {vp}"
         report(0.3 + 0.2 * len(frames), f"viewpoint {vp}")
         point = found.copy()
@@ -777,7 +783,8 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     state["_radius"] = radius
     if state["decision"] == "recognized":
         try:
-            pose = await _pose(ctx, res, state["model"], T_cam_top, height)
+            pose = await _pose(ctx, res, state["model"], T_cam_top, height,
+                               top_features[0] if top_features else None)  # fmt: skip
         except PoseFailed as exc:
             pose_err = exc.detail
     belt_stopped = False
@@ -828,9 +835,18 @@ async def _pick_stage(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], po
         state["pick"] = await _pick_unknown(ctx, opts, state, pose, at, radius)
 
 
+#: Most trained top views the pose is computed from (the recognised one and the others of
+#: the model that verify best on the top view), and the fewest inliers a view needs.
+POSE_MAX_VIEWS = 6
+POSE_MIN_INLIERS = 6
+
+
 async def _pose(
-    ctx: _Ctx, res: Any, model: str, T_cam_now: NDArray[np.float64], height: float
-) -> ObjectPose:
+    ctx: _Ctx, res: Any, model: str, T_cam_now: NDArray[np.float64], height: float,
+    query: Any = None,
+) -> ObjectPose:  # fmt: skip
+    """The pose from the recognised trained top view and the model's other top views that
+    verify on the top view's features ``query`` (:func:`estimate_pose_views`)."""
     top = next((r for vp, r in zip(res.viewpoints, res.views, strict=True) if vp == 1), None)
     cand = (
         None
@@ -839,29 +855,48 @@ async def _pose(
     )
     if cand is None or cand.viewpoint != 1:
         raise PoseFailed("the top view did not verify the recognised model (no homography)")
+    cands = [cand]
+    if query is not None:
+        live = ctx.rt.live_index
+
+        def verify_others() -> list[Any]:
+            from vision.recognition.recognise import verify_view
+
+            with live.reading() as index:
+                ids = [v.view_id for v in index.views_of(model, viewpoint=1)
+                       if v.view_id != cand.view_id]  # fmt: skip
+                got = [verify_view(index, vid, query) for vid in ids]
+            ok = [c for c in got if c.H is not None and c.n_inliers >= POSE_MIN_INLIERS]
+            return sorted(ok, key=lambda c: (-c.n_inliers, c.view_id))[: POSE_MAX_VIEWS - 1]
+
+        cands += await asyncio.to_thread(verify_others)
     async with ctx.rt.database.session() as session:
-        view = await session.get(TrainedView, cand.view_id)
-        if view is None or view.joints is None:
-            raise PoseFailed(
-                f"trained view {cand.view_id} has no camera pose (uploaded, not taught)"
-            )
-        joints, yaw, mask_png, shape = (
-            view.joints,
-            view.yaw_rad,
-            view.mask_png,
-            (view.height, view.width),
-        )
+        rows = await session.execute(
+            select(TrainedView.id, TrainedView.joints, TrainedView.yaw_rad, TrainedView.mask_png,
+                   TrainedView.height, TrainedView.width)
+            .where(TrainedView.id.in_([c.view_id for c in cands]))
+        )  # fmt: skip
+        stored = {int(vid): (j, y, m, (h, w)) for vid, j, y, m, h, w in rows.all()}
+    if stored.get(cand.view_id, (None,))[0] is None:
+        raise PoseFailed(f"trained view {cand.view_id} has no camera pose (uploaded, not taught)")
     from backend.recognition.images import mask_from_png
 
-    mask = None if mask_png is None else mask_from_png(mask_png)
-    T_taught = np.eye(4)
-    c, s = math.cos(yaw), math.sin(yaw)
-    T_taught[:2, :2] = [[c, -s], [s, c]]
-    T_taught[:3, 3] = ctx.station
+    matches = []
+    for c in cands:
+        joints, yaw, mask_png, shape = stored.get(c.view_id, (None, 0.0, None, (0, 0)))
+        if joints is None or c.inlier_xy is None:
+            continue  # deleted meanwhile, or uploaded without a camera pose
+        T_taught = np.eye(4)
+        co, si = math.cos(yaw), math.sin(yaw)
+        T_taught[:2, :2] = [[co, -si], [si, co]]
+        T_taught[:3, 3] = ctx.station
+        matches.append(ViewMatch(
+            c.H, c.inlier_xy, _T_cam(joints, ctx.T_ee_cam), T_taught,
+            None if mask_png is None else mask_from_png(mask_png), shape,
+        ))  # fmt: skip
     return await asyncio.to_thread(
-        estimate_pose, cand.H, camera=ctx.camera, T_base_cam_view=_T_cam(joints, ctx.T_ee_cam),
-        T_base_cam_now=T_cam_now, T_base_obj_taught=T_taught, z_plane_m=ctx.surface_z + height,
-        view_mask=mask, view_shape=shape, inlier_xy=cand.inlier_xy, z_floor_m=ctx.surface_z,
+        estimate_pose_views, matches, camera=ctx.camera, T_base_cam_now=T_cam_now,
+        z_plane_m=ctx.surface_z + height, z_floor_m=ctx.surface_z,
     )  # fmt: skip
 
 
