@@ -277,7 +277,7 @@ def side_roi(
         return _whole("the object's space projects off the side image")
     if margin_px:
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * margin_px + 1, 2 * margin_px + 1))
-        roi = cv2.dilate(roi, k)
+        roi = np.asarray(cv2.dilate(roi, k), dtype=np.uint8)
     frac = float(roi.mean())
     return SideRoi(
         roi,

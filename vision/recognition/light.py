@@ -75,7 +75,8 @@ def surround_colour(
     if m.shape != img.shape[:2]:
         raise InvalidInput(f"the mask is {m.shape}, the image {img.shape[:2]}")
     k = 2 * SURROUND_GAP_PX + 1
-    inside = cv2.dilate((m > 0).astype(np.uint8), np.ones((k, k), np.uint8)) > 0
+    grown = np.asarray(cv2.dilate(m.astype(bool).astype(np.uint8), np.ones((k, k), np.uint8)))
+    inside = grown.astype(bool)
     usable = (
         ~inside & (img.max(axis=2) < CLIP_LEVEL) & (img.sum(axis=2, dtype=np.int32) >= DARK_SUM)
     )
