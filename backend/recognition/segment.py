@@ -2,9 +2,9 @@
 initialised from the difference with the empty-belt background.
 
 1. Foreground: the per-pixel largest channel difference between the (slightly blurred)
-   image and the background of the same viewpoint, thresholded (Otsu's threshold, never
-   below ``min_diff``), opened and closed, and the largest connected blob kept with its holes
-   filled.  This is where the object is, roughly: shadows and the belt seen through holes
+   image and the background of the same viewpoint, thresholded at ``min_diff`` grey levels
+   (a fixed level: a dark part on the dark belt under dimmed light can fall below it),
+   opened and closed, and the largest connected blob kept with its holes filled.  This is where the object is, roughly: shadows and the belt seen through holes
    move its edge by a few pixels.
 2. Initial contour: the blob's convex hull pushed out by ``margin_px`` along its normals
    (the loose contour around the object that the chapter's operator would draw).
