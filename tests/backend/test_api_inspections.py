@@ -18,6 +18,8 @@ def test_roles_and_bad_input(client, headers):
         {"wait_s": -1},
         {"wait_s": 1e9},
         {"speed": 0},
+        {"balance_light": "yes"},
+        {"balance_light": 1},
         {"extra": 1},
     ):
         r = client.post("/api/inspections", json=body, headers=op)
