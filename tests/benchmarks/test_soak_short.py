@@ -20,10 +20,13 @@ def test_thirty_inspections_leak_no_files_or_connections(tmp_path, monkeypatch):
                               time_scale=20.0, idle_s=1.0, max_wall_s=3600.0, docs=False)  # fmt: skip
     r = asyncio.run(soak.soak(args, lambda msg: None))
     assert r["inspections"] == 30 and sum(r["decisions"].values()) == 30
-    files, conns = r["series"]["open_files"], r["series"]["db_connections"]
+    files, conns = r["series"]["other_files"], r["series"]["db_connections"]
     # Compared as medians of five samples: each sample is taken as an inspection ends, when
     # an image file or a second pooled connection may be open for a moment (CI once saw
     # 27 -> 29 files between two single samples); a leak of one per inspection adds 20.
-    assert files["late_median"] <= files["early_median"] + 1, files
+    # Files other than the database's own: a pooled connection that opens after the
+    # warm-up brings the database file and its WAL (CI saw 25 -> 27 open files in all, a
+    # step, not a slope); the connections are compared on their own below.
+    assert files["late_median"] <= files["early_median"] + 1, (files, r["series"]["open_files"])
     assert conns["max"] <= 5 and conns["late_median"] <= conns["early_median"] + 1, conns
     assert r["series"]["rss_mb"]["max"] > 0 and (tmp_path / "soak.png").exists()
