@@ -133,6 +133,11 @@ class ObjectPose:
         }
 
 
+def _yaw_of(T: NDArray[np.float64]) -> float:
+    """Rotation of a pose about the belt normal (base z), radians."""
+    return math.atan2(T[1, 0], T[0, 0])
+
+
 def plane_points(
     px: NDArray[np.float64],
     camera: PinholeCamera,
@@ -246,11 +251,10 @@ def estimate_pose(
                 z_top_m=z_plane_m,
             )  # fmt: skip
             if refined is not None:
-                T_delta, reproj = refined
-                method, n = "parallax", min(len(pairs), MAX_PARALLAX_POINTS)
+                T_delta, reproj, n = refined
+                method = "parallax"
     T = T_delta @ np.asarray(T_base_obj_taught, dtype=np.float64)
-    yaw = math.atan2(T[1, 0], T[0, 0])
-    return ObjectPose(T, yaw, resid, n, method, reproj)
+    return ObjectPose(T, _yaw_of(T), resid, n, method, reproj)
 
 
 def _plane_fit(
@@ -309,11 +313,12 @@ def refine_with_parallax(
     when the solver fails, or when it moved the start by more than
     :data:`MAX_REFINE_SHIFT_M` / :data:`MAX_REFINE_YAW_RAD`.
     """
-    return _refine(
+    refined = _refine(
         [(np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4), T_base_cam_view, np.eye(4))],
         camera=camera, T_base_cam_now=T_base_cam_now, T_delta0=T_delta0, z_floor_m=z_floor_m,
         z_top_m=z_top_m,
     )  # fmt: skip
+    return None if refined is None else refined[:2]
 
 
 #: One trained view's share of a joint fit: its correspondences (trained ``x, y``, current
@@ -330,10 +335,12 @@ def _refine(
     T_delta0: NDArray[np.float64],
     z_floor_m: float,
     z_top_m: float,
-) -> tuple[NDArray[np.float64], float] | None:
+) -> tuple[NDArray[np.float64], float, int] | None:
     """:func:`refine_with_parallax` over the correspondences of one or several trained
     views at once: one motion of the reference view's object frame, each feature on its
-    own view's trained ray, moved into the reference frame by its group's map first."""
+    own view's trained ray, moved into the reference frame by its group's map first.
+    Returns ``(T_delta, RMS reprojection error in px, correspondences used)``: at most
+    :data:`MAX_PARALLAX_POINTS` shared out between the views."""
     from scipy.optimize import least_squares
     from scipy.sparse import lil_matrix
 
@@ -410,7 +417,7 @@ def _refine(
     ):
         return None
     reproj = float(np.sqrt(np.mean(sol.fun[: 2 * n].reshape(-1, 2) ** 2) * 2))
-    return T, reproj
+    return T, reproj, n
 
 
 @dataclass(frozen=True, eq=False)
@@ -446,10 +453,6 @@ class ViewMatch:
 #: degrees away).
 AGREE_M = 0.008
 AGREE_YAW_RAD = math.radians(4.0)
-
-
-def _yaw_of(T: NDArray[np.float64]) -> float:
-    return math.atan2(T[1, 0], T[0, 0])
 
 
 def estimate_pose_views(
@@ -533,10 +536,8 @@ def estimate_pose_views(
                       z_floor_m=z_floor_m, z_top_m=z_plane_m)  # fmt: skip
     if refined is None:
         return single()
-    T_delta, reproj = refined
+    T_delta, reproj, n_used = refined
     T = T_delta @ T_ref
-    n_used = sum(min(len(g[0]), max(MIN_PARALLAX_POINTS, MAX_PARALLAX_POINTS // len(groups)))
-                 for g in groups)  # fmt: skip
     return ObjectPose(T, _yaw_of(T), lead.residual_m, n_used, "parallax", reproj, len(groups))
 
 

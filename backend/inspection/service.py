@@ -65,6 +65,7 @@ from robot.kinematics import T_base_ee
 from vision.errors import Conflict, InvalidInput, VisionCellError
 from vision.recognition import POLICIES, recognise_views
 from vision.recognition.light import apply_gain, light_gain, surround_colour
+from vision.recognition.recognise import verify_view
 from vision.segmentation import iou
 
 __all__ = ["InspectOptions", "InspectionDone", "InspectionRun", "hold_until_ready", "inspect_object", "readiness", "start_inspection", "start_run"]  # fmt: skip
@@ -860,8 +861,6 @@ async def _pose(
         live = ctx.rt.live_index
 
         def verify_others() -> list[Any]:
-            from vision.recognition.recognise import verify_view
-
             with live.reading() as index:
                 ids = [v.view_id for v in index.views_of(model, viewpoint=1)
                        if v.view_id != cand.view_id]  # fmt: skip

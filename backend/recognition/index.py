@@ -169,6 +169,9 @@ class IndexDiff:
 #: (``add_views`` indexes views just before its transaction commits), seconds.
 LOCAL_GRACE_S = 30.0
 
+#: Stored images read at a time when the index is built (:meth:`LiveIndex.load`).
+IMAGE_CHUNK = 64
+
 #: A stored view as :meth:`LiveIndex.apply` takes it:
 #: ``(view_id, model_id, viewpoint, features blob, descriptor kind, descriptor version)``.
 ViewRow = tuple[int, int, int, bytes, str, str]
@@ -299,24 +302,26 @@ class LiveIndex:
         async with db.session() as session:
             models = list(await session.scalars(select(ObjectModel)))
             rows = (await session.execute(select(*VIEW_ROW_COLUMNS).order_by(TrainedView.id))).all()
-            # The views' images: side views' colour signatures (the twins' tie-break) and
-            # the belt's colour round each top view (the light it was taught under).
-            images = (
-                await session.execute(
-                    select(TrainedView.id, TrainedView.image_png, TrainedView.mask_png).order_by(
-                        TrainedView.id
-                    )
-                )
-            ).all()
-        by_id = {m.id: IndexedModel.of(m) for m in models}
+            by_id = {m.id: IndexedModel.of(m) for m in models}
+            with self._lock:
+                if len(self._index):
+                    raise RuntimeError("LiveIndex.load() fills an empty index only")
+                self._models = dict(by_id)
+                for row in rows:
+                    self._index_row(by_id[row[1]], tuple(row))  # type: ignore[arg-type]
+            # The views' images, a chunk at a time (not every image in memory at once):
+            # side views' colour signatures (the twins' tie-break) and the belt's colour
+            # round each top view (the light it was taught under).
+            images = await session.stream(
+                select(TrainedView.id, TrainedView.image_png, TrainedView.mask_png)
+                .order_by(TrainedView.id)
+                .execution_options(yield_per=IMAGE_CHUNK)
+            )  # fmt: skip
+            async for part in images.partitions(IMAGE_CHUNK):
+                with self._lock:
+                    for vid, png, mask_png in part:
+                        self._colour_from_png(vid, png, mask_png)
         with self._lock:
-            if len(self._index):
-                raise RuntimeError("LiveIndex.load() fills an empty index only")
-            self._models = dict(by_id)
-            for row in rows:
-                self._index_row(by_id[row[1]], tuple(row))  # type: ignore[arg-type]
-            for vid, png, mask_png in images:
-                self._colour_from_png(vid, png, mask_png)
             self._generation += 1
             report = LoadReport(
                 len(by_id),
