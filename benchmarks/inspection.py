@@ -183,8 +183,24 @@ def _record(
         "cycle_s": sum(v for k, v in d.items() if k != "wait"),
         "stages": {k: v for k, v in d.items()},
         "reason": row["reason"],
+        "pose_hypotheses": _hypotheses(row),
         **extra,
     }
+
+
+def _hypotheses(row: dict[str, Any]) -> list[dict[str, Any]]:
+    """The pose's groups of agreeing views with their errors against the truth."""
+    if row["pose"] is None or row["truth"] is None:
+        return []
+    Tt = np.array(row["truth"]["T_base_obj"])
+    yaw_t = math.atan2(Tt[1, 0], Tt[0, 0])
+    out = []
+    for h in row["pose"].get("hypotheses", []):
+        pos = float(np.linalg.norm(np.array(h["position_m"][:2]) - Tt[:2, 3]) * 1e3)
+        dyaw = abs(math.degrees(math.remainder(h["yaw_rad"] - yaw_t, 2 * math.pi)))
+        out.append({"pos_err_mm": round(pos, 2), "yaw_err_deg": round(dyaw, 2),
+                    **{k: h[k] for k in ("views", "correspondences", "silhouette_iou", "chosen")}})  # fmt: skip
+    return out
 
 
 def _bin_for(engine: Any, name: str) -> str:
@@ -236,6 +252,8 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
         ctx = await service.context(rt)
 
         def pick_name() -> str:
+            if args.parts:  # a diagnostic run on a few catalogue entries
+                return str(rng.choice(args.parts))
             return str(rng.choice(untrained if rng.uniform() < 0.15 else trained))
 
         async def index_object(
@@ -474,6 +492,11 @@ def main(argv: list[str] | None = None) -> None:
         help="under half light and the colour cast, do not inspect each object a second "
         "time without the light balance (the baseline)",
     )  # fmt: skip
+    ap.add_argument(
+        "--parts", default="",
+        help="comma-separated catalogue names: inspect only these (every trainable entry is "
+        "still taught); default: the trained ones with the untrained mixed in",
+    )  # fmt: skip
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--rows", action="store_true", help="with --json: every inspection's row")
     args = ap.parse_args(argv)
@@ -485,6 +508,12 @@ def main(argv: list[str] | None = None) -> None:
     bad = [p for p in args.policies if p not in POLICIES]
     if bad or not args.policies:
         ap.error(f"--policies: unknown {bad or 'empty'}; valid: {', '.join(POLICIES)}")
+    from robot.sim.catalogue import CATALOGUE
+
+    args.parts = tuple(p.strip() for p in args.parts.split(",") if p.strip())
+    unknown_parts = [p for p in args.parts if p not in CATALOGUE]
+    if unknown_parts:
+        ap.error(f"--parts: not in the catalogue: {unknown_parts}; valid: {', '.join(CATALOGUE)}")
     if not (0.0 < args.belt_speed <= 0.5):
         ap.error(f"--belt-speed must be in (0, 0.5] m/s, got {args.belt_speed}")
     if not 1 <= args.teach_yaws <= 12:

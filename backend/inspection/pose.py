@@ -38,7 +38,10 @@ top views that verify on the current one as well (taught at other object yaws an
 rolls, they see the parallax in other directions), keeps the views whose answers agree
 (a view registered on the wrong features, the pipe flange's bolt circle a sixth of a turn
 off, is outvoted) and fits their correspondences together: one motion, every feature at
-its own height on its own view's ray.
+its own height on its own view's ray.  Where the views that agree on a wrong turn hold
+the most correspondences (each of the flange's bolts looks like the next), the answers
+are also judged by the outline: the trained region nearest in viewpoint, moved by each
+answer, against the current region (:func:`silhouette_overlap`).
 
 With the belt running (constant-speed mode, section 4.1) the pose is that at exposure;
 :func:`predict_along_belt` moves it forward by the belt's travel since then.
@@ -47,6 +50,7 @@ With the belt running (constant-speed mode, section 4.1) the pose is that at exp
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -59,12 +63,14 @@ from vision.errors import VisionCellError
 __all__ = [
     "ObjectPose",
     "PoseFailed",
+    "SilhouetteView",
     "ViewMatch",
     "estimate_pose",
     "estimate_pose_views",
     "plane_points",
     "predict_along_belt",
     "refine_with_parallax",
+    "silhouette_overlap",
 ]
 
 #: Largest residual of the planar fit accepted, metres.
@@ -118,6 +124,9 @@ class ObjectPose:
     reproj_px: float | None = None
     views: int = 1
     """Trained top views whose correspondences the pose was fitted to."""
+    hypotheses: tuple[dict[str, object], ...] = ()
+    """With several views: every group of agreeing views considered (its plane answer,
+    views, correspondences, silhouette overlap) and which one the pose came from."""
 
     def public(self) -> dict[str, object]:
         """JSON-friendly form (metres and radians)."""
@@ -130,6 +139,7 @@ class ObjectPose:
             "method": self.method,
             "reproj_px": self.reproj_px,
             "views": self.views,
+            "hypotheses": list(self.hypotheses),
         }
 
 
@@ -446,6 +456,17 @@ class ViewMatch:
     view_shape: tuple[int, int]
 
 
+@dataclass(frozen=True, eq=False)
+class SilhouetteView:
+    """A trained top view of the model whose region can be compared with the current one:
+    its camera pose, the model frame as it saw it, and its region (``mask()``, decoded
+    when first asked for: only the views nearest an answer's viewpoint are)."""
+
+    T_base_cam_view: NDArray[np.float64]
+    T_base_obj_taught: NDArray[np.float64]
+    mask: Callable[[], NDArray[np.bool_] | None]
+
+
 #: Two trained views' plane poses agree when within this distance and turn of each other
 #: (the plane answer alone is 3-5 mm off for parts with features below the top face; a
 #: view registered on the wrong features, the pipe flange's bolt circle a sixth of a turn
@@ -455,6 +476,87 @@ AGREE_M = 0.008
 AGREE_YAW_RAD = math.radians(4.0)
 
 
+#: A group of agreeing views turned from the one with the most correspondences is taken
+#: instead when the trained silhouettes moved by its answer overlap the current one better
+#: by at least this much (intersection over union) and it holds at least
+#: :data:`SILHOUETTE_MIN_SHARE` of the leading group's correspondences.
+SILHOUETTE_MARGIN = 0.04
+SILHOUETTE_MIN_SHARE = 0.2
+#: Largest shift of the moved trained region searched, as a share of the current region's
+#: size (the answers' positions are a few millimetres off; a turn moves more).
+SILHOUETTE_SHIFT = 0.04
+
+
+def silhouette_overlap(
+    view_mask: NDArray[np.bool_],
+    query_mask: NDArray[np.bool_],
+    *,
+    camera: PinholeCamera,
+    T_base_cam_view: NDArray[np.float64],
+    T_base_cam_now: NDArray[np.float64],
+    T_delta: NDArray[np.float64],
+    z_m: float,
+) -> float:
+    """Intersection over union of the current region ``query_mask`` and the trained
+    region ``view_mask`` moved by the planar motion ``T_delta`` (taught to now).
+
+    The trained region is mapped through the plane ``z = z_m``: back-projected from the
+    trained camera, moved, projected into the current camera (a homography fitted to a
+    grid of the region's pixels, so the lens distortion is averaged over it).  Parts of
+    the outline at other heights shift by parallax between the two cameras (a few
+    millimetres when the trained camera stood near where the current one stands relative
+    to the object: the caller picks that view), and the answer's position is a few
+    millimetres off; the overlap is therefore the best over small shifts
+    (:data:`SILHOUETTE_SHIFT`).  What it measures is whether the outline's asymmetric
+    parts (a side nozzle, a shaft) lie where the answer puts them: answers a turn apart
+    differ there by far more.  Empty regions overlap 0; ``nan`` when the plane cannot be
+    back-projected from the trained camera.
+    """
+    vm = np.asarray(view_mask, dtype=bool)
+    qm = np.asarray(query_mask, dtype=bool)
+    if not vm.any() or not qm.any():
+        return 0.0
+    src = _sample_region(vm, vm.shape, n=8)
+    if len(src) < 4:
+        return 0.0
+    try:
+        P = plane_points(src, camera, T_base_cam_view, z_m)
+    except PoseFailed:
+        return math.nan
+    P = P @ np.asarray(T_delta, dtype=np.float64)[:3, :3].T + np.asarray(T_delta)[:3, 3]
+    T_cam_base = np.linalg.inv(np.asarray(T_base_cam_now, dtype=np.float64))
+    rvec, _ = cv2.Rodrigues(T_cam_base[:3, :3])
+    dst, _ = cv2.projectPoints(
+        P.reshape(-1, 1, 3), rvec, T_cam_base[:3, 3], camera.K,
+        np.asarray(camera.dist, dtype=np.float64),
+    )  # fmt: skip
+    Hm, _ = cv2.findHomography(src.reshape(-1, 1, 2), dst.reshape(-1, 1, 2), 0)
+    if Hm is None or not np.all(np.isfinite(Hm)):
+        return math.nan
+    # compared at full resolution in a window round the current region (half its size
+    # again on each side, so a moved outline stays inside)
+    ys, xs = np.nonzero(qm)
+    pad = int(0.5 * max(xs.max() - xs.min(), ys.max() - ys.min())) + 2
+    h, w = qm.shape
+    x0, y0 = max(0, int(xs.min()) - pad), max(0, int(ys.min()) - pad)
+    x1, y1 = min(w, int(xs.max()) + pad + 1), min(h, int(ys.max()) + pad + 1)
+    shift = np.array([[1.0, 0.0, -x0], [0.0, 1.0, -y0], [0.0, 0.0, 1.0]])
+    warped = cv2.warpPerspective(vm.astype(np.uint8), shift @ Hm, (x1 - x0, y1 - y0),
+                                 flags=cv2.INTER_NEAREST) > 0  # fmt: skip
+    small_q = qm[y0:y1, x0:x1]
+    # Each answer's position carries the plane fit's few millimetres of error, which moves
+    # a round outline as much as a turn moves a small asymmetric part of it: the overlap
+    # is the best over shifts of up to SILHOUETTE_SHIFT of the region's size (the
+    # intersection at every shift in one correlation; the areas do not change).
+    r = max(2, round(SILHOUETTE_SHIFT * max(xs.max() - xs.min(), ys.max() - ys.min())))
+    q_pad = cv2.copyMakeBorder(
+        small_q.astype(np.float32), r, r, r, r, cv2.BORDER_CONSTANT, value=0.0
+    )
+    inter = float(cv2.matchTemplate(q_pad, warped.astype(np.float32), cv2.TM_CCORR).max())
+    union = float(np.count_nonzero(warped)) + float(np.count_nonzero(small_q)) - inter
+    return 0.0 if union <= 0 else inter / union
+
+
 def estimate_pose_views(
     matches: list[ViewMatch],
     *,
@@ -462,6 +564,8 @@ def estimate_pose_views(
     T_base_cam_now: NDArray[np.float64],
     z_plane_m: float,
     z_floor_m: float,
+    query_mask: NDArray[np.bool_] | None = None,
+    silhouettes: list[SilhouetteView] | None = None,
 ) -> ObjectPose:
     """The object's pose from several trained top views verified on the current one.
 
@@ -475,6 +579,15 @@ def estimate_pose_views(
     feature at its own height (:func:`refine_with_parallax`'s model, one motion for all
     views); with fewer than :data:`MIN_PARALLAX_POINTS` of them, or a failed fit, the
     first view of the group gives the answer alone (:func:`estimate_pose`).
+
+    With ``query_mask`` (the current top view's region) and more than one group, the
+    groups are also judged by their silhouettes (:func:`_by_silhouette`): the trained
+    region of ``silhouettes`` (every taught top view of the model; default: the matches'
+    own masks) nearest each answer's viewpoint, moved by that answer, against the current
+    region.  A part whose features repeat round a circle (the pipe flange's bolts) can
+    register a sixth of a turn off on as many correspondences as it registers right; its
+    outline (the side nozzle) cannot.  Every group considered is recorded in
+    :attr:`ObjectPose.hypotheses`.
 
     Raises
     ------
@@ -505,13 +618,25 @@ def estimate_pose_views(
         dyaw = abs(math.remainder(a.yaw_rad - b.yaw_rad, 2 * math.pi))
         return d <= AGREE_M and dyaw <= AGREE_YAW_RAD
 
-    best: list[tuple[ViewMatch, ObjectPose]] = []
-    best_n = -1
+    groups_seen: list[tuple[list[tuple[ViewMatch, ObjectPose]], int]] = []
     for _seed_m, seed in planes:
         group = [(m, p) for m, p in planes if agree(seed, p)]
-        n = sum(len(m.inlier_xy) for m, _ in group)
-        if n > best_n:
-            best, best_n = group, n
+        members = {id(m) for m, _ in group}
+        if any({id(m) for m, _ in g} == members for g, _ in groups_seen):
+            continue
+        groups_seen.append((group, sum(len(m.inlier_xy) for m, _ in group)))
+    # the most correspondences first (ties: the earlier view)
+    order = sorted(range(len(groups_seen)), key=lambda i: -groups_seen[i][1])
+    best, best_n = groups_seen[order[0]]
+    hyps, chosen = _by_silhouette(
+        [groups_seen[i] for i in order], camera=camera, T_base_cam_now=T_base_cam_now,
+        z_m=0.5 * (z_plane_m + z_floor_m), query_mask=query_mask,
+        silhouettes=silhouettes if silhouettes is not None else [
+            SilhouetteView(m.T_base_cam_view, m.T_base_obj_taught, _const(m.view_mask))
+            for m in matches if m.view_mask is not None
+        ],
+    )  # fmt: skip
+    best, best_n = chosen
     lead_m, lead = best[0]
 
     def single() -> ObjectPose:
@@ -523,7 +648,7 @@ def estimate_pose_views(
         )  # fmt: skip
 
     if len(best) == 1 or best_n < MIN_PARALLAX_POINTS:
-        return single()
+        return _with(single(), hyps)
     T_ref = np.asarray(lead_m.T_base_obj_taught, dtype=np.float64)
     groups: list[_Group] = []
     for m, _p in best:
@@ -535,10 +660,10 @@ def estimate_pose_views(
     refined = _refine(groups, camera=camera, T_base_cam_now=T_base_cam_now, T_delta0=T_delta0,
                       z_floor_m=z_floor_m, z_top_m=z_plane_m)  # fmt: skip
     if refined is None:
-        return single()
+        return _with(single(), hyps)
     T_delta, reproj, n_used = refined
     T = T_delta @ T_ref
-    return ObjectPose(T, _yaw_of(T), lead.residual_m, n_used, "parallax", reproj, len(groups))
+    return ObjectPose(T, _yaw_of(T), lead.residual_m, n_used, "parallax", reproj, len(groups), hyps)
 
 
 def predict_along_belt(
@@ -552,3 +677,96 @@ def predict_along_belt(
     T[:3, 3] += travel_m * d / np.linalg.norm(d)
     return ObjectPose(T, pose.yaw_rad, pose.residual_m, pose.n_points, pose.method,
                       pose.reproj_px, pose.views)  # fmt: skip
+
+
+def _const(mask: NDArray[np.bool_] | None) -> Callable[[], NDArray[np.bool_] | None]:
+    return lambda: mask
+
+
+def _with(pose: ObjectPose, hyps: tuple[dict[str, object], ...]) -> ObjectPose:
+    return ObjectPose(pose.T_base_obj, pose.yaw_rad, pose.residual_m, pose.n_points,
+                      pose.method, pose.reproj_px, pose.views, hyps)  # fmt: skip
+
+
+_Hyp = tuple[list[tuple[ViewMatch, ObjectPose]], int]
+
+
+def _by_silhouette(
+    ranked: list[_Hyp],
+    *,
+    camera: PinholeCamera,
+    T_base_cam_now: NDArray[np.float64],
+    z_m: float,
+    query_mask: NDArray[np.bool_] | None,
+    silhouettes: list[SilhouetteView],
+) -> tuple[tuple[dict[str, object], ...], _Hyp]:
+    """Of the groups of agreeing views (``ranked``: most correspondences first), the one
+    to fit: the first, unless another turned from it by more than :data:`AGREE_YAW_RAD`,
+    with at least :data:`SILHOUETTE_MIN_SHARE` of its correspondences, explains the current
+    region better by :data:`SILHOUETTE_MARGIN`.  Only a turn is settled by the outline:
+    groups that disagree in position alone are plane answers thrown off by parallax (the
+    valve block's features 62 mm below its top put them 13-17 mm apart), which the joint
+    fit of the most correspondences corrects and an outline compared through one plane
+    does not.
+
+    A group's answer (its first view's plane pose) puts the current camera somewhere
+    relative to the object; the trained view taken from nearest that place (the object
+    frame of its teach) sees the outline with the least parallax, and its region moved
+    by the answer is compared with the current one (:func:`silhouette_overlap`).
+    Returns a record of every group and the chosen one.
+    """
+    cam_now = np.asarray(T_base_cam_now, dtype=np.float64)[:, 3]
+    rel_views = [
+        (np.linalg.inv(np.asarray(v.T_base_obj_taught, dtype=np.float64))
+         @ np.asarray(v.T_base_cam_view, dtype=np.float64)[:, 3])[:3]
+        for v in silhouettes
+    ]  # fmt: skip
+    ious: list[float | None] = []
+    for group, _n in ranked:
+        if query_mask is None or not silhouettes or len(ranked) == 1:
+            ious.append(None)
+            continue
+        T_obj = group[0][1].T_base_obj
+        rel_now = (np.linalg.inv(T_obj) @ cam_now)[:3]
+        near = sorted(
+            range(len(silhouettes)), key=lambda i: float(np.linalg.norm(rel_views[i] - rel_now))
+        )
+        iou: float | None = None
+        for i in near:
+            mask = silhouettes[i].mask()
+            if mask is None:
+                continue
+            v = silhouettes[i]
+            iou = silhouette_overlap(
+                mask, query_mask, camera=camera, T_base_cam_view=v.T_base_cam_view,
+                T_base_cam_now=T_base_cam_now,
+                T_delta=T_obj @ np.linalg.inv(np.asarray(v.T_base_obj_taught, dtype=np.float64)),
+                z_m=z_m,
+            )  # fmt: skip
+            break
+        ious.append(iou if iou is not None and math.isfinite(iou) else None)
+    pick = 0
+    lead_n = ranked[0][1]
+    lead_yaw = ranked[0][0][0][1].yaw_rad
+    iou0 = ious[0]
+    if iou0 is not None:
+        for i in range(1, len(ranked)):
+            iou = ious[i]
+            turn = abs(math.remainder(ranked[i][0][0][1].yaw_rad - lead_yaw, 2 * math.pi))
+            if (iou is not None and turn > AGREE_YAW_RAD
+                    and ranked[i][1] >= SILHOUETTE_MIN_SHARE * lead_n
+                    and iou >= iou0 + SILHOUETTE_MARGIN
+                    and (pick == 0 or iou > (ious[pick] or 0.0))):  # fmt: skip
+                pick = i
+    record: tuple[dict[str, object], ...] = tuple(
+        {
+            "position_m": [float(v) for v in g[0][1].T_base_obj[:3, 3]],
+            "yaw_rad": float(g[0][1].yaw_rad),
+            "views": len(g),
+            "correspondences": int(n),
+            "silhouette_iou": None if iou is None else round(float(iou), 4),
+            "chosen": i == pick,
+        }
+        for i, ((g, n), iou) in enumerate(zip(ranked, ious, strict=True))
+    )
+    return record, ranked[pick]

@@ -31,6 +31,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import functools
 import logging
 import math
 import time
@@ -48,6 +49,7 @@ from backend.inspection import recovery, results
 from backend.inspection.pose import (
     ObjectPose,
     PoseFailed,
+    SilhouetteView,
     ViewMatch,
     estimate_pose_views,
     plane_points,
@@ -785,7 +787,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     if state["decision"] == "recognized":
         try:
             pose = await _pose(ctx, res, state["model"], T_cam_top, height,
-                               top_features[0] if top_features else None)  # fmt: skip
+                               top_features[0] if top_features else None, region.mask)  # fmt: skip
         except PoseFailed as exc:
             pose_err = exc.detail
     belt_stopped = False
@@ -844,10 +846,11 @@ POSE_MIN_INLIERS = 6
 
 async def _pose(
     ctx: _Ctx, res: Any, model: str, T_cam_now: NDArray[np.float64], height: float,
-    query: Any = None,
+    query: Any = None, query_mask: NDArray[np.bool_] | None = None,
 ) -> ObjectPose:  # fmt: skip
     """The pose from the recognised trained top view and the model's other top views that
-    verify on the top view's features ``query`` (:func:`estimate_pose_views`)."""
+    verify on the top view's features ``query`` (:func:`estimate_pose_views`; the top
+    view's region ``query_mask`` judges answers that disagree by their silhouettes)."""
     top = next((r for vp, r in zip(res.viewpoints, res.views, strict=True) if vp == 1), None)
     cand = (
         None
@@ -857,45 +860,58 @@ async def _pose(
     if cand is None or cand.viewpoint != 1:
         raise PoseFailed("the top view did not verify the recognised model (no homography)")
     cands = [cand]
-    if query is not None:
-        live = ctx.rt.live_index
+    live = ctx.rt.live_index
 
-        def verify_others() -> list[Any]:
-            with live.reading() as index:
-                ids = [v.view_id for v in index.views_of(model, viewpoint=1)
-                       if v.view_id != cand.view_id]  # fmt: skip
-                got = [verify_view(index, vid, query) for vid in ids]
-            ok = [c for c in got if c.H is not None and c.n_inliers >= POSE_MIN_INLIERS]
-            return sorted(ok, key=lambda c: (-c.n_inliers, c.view_id))[: POSE_MAX_VIEWS - 1]
+    def verify_others() -> tuple[list[Any], list[int]]:
+        with live.reading() as index:
+            top_ids = [v.view_id for v in index.views_of(model, viewpoint=1)]
+            if query is None:
+                return [], top_ids
+            got = [verify_view(index, vid, query) for vid in top_ids if vid != cand.view_id]
+        ok = [c for c in got if c.H is not None and c.n_inliers >= POSE_MIN_INLIERS]
+        return sorted(ok, key=lambda c: (-c.n_inliers, c.view_id))[: POSE_MAX_VIEWS - 1], top_ids
 
-        cands += await asyncio.to_thread(verify_others)
+    others, top_ids = await asyncio.to_thread(verify_others)
+    cands += others
     async with ctx.rt.database.session() as session:
         rows = await session.execute(
             select(TrainedView.id, TrainedView.joints, TrainedView.yaw_rad, TrainedView.mask_png,
                    TrainedView.height, TrainedView.width)
-            .where(TrainedView.id.in_([c.view_id for c in cands]))
+            .where(TrainedView.id.in_({c.view_id for c in cands} | set(top_ids)))
         )  # fmt: skip
         stored = {int(vid): (j, y, m, (h, w)) for vid, j, y, m, h, w in rows.all()}
     if stored.get(cand.view_id, (None,))[0] is None:
         raise PoseFailed(f"trained view {cand.view_id} has no camera pose (uploaded, not taught)")
     from backend.recognition.images import mask_from_png
 
+    def taught_at(yaw: float) -> NDArray[np.float64]:
+        T = np.eye(4)
+        co, si = math.cos(yaw), math.sin(yaw)
+        T[:2, :2] = [[co, -si], [si, co]]
+        T[:3, 3] = ctx.station
+        return T
+
     matches = []
     for c in cands:
         joints, yaw, mask_png, shape = stored.get(c.view_id, (None, 0.0, None, (0, 0)))
         if joints is None or c.inlier_xy is None:
             continue  # deleted meanwhile, or uploaded without a camera pose
-        T_taught = np.eye(4)
-        co, si = math.cos(yaw), math.sin(yaw)
-        T_taught[:2, :2] = [[co, -si], [si, co]]
-        T_taught[:3, 3] = ctx.station
         matches.append(ViewMatch(
-            c.H, c.inlier_xy, _T_cam(joints, ctx.T_ee_cam), T_taught,
+            c.H, c.inlier_xy, _T_cam(joints, ctx.T_ee_cam), taught_at(yaw),
             None if mask_png is None else mask_from_png(mask_png), shape,
         ))  # fmt: skip
+    # Every taught top view of the model with a region judges answers that disagree by
+    # their silhouettes (the region decoded only for the views nearest an answer's).
+    silhouettes = [
+        SilhouetteView(_T_cam(joints, ctx.T_ee_cam), taught_at(yaw),
+                       functools.cache(functools.partial(mask_from_png, mask_png)))
+        for vid, (joints, yaw, mask_png, _shape) in sorted(stored.items())
+        if joints is not None and mask_png is not None
+    ]  # fmt: skip
     return await asyncio.to_thread(
         estimate_pose_views, matches, camera=ctx.camera, T_base_cam_now=T_cam_now,
-        z_plane_m=ctx.surface_z + height, z_floor_m=ctx.surface_z,
+        z_plane_m=ctx.surface_z + height, z_floor_m=ctx.surface_z, query_mask=query_mask,
+        silhouettes=silhouettes,
     )  # fmt: skip
 
 

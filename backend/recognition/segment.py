@@ -4,13 +4,22 @@ initialised from the difference with the empty-belt background.
 1. Foreground: the per-pixel largest channel difference between the (slightly blurred)
    image and the background of the same viewpoint, thresholded at ``min_diff`` grey levels
    (a fixed level: a dark part on the dark belt under dimmed light can fall below it),
-   opened and closed, and the largest connected blob kept with its holes filled.  This is where the object is, roughly: shadows and the belt seen through holes
-   move its edge by a few pixels.
+   opened and closed, and the largest connected blob kept with its holes filled.  This is
+   where the object is, roughly: shadows and the belt seen through holes move its edge by
+   a few pixels.
 2. Initial contour: the blob's convex hull pushed out by ``margin_px`` along its normals
    (the loose contour around the object that the chapter's operator would draw).
 3. The snake (:func:`vision.segmentation.active_contour`, eq. 8 with the edge energy of
    eq. 11) shrinks from there under a small balloon pressure (Cohen 1991) that fades on
    edges, and stops on the object's outline.  Its inside is the object's mask.
+4. The snake's tension (eq. 8's first-order term) cuts across a narrow neck as it shrinks:
+   the pipe flange's side nozzle and the gear housing's shaft were left out (the flange's
+   region covered 92-94 % of its true silhouette, and without the nozzle's features its
+   bolt circle registered a sixth of a turn off).  The parts of the step-1 blob outside
+   the snake's region that are not the belt in shadow (:func:`cut_off_parts`) are added
+   back, joined by their necks.  In the simulator's top views the region's overlap with
+   the true silhouette rose from 0.914 to 0.968 (gear housing) and 0.958 to 0.974 (bracket
+   upright); wheels and the other parts were left as they were.
 """
 
 from __future__ import annotations
@@ -24,7 +33,13 @@ from numpy.typing import NDArray
 from vision.errors import VisionCellError
 from vision.segmentation import active_contour, iou, mask_from_contour, resample_closed
 
-__all__ = ["ObjectRegion", "SegmentationFailed", "foreground_mask", "segment_object"]
+__all__ = [
+    "ObjectRegion",
+    "SegmentationFailed",
+    "cut_off_parts",
+    "foreground_mask",
+    "segment_object",
+]
 
 
 class SegmentationFailed(VisionCellError):
@@ -119,11 +134,7 @@ def foreground_mask(
             f"the largest change from the background covers {area} px, under "
             f"{min_area_frac:.1%} of the image: is the object at the station?"
         )
-    blob = (labels == k).astype(np.uint8)
-    contours, _ = cv2.findContours(blob, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    filled = np.zeros_like(blob)
-    cv2.drawContours(filled, contours, -1, 1, -1)
-    return filled.astype(bool)
+    return _fill(labels == k)
 
 
 def _initial_contour(
@@ -155,6 +166,7 @@ def segment_object(
     n_points: int = 200,
     max_num_iter: int = 600,
     min_agreement: float = 0.6,
+    recover_cut: bool = True,
 ) -> ObjectRegion:
     """Segment the object in ``image`` against ``background`` (module docstring).
 
@@ -173,6 +185,9 @@ def segment_object(
         snake is taken to have left the object (it may have collapsed through a weak edge,
         or the object touches the image border) and the blob is the region instead, with
         ``method="background difference"`` and the reason in ``note``.
+    recover_cut : bool
+        Add back the parts of the foreground the snake cut off (:func:`cut_off_parts`):
+        ``method="active contour + cut-off parts"``, the pixels added in ``note``.
 
     Raises
     ------
@@ -202,4 +217,79 @@ def segment_object(
             note=f"the active contour left the object (IoU {agreement:.2f} with the "
             f"background difference, under {min_agreement})",
         )
-    return ObjectRegion(mask, snake.contour, blob, init, snake.iterations, snake.converged)
+    if not recover_cut:
+        return ObjectRegion(mask, snake.contour, blob, init, snake.iterations, snake.converged)
+    cut = cut_off_parts(image, background, blob, mask)
+    if not cut.any():
+        return ObjectRegion(mask, snake.contour, blob, init, snake.iterations, snake.converged)
+    # the pieces and the necks joining them: the union closed near the pieces only
+    union = (mask | cut).astype(np.uint8)
+    ell = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
+    bridged = cv2.morphologyEx(union, cv2.MORPH_CLOSE, ell).astype(bool)
+    joined = _fill(mask | cut | (bridged & cv2.dilate(cut.astype(np.uint8), ell).astype(bool)))
+    contours, _ = cv2.findContours(
+        joined.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE
+    )
+    outline = max(contours, key=cv2.contourArea).reshape(-1, 2).astype(np.float64)
+    return ObjectRegion(
+        joined, outline, blob, init, snake.iterations, snake.converged,
+        method="active contour + cut-off parts",
+        note=f"{int(cut.sum())} px of the background difference the contour cut off added back",
+    )  # fmt: skip
+
+
+def _fill(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """The largest connected part of ``mask`` with its holes filled."""
+    m = mask.astype(np.uint8)
+    contours, _ = cv2.findContours(m, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    out = np.zeros_like(m)
+    if contours:
+        cv2.drawContours(out, [max(contours, key=cv2.contourArea)], -1, 1, -1)
+    return out.astype(bool)
+
+
+#: A pixel darker than the background by one factor in every channel (within this spread
+#: of the per-channel ratios), between :data:`SHADOW_MIN_RATIO` and :data:`SHADOW_MAX_RATIO`
+#: of it, is the belt in shadow: light blocked, the belt's colour kept.
+SHADOW_RATIO_SPREAD = 0.12
+SHADOW_MIN_RATIO = 0.2
+SHADOW_MAX_RATIO = 0.97
+
+
+def cut_off_parts(
+    image: NDArray[np.uint8],
+    background: NDArray[np.uint8],
+    blob: NDArray[np.bool_],
+    mask: NDArray[np.bool_],
+) -> NDArray[np.bool_]:
+    """Parts of the background-difference ``blob`` the snake's region ``mask`` left out
+    that are object, not shadow: a side nozzle or a handle joined to the body by a narrow
+    neck, which the snake's tension (eq. 8's first-order term) cuts across as it shrinks.
+
+    The blob outside the region, without the pixels that look like the belt in shadow
+    (every channel darker than the background by about one factor), opened with a 7 px
+    disc (the ring of a few pixels between the blob's blurred edge and the contour goes),
+    keeping the pieces that touch the region and cover at least 0.5 % of it.
+    """
+    a = cv2.GaussianBlur(image, (5, 5), 1.2).astype(np.float32) + 1.0
+    b = cv2.GaussianBlur(background, (5, 5), 1.2).astype(np.float32) + 1.0
+    ratio = a / b
+    shadow = (
+        (ratio.max(axis=2) - ratio.min(axis=2) <= SHADOW_RATIO_SPREAD)
+        & (ratio.max(axis=2) <= SHADOW_MAX_RATIO)
+        & (ratio.min(axis=2) >= SHADOW_MIN_RATIO)
+    )
+    extra = (blob & ~mask & ~shadow).astype(np.uint8)
+    extra = cv2.morphologyEx(
+        extra, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))
+    )
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(extra, connectivity=8)
+    if n <= 1:
+        return np.zeros_like(mask, dtype=bool)
+    near = cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    min_area = 0.005 * max(1, int(mask.sum()))
+    keep = np.zeros(n, dtype=bool)
+    for k in range(1, n):
+        if stats[k, cv2.CC_STAT_AREA] >= min_area:
+            keep[k] = bool(near[labels == k].any())
+    return keep[labels]

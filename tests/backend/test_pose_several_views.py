@@ -27,7 +27,7 @@ def _features(seed: int, n: int) -> np.ndarray:
     return np.c_[r * np.cos(a), r * np.sin(a), h, np.ones(n)]
 
 
-def _view(taught_yaw_deg, roll, n, seed, noise_px=0.0, seen_turned_deg=0.0):
+def _view(taught_yaw_deg, roll, n, seed, noise_px=0.0, seen_turned_deg=0.0, seen_shift=None):
     """One trained view verified on the current top view: ``n`` correspondences of the
     object taught at ``taught_yaw_deg`` seen from the roll's camera; ``seen_turned_deg``
     makes the match the object turned by that much more (a symmetric pattern's wrong
@@ -38,6 +38,9 @@ def _view(taught_yaw_deg, roll, n, seed, noise_px=0.0, seen_turned_deg=0.0):
     if seen_turned_deg:
         now = now.copy()
         now[:3, 3] = TRUTH[:3, 3]
+    if seen_shift is not None:
+        now = now.copy()
+        now[:2, 3] += seen_shift
     T_view, T_now = _cam(roll), _cam(0.0)
     pa = _project(T_view, (local @ taught.T)[:, :3])
     pb = _project(T_now, (local @ now.T)[:, :3])
@@ -142,3 +145,98 @@ def test_features_far_below_the_model_height_are_placed_by_several_views():
         joint_err.append(1e3 * float(np.linalg.norm(joint.T_base_obj[:2, 3] - truth[:2, 3])))
     assert np.median(single_err) > 5.0  # what one view gives
     assert np.median(joint_err) < 0.5 and max(joint_err) < 1.5, joint_err
+
+
+def _outline(T_base_cam, T_obj, nozzle: bool) -> np.ndarray:
+    """The region of a round part (85 mm radius) seen from ``T_base_cam``, with a side
+    nozzle on its +x (25 mm beyond the rim, 50 mm wide) when ``nozzle``: the pipe flange's
+    outline, at the middle of its height."""
+    z = 0.5 * (TOP - SURFACE)
+    t = np.linspace(0.0, 2 * math.pi, 96, endpoint=False)
+    polys = [np.c_[0.085 * np.cos(t), 0.085 * np.sin(t), np.full_like(t, z), np.ones_like(t)]]
+    if nozzle:
+        polys.append(np.array([[0.07, -0.025, z, 1], [0.11, -0.025, z, 1],
+                               [0.11, 0.025, z, 1], [0.07, 0.025, z, 1]]))  # fmt: skip
+    mask = np.zeros((480, 640), np.uint8)
+    for p in polys:
+        px = _project(T_base_cam, (p @ np.asarray(T_obj).T)[:, :3])
+        cv2.fillPoly(mask, [np.round(px).astype(np.int32)], 1)
+    return mask.astype(bool)
+
+
+def _with_outline(m: ViewMatch, nozzle: bool) -> ViewMatch:
+    import dataclasses
+
+    mask = _outline(m.T_base_cam_view, m.T_base_obj_taught, nozzle)
+    return dataclasses.replace(m, view_mask=mask)
+
+
+def test_a_wrong_turn_with_the_most_correspondences_loses_on_the_silhouette():
+    """One view registered a sixth of a turn off holds more correspondences than the one
+    right view: the correspondences alone take the wrong turn; the current region (the
+    nozzle where the truth puts it) overlaps the trained region moved by the right answer
+    better, and the pose takes that answer."""
+    wrong = _with_outline(_view(0.0, 0.0, 30, seed=4, seen_turned_deg=60.0), nozzle=True)
+    right = _with_outline(_view(90.0, 2.094, 20, seed=5), nozzle=True)
+    query = _outline(_cam(0.0), TRUTH, nozzle=True)
+    alone = estimate_pose_views([wrong, right], **KW)
+    assert _errors(alone)[1] > 50.0  # without the current region: the most correspondences
+    pose = estimate_pose_views([wrong, right], **KW, query_mask=query)
+    pos, yaw = _errors(pose)
+    assert pos < 0.5 and yaw < 0.2, (pos, yaw)
+    chosen = [h for h in pose.hypotheses if h["chosen"]]
+    assert len(pose.hypotheses) == 2 and len(chosen) == 1 and chosen[0]["correspondences"] == 20
+    ious = {h["correspondences"]: h["silhouette_iou"] for h in pose.hypotheses}
+    assert ious[20] > ious[30] + 0.04 and ious[20] > 0.97
+
+
+def test_a_round_outline_leaves_the_choice_to_the_correspondences():
+    """Without anything in the outline that turns with the part (a plain disc) the
+    silhouettes cannot tell the answers apart: the most correspondences decide, as they
+    did before the silhouette check."""
+    wrong = _with_outline(_view(0.0, 0.0, 30, seed=4, seen_turned_deg=60.0), nozzle=False)
+    right = _with_outline(_view(90.0, 2.094, 20, seed=5), nozzle=False)
+    query = _outline(_cam(0.0), TRUTH, nozzle=False)
+    pose = estimate_pose_views([wrong, right], **KW, query_mask=query)
+    assert _errors(pose)[1] > 50.0
+    assert [h["chosen"] for h in pose.hypotheses] == [True, False]
+    assert abs(pose.hypotheses[0]["silhouette_iou"] - pose.hypotheses[1]["silhouette_iou"]) < 0.02
+
+
+def test_silhouette_overlap_is_one_for_the_true_motion_and_bounded():
+    from backend.inspection.pose import silhouette_overlap
+
+    taught = _planar(math.radians(90.0), *STATION[:2])
+    T_view = _cam(2.094)
+    view_mask = _outline(T_view, taught, nozzle=True)
+    query = _outline(_cam(0.0), TRUTH, nozzle=True)
+    z = SURFACE + 0.5 * (TOP - SURFACE)
+    kw = dict(camera=CAM, T_base_cam_view=T_view, T_base_cam_now=_cam(0.0), z_m=z)
+    right = silhouette_overlap(view_mask, query, T_delta=TRUTH @ np.linalg.inv(taught), **kw)
+    turned = TRUTH @ _planar(math.radians(60.0), 0.0, 0.0)
+    turned[:3, 3] = TRUTH[:3, 3]
+    wrong = silhouette_overlap(view_mask, query, T_delta=turned @ np.linalg.inv(taught), **kw)
+    assert right > 0.98 and wrong < right - 0.05, (right, wrong)
+    empty = np.zeros_like(query)
+    assert silhouette_overlap(empty, query, T_delta=np.eye(4), **kw) == 0.0
+    assert silhouette_overlap(view_mask, empty, T_delta=np.eye(4), **kw) == 0.0
+
+
+def test_answers_apart_in_position_only_are_left_to_the_correspondences():
+    """Groups that agree in turn but not in position are plane answers thrown off by
+    parallax, not a symmetry: even where the current region fits the smaller group's
+    position better (here it was drawn there), the most correspondences decide."""
+    shift = np.array([0.015, 0.0])
+    right = [_with_outline(_view(90.0, 2.094, 25, seed=2), nozzle=True),
+             _with_outline(_view(180.0, -2.094, 25, seed=3), nozzle=True)]  # fmt: skip
+    off = _with_outline(_view(0.0, 0.0, 12, seed=6, seen_shift=shift), nozzle=True)
+    at_off = TRUTH.copy()
+    at_off[:2, 3] += shift
+    query = _outline(_cam(0.0), at_off, nozzle=True)
+    pose = estimate_pose_views([*right, off], **KW, query_mask=query)
+    pos, yaw = _errors(pose)
+    assert pos < 0.3 and yaw < 0.1, (pos, yaw)
+    (chosen,) = [h for h in pose.hypotheses if h["chosen"]]
+    assert chosen["correspondences"] == 50
+    other = next(h for h in pose.hypotheses if not h["chosen"])
+    assert other["silhouette_iou"] > chosen["silhouette_iou"] + 0.04  # it did fit better
