@@ -187,7 +187,7 @@ def test_a_wrong_turn_with_the_most_correspondences_loses_on_the_silhouette():
     chosen = [h for h in pose.hypotheses if h["chosen"]]
     assert len(pose.hypotheses) == 2 and len(chosen) == 1 and chosen[0]["correspondences"] == 20
     ious = {h["correspondences"]: h["silhouette_iou"] for h in pose.hypotheses}
-    assert ious[20] > ious[30] + 0.04 and ious[20] > 0.97
+    assert ious[20] > ious[30] + 0.05 and ious[20] > 0.97
 
 
 def test_a_round_outline_leaves_the_choice_to_the_correspondences():
@@ -222,21 +222,36 @@ def test_silhouette_overlap_is_one_for_the_true_motion_and_bounded():
     assert silhouette_overlap(view_mask, empty, T_delta=np.eye(4), **kw) == 0.0
 
 
-def test_answers_apart_in_position_only_are_left_to_the_correspondences():
-    """Groups that agree in turn but not in position are plane answers thrown off by
-    parallax, not a symmetry: even where the current region fits the smaller group's
-    position better (here it was drawn there), the most correspondences decide."""
-    shift = np.array([0.015, 0.0])
+def test_answers_that_fit_the_outline_alike_are_left_to_the_correspondences():
+    """A group a few millimetres off (a plane answer thrown off by parallax) fits the
+    outline about as well as the right one, even a little better (the region is drawn
+    halfway to it): the most correspondences decide."""
+    shift = np.array([0.005, 0.0])
     right = [_with_outline(_view(90.0, 2.094, 25, seed=2), nozzle=True),
              _with_outline(_view(180.0, -2.094, 25, seed=3), nozzle=True)]  # fmt: skip
-    off = _with_outline(_view(0.0, 0.0, 12, seed=6, seen_shift=shift), nozzle=True)
-    at_off = TRUTH.copy()
-    at_off[:2, 3] += shift
-    query = _outline(_cam(0.0), at_off, nozzle=True)
-    pose = estimate_pose_views([*right, off], **KW, query_mask=query)
-    pos, yaw = _errors(pose)
-    assert pos < 0.3 and yaw < 0.1, (pos, yaw)
+    off = _with_outline(_view(0.0, 0.0, 12, seed=6, seen_shift=2 * shift), nozzle=True)
+    between = TRUTH.copy()
+    between[:2, 3] += shift
+    pose = estimate_pose_views([*right, off], **KW, query_mask=_outline(_cam(0.0), between, True))
+    assert len(pose.hypotheses) == 2
     (chosen,) = [h for h in pose.hypotheses if h["chosen"]]
     assert chosen["correspondences"] == 50
-    other = next(h for h in pose.hypotheses if not h["chosen"])
-    assert other["silhouette_iou"] > chosen["silhouette_iou"] + 0.04  # it did fit better
+    pos, yaw = _errors(pose)
+    assert pos < 0.3 and yaw < 0.1, (pos, yaw)
+
+
+def test_an_answer_far_off_with_the_most_correspondences_loses_on_the_silhouette():
+    """The bracket's case: the views with the most correspondences agree on a position
+    26 mm off (same turn); their outline does not fit the current region, the right
+    view's does."""
+    shift = np.array([0.026, 0.0])
+    far = [_with_outline(_view(0.0, 0.0, 15, seed=7, seen_shift=shift), nozzle=True),
+           _with_outline(_view(90.0, 2.094, 15, seed=8, seen_shift=shift), nozzle=True)]  # fmt: skip
+    right = _with_outline(_view(180.0, -2.094, 12, seed=9), nozzle=True)
+    query = _outline(_cam(0.0), TRUTH, nozzle=True)
+    assert _errors(estimate_pose_views([*far, right], **KW))[0] > 20.0
+    pose = estimate_pose_views([*far, right], **KW, query_mask=query)
+    pos, yaw = _errors(pose)
+    assert pos < 0.3 and yaw < 0.1, (pos, yaw)
+    ious = {h["correspondences"]: h["silhouette_iou"] for h in pose.hypotheses}
+    assert ious[12] > ious[30] + 0.1
