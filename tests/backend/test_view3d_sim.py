@@ -94,6 +94,8 @@ async def test_view_draws_the_simulated_cell_and_live_frames(sim_cell):
         assert set(before) & set(after) <= set(drawn) <= set(before) | set(after)
         assert len(objects) >= 5
         for i in set(before) & set(after) & set(drawn):
+            if after[i][1] < before[i][1] - 0.01:
+                continue  # recycled in between: carried off the end, put back at the start
             lo = np.minimum(before[i], after[i]) - 0.002
             hi = np.maximum(before[i], after[i]) + 0.002
             assert np.all((drawn[i] >= lo) & (drawn[i] <= hi)), (i, drawn[i], before[i], after[i])
