@@ -80,11 +80,37 @@ def test_models_page_uploads_views_and_sets_thresholds(browser, shared_server, t
     page.fill("#model-threshold", "1.5")
     page.click("#model-threshold-save")
     assert "[0, 1]" in page.text_content("#model-message")
+    # The refresh of the thresholds after this save is held back until the global field
+    # has been typed in (CI once saw the late refresh overwrite what was typed, and the
+    # save then sent the old threshold): what was typed stays.
+    held = []
+
+    def hold(route):
+        if route.request.method == "GET":
+            held.append(route)
+        else:
+            route.continue_()
+
+    page.route("**/api/recognition/settings", hold)
     page.fill("#model-threshold", "0.4")
     page.click("#model-threshold-save")
     page.wait_for_function(
         "() => document.querySelector('#models-table tbody').textContent.includes('0.400')"
     )
+    for _ in range(100):
+        if held:
+            break
+        page.wait_for_timeout(50)
+    assert held, "the page did not refresh the thresholds after the model's was saved"
+    page.fill("#global-threshold", "0.45")
+    for route in held:
+        route.continue_()
+    page.unroute("**/api/recognition/settings")
+    page.wait_for_function(
+        "() => document.querySelector('#threshold-summary').textContent.includes('Global')"
+    )
+    page.wait_for_timeout(300)
+    assert page.input_value("#global-threshold") == "0.45"
     got = httpx.get(f"{server.base}/api/models/{model['id']}", headers=auth, timeout=10).json()
     assert got["threshold"] == 0.4
     # The global threshold by hand, with the reason kept in the audit trail.

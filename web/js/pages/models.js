@@ -291,7 +291,11 @@ async function loadThresholds() {
   const rates = Number.isFinite(d.far) && Number.isFinite(d.frr)
     ? ` FAR ${(d.far * 100).toFixed(2)} %, FRR ${(d.frr * 100).toFixed(2)} % on held-out views.` : "";
   setText(q("#threshold-summary"), `Global threshold ${t.toFixed(3)} (${s.chosen_by}${rule}).${rates}`);
-  q("#global-threshold").value = t.toFixed(3);
+  // A refresh that lands after the engineer began typing a threshold keeps what was typed
+  // (it replaces the field only while the field still shows the last value loaded).
+  const field = q("#global-threshold");
+  if (field.value === "" || field.value === field.dataset.loaded) field.value = t.toFixed(3);
+  field.dataset.loaded = t.toFixed(3);
   const genuine = d.genuine || [];
   const impostor = d.impostor || [];
   const hasScores = genuine.length + impostor.length > 0;
@@ -328,7 +332,7 @@ async function saveGlobal(ev) {
   if (text === "" || !Number.isFinite(v) || v < 0 || v > 1) { say("#threshold-message", `threshold must be in [0, 1], got ${JSON.stringify(text)}`); return; }
   const note = q("#global-note").value.trim().slice(0, 500);
   const r = await call("#threshold-message", "PUT", "/recognition/settings", { global_threshold: v, note, reason: note || "set in the console" });
-  if (r) loadThresholds();
+  if (r) { q("#global-threshold").dataset.loaded = text; loadThresholds(); }
 }
 
 // -- the page ----------------------------------------------------------------------------------
