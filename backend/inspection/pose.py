@@ -49,6 +49,7 @@ With the belt running (constant-speed mode, section 4.1) the pose is that at exp
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -627,7 +628,6 @@ def estimate_pose_views(
         groups_seen.append((group, sum(len(m.inlier_xy) for m, _ in group)))
     # the most correspondences first (ties: the earlier view)
     order = sorted(range(len(groups_seen)), key=lambda i: -groups_seen[i][1])
-    best, best_n = groups_seen[order[0]]
     hyps, chosen = _by_silhouette(
         [groups_seen[i] for i in order], camera=camera, T_base_cam_now=T_base_cam_now,
         z_m=0.5 * (z_plane_m + z_floor_m), query_mask=query_mask,
@@ -648,7 +648,7 @@ def estimate_pose_views(
         )  # fmt: skip
 
     if len(best) == 1 or best_n < MIN_PARALLAX_POINTS:
-        return _with(single(), hyps)
+        return dataclasses.replace(single(), hypotheses=hyps)
     T_ref = np.asarray(lead_m.T_base_obj_taught, dtype=np.float64)
     groups: list[_Group] = []
     for m, _p in best:
@@ -660,7 +660,7 @@ def estimate_pose_views(
     refined = _refine(groups, camera=camera, T_base_cam_now=T_base_cam_now, T_delta0=T_delta0,
                       z_floor_m=z_floor_m, z_top_m=z_plane_m)  # fmt: skip
     if refined is None:
-        return _with(single(), hyps)
+        return dataclasses.replace(single(), hypotheses=hyps)
     T_delta, reproj, n_used = refined
     T = T_delta @ T_ref
     return ObjectPose(T, _yaw_of(T), lead.residual_m, n_used, "parallax", reproj, len(groups), hyps)
@@ -681,11 +681,6 @@ def predict_along_belt(
 
 def _const(mask: NDArray[np.bool_] | None) -> Callable[[], NDArray[np.bool_] | None]:
     return lambda: mask
-
-
-def _with(pose: ObjectPose, hyps: tuple[dict[str, object], ...]) -> ObjectPose:
-    return ObjectPose(pose.T_base_obj, pose.yaw_rad, pose.residual_m, pose.n_points,
-                      pose.method, pose.reproj_px, pose.views, hyps)  # fmt: skip
 
 
 _Hyp = tuple[list[tuple[ViewMatch, ObjectPose]], int]
