@@ -32,7 +32,7 @@ from robot.sim.builder import MjcfBuilder, fmt, quat_from_matrix
 from robot.sim.camera import CameraSpec, Lens
 from robot.sim.catalogue import CATALOGUE
 from robot.sim.gripper import SuctionCupSpec
-from robot.sim.world import add_world
+from robot.sim.world import WorldLayout, add_world
 
 if TYPE_CHECKING:
     from robot.sim.config import SimConfig
@@ -353,16 +353,38 @@ def add_suction_cup(b: MjcfBuilder, flange: ET.Element, cup: SuctionCupSpec) -> 
     ET.SubElement(payload, "inertial", pos="0 0 0", mass="1e-6", diaginertia="1e-9 1e-9 1e-9")
 
 
-def _add_catalogue(b: MjcfBuilder, slots: int) -> dict[str, tuple[str, ...]]:
+def texture_tint(layout: WorldLayout) -> float:
+    """Grey level of a textured catalogue material's ``rgba``: the lighting of a face at the
+    layout's default lights stays below MuJoCo's clamp.
+
+    MuJoCo's renderer lights a textured face with the material's ``rgba`` as its colour,
+    clamps the sum of the ambient and every light's terms at 1 and only then multiplies by
+    the texture.  At full ``rgba`` a face lit by more than 1 in all rendered as if lit by 1,
+    so the picture did not scale with the light: the valve block's top face under half light
+    was 1/1.38 of its normal level while the belt (untextured: its colour enters the sum
+    before the clamp) was 1/2, and a dimmer light changed the shading between the part's
+    faces, which no gain undoes.  The bound is the headlight's ambient plus every lamp's
+    diffuse (the most a face can receive); a tint of its inverse keeps the sum below 1 at
+    the default intensities and dimmer, so a textured part scales with the light as the
+    belt does.  Lights raised above their defaults can reach the clamp again."""
+    bound = layout.ambient + sum(spec.diffuse for spec in layout.lights)
+    return min(1.0, 1.0 / bound) if bound > 0 else 1.0
+
+
+def _add_catalogue(b: MjcfBuilder, slots: int, layout: WorldLayout) -> dict[str, tuple[str, ...]]:
     out = {}
+    tint = texture_tint(layout)
     for name, entry in CATALOGUE.items():
         geo = entry.geometry()
         mats = {}
         for key, mat in geo.materials.items():
             tex = b.texture(f"{name}_{key}", mat.texture) if mat.texture is not None else None
+            rgba = mat.rgba
+            if tex is not None:
+                rgba = (mat.rgba[0] * tint, mat.rgba[1] * tint, mat.rgba[2] * tint, mat.rgba[3])
             mats[key] = b.material(
                 f"{name}_{key}",
-                rgba=mat.rgba,
+                rgba=rgba,
                 texture=tex,
                 specular=mat.specular,
                 shininess=mat.shininess,
@@ -419,6 +441,6 @@ def build_cell(config: SimConfig, model: ArmModel = ASEA) -> CellModel:
     flange = add_arm(b, model, config.dynamics, config.camera, lens)
     add_suction_cup(b, flange, config.gripper)
     cleats = add_world(b, config.layout)
-    slots = _add_catalogue(b, config.slots_per_object)
+    slots = _add_catalogue(b, config.slots_per_object, config.layout)
     boards = {spec.kind: add_board_body(b, spec, f"board_{spec.kind}") for spec in config.boards}
     return CellModel(b.to_xml(), b.assets, slots, tuple(cleats), boards)

@@ -55,6 +55,20 @@ async def _until(predicate, timeout: float = 10.0, what: str = "condition") -> N
         await asyncio.sleep(0.02)
 
 
+def _shown(panel) -> set[str]:
+    """The panel's controls, read while no rebuild is under way: a sign-out drops the
+    grant first (every guarded callback refuses from then on) and then rebuilds the
+    controls on viser's thread, so the two can be seen apart for a moment."""
+    with panel._lock:
+        return set(panel.controls)
+
+
+async def _anonymous(panel, what: str) -> None:
+    await _until(
+        lambda: panel.grant is None and _shown(panel) == ANONYMOUS_CONTROLS, what=what
+    )
+
+
 async def _panel(view: View3D, known: set[int]):
     await _until(lambda: set(view.panels) - known, what="the client's panel")
     (cid,) = set(view.panels) - known
@@ -134,8 +148,7 @@ async def test_a_signed_in_operator_moves_the_arm_and_loses_control_on_revocatio
             user = await s.get(User, 2)
             assert user is not None and user.name == "test-operator"
             await revoke_tokens(s, user)
-        await _until(lambda: panel.grant is None, what="revocation to reach the panel")
-        assert set(panel.controls) == ANONYMOUS_CONTROLS
+        await _anonymous(panel, "revocation to reach the panel")
         assert "revoked" in panel.controls["message"].content
 
 
@@ -149,8 +162,7 @@ async def test_a_viewer_may_press_estop_only_and_sign_out_removes_it(rig):
         await client.press(uuid_of(panel.controls["estop"]))
         await _until(lambda: cell.driver.state.estopped, what="the e-stop")
         await client.press(uuid_of(panel.controls["sign_out"]))
-        await _until(lambda: panel.grant is None, what="sign-out")
-        assert set(panel.controls) == ANONYMOUS_CONTROLS
+        await _anonymous(panel, "sign-out")
     assert cell.driver.state.estopped  # nobody without the operator role reset it
 
 

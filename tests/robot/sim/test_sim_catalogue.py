@@ -9,7 +9,9 @@ import pytest
 from robot.sim import CATALOGUE, SimEngine
 from robot.sim.catalogue import WHEELS
 from robot.sim.imaging import Imager
+from robot.sim.mjcf import texture_tint
 from robot.sim.poses import viewpoint
+from robot.sim.world import WorldLayout
 
 
 def test_catalogue_has_the_required_objects():
@@ -82,12 +84,16 @@ def test_look_alike_wheels_are_identical_from_the_top(views):
 def test_look_alike_wheels_differ_from_the_side(views):
     a = views[("wheel-5spoke", "side")]
     b = views[("wheel-5spoke-redband", "side")]
+    # Grey levels scale with the textures' tint (robot.sim.mjcf.texture_tint, 2/3 at the
+    # default lights; the levels below were set at no tint): the tread is lit at a grazing
+    # angle, below MuJoCo's clamp with or without the tint.
+    k = texture_tint(WorldLayout())
     diff = np.abs(a.astype(float) - b.astype(float)).sum(axis=2)
-    assert (diff > 60).sum() > 500  # the red band and its lettering on the near tread
+    assert (diff > 60 * k).sum() > 500  # the red band and its lettering on the near tread
 
     def red(im: np.ndarray) -> int:  # the band is dark red at this grazing angle
         r, g = im[..., 0].astype(int), im[..., 1].astype(int)
-        return int(((r > 2 * g + 20) & (r > 60)).sum())
+        return int(((r > 2 * g + 20 * k) & (r > 60 * k)).sum())
 
     assert red(b) > red(a) + 250
 
