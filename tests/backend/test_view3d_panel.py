@@ -64,9 +64,7 @@ def _shown(panel) -> set[str]:
 
 
 async def _anonymous(panel, what: str) -> None:
-    await _until(
-        lambda: panel.grant is None and _shown(panel) == ANONYMOUS_CONTROLS, what=what
-    )
+    await _until(lambda: panel.grant is None and _shown(panel) == ANONYMOUS_CONTROLS, what=what)
 
 
 async def _panel(view: View3D, known: set[int]):
