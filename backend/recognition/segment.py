@@ -18,9 +18,10 @@ initialised from the difference with the empty-belt background.
    the bolt circle registered a sixth of a turn off).  The parts of the step-1 blob
    outside the snake's region that are not the belt in shadow (:func:`cut_off_parts`)
    are added back, joined by their necks.  Overlap with the true silhouette in the
-   simulator's top views (``python -m benchmarks.segment_parts``, 4 yaws per part): pipe
-   flange 0.921 -> 0.981, gear housing 0.912 -> 0.970, bracket upright 0.927 -> 0.975;
-   the wheels and the other parts unchanged.
+   simulator's top views (``python -m benchmarks.segment_parts``, 4 yaws per part, snake
+   alone -> with the cut-off parts): pipe flange 0.921 -> 0.981, gear housing 0.912 ->
+   0.969, bracket upright 0.877 -> 0.973, bracket flat 0.895 -> 0.960; the wheels and the
+   other parts unchanged.
 """
 
 from __future__ import annotations
