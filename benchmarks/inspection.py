@@ -250,6 +250,11 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
                 await _save_taught(args, tmp / "bench.db", threshold, rt.live_index.version)
         err.print(f"threshold: {threshold}")
         ctx = await service.context(rt)
+        # as a continuous run does before its first object (service.start_run)
+        t_warm = time.perf_counter()
+        warmed = await service.warm_feature_heights(ctx)
+        err.print(f"taught top views triangulated: {warmed} models in "
+                  f"{time.perf_counter() - t_warm:.1f} s")  # fmt: skip
 
         def pick_name() -> str:
             if args.parts:  # a diagnostic run on a few catalogue entries

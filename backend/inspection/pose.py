@@ -203,6 +203,7 @@ def estimate_pose(
     view_shape: tuple[int, int],
     inlier_xy: NDArray[np.float64] | None = None,
     z_floor_m: float | None = None,
+    heights: NDArray[np.float64] | None = None,
 ) -> ObjectPose:
     """The object's pose now from the homography of the trained top view (module docstring).
 
@@ -228,6 +229,10 @@ def estimate_pose(
         refined by :func:`refine_with_parallax`.
     z_floor_m : float, optional
         Lowest height a feature can have (the belt surface), metres.
+    heights : ndarray of shape (N,), optional
+        Base-frame heights of ``inlier_xy``'s trained features triangulated from the taught
+        views (:mod:`backend.inspection.structure`; ``nan`` where unknown): the refinement
+        holds those features near them.
 
     Raises
     ------
@@ -257,7 +262,7 @@ def estimate_pose(
         pairs = np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4)
         if len(pairs) >= MIN_PARALLAX_POINTS and np.all(np.isfinite(pairs)):
             refined = _refine(
-                [(pairs, T_base_cam_view, np.eye(4))], camera=camera,
+                [(pairs, T_base_cam_view, np.eye(4), heights)], camera=camera,
                 T_base_cam_now=T_base_cam_now, T_delta0=T_delta, z_floor_m=z_floor_m,
                 z_top_m=z_plane_m,
             )  # fmt: skip
@@ -309,6 +314,7 @@ def refine_with_parallax(
     T_delta0: NDArray[np.float64],
     z_floor_m: float,
     z_top_m: float,
+    heights: NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.float64], float] | None:
     """The planar motion ``T_delta`` (taught to now, base frame) fitted to correspondences
     with each feature at its own height (module docstring); ``None`` when the fit fails.
@@ -317,15 +323,19 @@ def refine_with_parallax(
     of the feature on its trained viewing ray, bounded to ``[z_floor_m, z_top_m]`` (1 mm
     slack each side).  Residuals: the feature moved by the motion and projected into the
     current camera against where it was seen, in undistorted pixels (robust soft-L1 loss,
-    :data:`PARALLAX_F_SCALE_PX`), and a weak pull of every height towards the top face
-    (0.1 px per 50 mm) so that heights the views cannot tell apart (no parallax: the two
-    cameras at the same place relative to the object) stay where the plane fit put them
-    instead of wandering.  Returns ``(T_delta, RMS reprojection error in px)``; ``None``
+    :data:`PARALLAX_F_SCALE_PX`), and a pull of every height towards a prior.  Where the
+    taught views triangulated the feature (``heights``, :mod:`backend.inspection.structure`)
+    the prior is that height, held at 1 px per mm (:data:`W_TRIANGULATED`): one current view
+    cannot tell a feature's height from the object's shift when the camera moved along the
+    belt relative to it, the taught views can.  Elsewhere it is the top face, pulled weakly
+    (0.1 px per 50 mm, :data:`W_UNKNOWN`) so that heights the views cannot tell apart stay
+    where the plane fit put them instead of wandering.  Returns ``(T_delta, RMS reprojection error in px)``; ``None``
     when the solver fails, or when it moved the start by more than
     :data:`MAX_REFINE_SHIFT_M` / :data:`MAX_REFINE_YAW_RAD`.
     """
     refined = _refine(
-        [(np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4), T_base_cam_view, np.eye(4))],
+        [(np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4), T_base_cam_view, np.eye(4),
+          heights)],
         camera=camera, T_base_cam_now=T_base_cam_now, T_delta0=T_delta0, z_floor_m=z_floor_m,
         z_top_m=z_top_m,
     )  # fmt: skip
@@ -333,9 +343,18 @@ def refine_with_parallax(
 
 
 #: One trained view's share of a joint fit: its correspondences (trained ``x, y``, current
-#: ``x, y``), its camera pose, and the planar map from its teach-time object frame to the
-#: reference view's (``T_taught_ref @ inv(T_taught_view)``; identity for the reference).
-_Group = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+#: ``x, y``), its camera pose, the planar map from its teach-time object frame to the
+#: reference view's (``T_taught_ref @ inv(T_taught_view)``; identity for the reference),
+#: and the triangulated heights of its trained features (``nan`` where unknown) or None.
+_Group = tuple[
+    NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None
+]
+
+#: Weight of a triangulated height's prior, pixels per metre: a millimetre off it costs as
+#: much as a pixel of reprojection error (the triangulation's own error is about that).
+W_TRIANGULATED = 1000.0
+#: Weight of the pull of a height the views did not triangulate towards the top face.
+W_UNKNOWN = 2.0
 
 
 def _refine(
@@ -357,9 +376,16 @@ def _refine(
 
     per_view = max(MIN_PARALLAX_POINTS, MAX_PARALLAX_POINTS // max(1, len(groups)))
     P0, D = [], []
-    obs_all = []
-    for pairs, T_view, T_align in groups:
+    obs_all, z_prior, w_prior = [], [], []
+    for pairs, T_view, T_align, known in groups:
         pairs = pairs[:per_view]
+        zk = np.full(len(pairs), np.nan) if known is None else np.asarray(known, np.float64)
+        zk = zk[: len(pairs)]
+        if len(zk) != len(pairs):
+            zk = np.full(len(pairs), np.nan)
+        tri = np.isfinite(zk)
+        z_prior.append(np.where(tri, zk, z_top_m))
+        w_prior.append(np.where(tri, W_TRIANGULATED, W_UNKNOWN))
         Tv = np.asarray(T_view, dtype=np.float64)
         d = _rays(pairs[:, :2], camera, Tv)
         if np.any(d[:, 2] > -1e-6):
@@ -375,12 +401,13 @@ def _refine(
             ).reshape(-1, 2)
         )
     C0, d, obs = np.concatenate(P0), np.concatenate(D), np.concatenate(obs_all)
+    zp, wp = np.concatenate(z_prior), np.concatenate(w_prior)
     n = len(d)
     Tn = np.asarray(T_base_cam_now, dtype=np.float64)
     f = float(camera.K[0, 0])
     Rn_T, Cn = Tn[:3, :3].T, Tn[:3, 3]
     lo, hi = z_floor_m - 0.001, z_top_m + 0.001
-    w_prior = 1.0 / 0.5  # px per metre of height away from the top face
+    zp = np.clip(zp, lo, hi)
 
     def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
         yaw, tx, ty, z = x[0], x[1], x[2], x[3:]
@@ -391,7 +418,7 @@ def _refine(
         pc = (Q - Cn) @ Rn_T.T
         pc_z = np.where(np.abs(pc[:, 2]) < 1e-9, 1e-9, pc[:, 2])
         uv = pc[:, :2] / pc_z[:, None]
-        return np.concatenate([f * (uv - obs).ravel(), w_prior * (z - z_top_m)])
+        return np.concatenate([f * (uv - obs).ravel(), wp * (z - zp)])
 
     sparsity = lil_matrix((3 * n, 3 + n), dtype=int)
     rows = np.arange(n)
@@ -400,7 +427,7 @@ def _refine(
     sparsity[2 * rows + 1, 3 + rows] = 1
     sparsity[2 * n + rows, 3 + rows] = 1
     yaw0 = math.atan2(T_delta0[1, 0], T_delta0[0, 0])
-    x0 = np.concatenate([[yaw0, T_delta0[0, 3], T_delta0[1, 3]], np.full(n, z_top_m)])
+    x0 = np.concatenate([[yaw0, T_delta0[0, 3], T_delta0[1, 3]], zp])
     lb = np.concatenate([[-np.inf] * 3, np.full(n, lo)])
     ub = np.concatenate([[np.inf] * 3, np.full(n, hi)])
     x0[3:] = np.clip(x0[3:], lo + 1e-9, hi - 1e-9)
@@ -447,6 +474,9 @@ class ViewMatch:
         The model frame as the view saw it (the station, turned by the view's yaw).
     view_mask : ndarray of shape (H, W), bool, or None
     view_shape : (int, int)
+    heights : ndarray of shape (N,) or None
+        Triangulated base-frame heights of ``inlier_xy``'s trained features (``nan`` where
+        unknown; :mod:`backend.inspection.structure`), or ``None``.
     """
 
     H: NDArray[np.float64]
@@ -455,6 +485,7 @@ class ViewMatch:
     T_base_obj_taught: NDArray[np.float64]
     view_mask: NDArray[np.bool_] | None
     view_shape: tuple[int, int]
+    heights: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -644,7 +675,7 @@ def estimate_pose_views(
             lead_m.H, camera=camera, T_base_cam_view=lead_m.T_base_cam_view,
             T_base_cam_now=T_base_cam_now, T_base_obj_taught=lead_m.T_base_obj_taught,
             z_plane_m=z_plane_m, view_mask=lead_m.view_mask, view_shape=lead_m.view_shape,
-            inlier_xy=lead_m.inlier_xy, z_floor_m=z_floor_m,
+            inlier_xy=lead_m.inlier_xy, z_floor_m=z_floor_m, heights=lead_m.heights,
         )  # fmt: skip
 
     if len(best) == 1 or best_n < MIN_PARALLAX_POINTS:
@@ -655,7 +686,7 @@ def estimate_pose_views(
         pairs = np.asarray(m.inlier_xy, dtype=np.float64).reshape(-1, 4)
         if len(pairs) and np.all(np.isfinite(pairs)):
             A = T_ref @ np.linalg.inv(np.asarray(m.T_base_obj_taught, dtype=np.float64))
-            groups.append((pairs, m.T_base_cam_view, A))
+            groups.append((pairs, m.T_base_cam_view, A, m.heights))
     T_delta0 = lead.T_base_obj @ np.linalg.inv(T_ref)
     refined = _refine(groups, camera=camera, T_base_cam_now=T_base_cam_now, T_delta0=T_delta0,
                       z_floor_m=z_floor_m, z_top_m=z_plane_m)  # fmt: skip

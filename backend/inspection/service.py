@@ -56,6 +56,7 @@ from backend.inspection.pose import (
     predict_along_belt,
 )
 from backend.inspection.roi import SideRoi, height_bound, side_query, side_roi
+from backend.inspection.structure import FeatureHeights, HeightCache, TaughtTopView
 from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
 from backend.recognition import thresholds
 from backend.recognition.images import encode_jpeg
@@ -842,6 +843,9 @@ async def _pick_stage(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], po
 #: the model that verify best on the top view), and the fewest inliers a view needs.
 POSE_MAX_VIEWS = 6
 POSE_MIN_INLIERS = 6
+#: Triangulated feature heights of the models' taught top views, per process (keyed by the
+#: views' features and poses and the calibration, so a model taught again gets new ones).
+FEATURE_HEIGHTS = HeightCache()
 
 
 async def _pose(
@@ -885,12 +889,18 @@ async def _pose(
     from backend.recognition.images import mask_from_png
 
     def taught_at(yaw: float) -> NDArray[np.float64]:
-        T = np.eye(4)
-        co, si = math.cos(yaw), math.sin(yaw)
-        T[:2, :2] = [[co, -si], [si, co]]
-        T[:3, 3] = ctx.station
-        return T
+        return _taught_at(ctx, yaw)
 
+    def heights_of_inliers() -> dict[int, NDArray[np.float64]]:
+        # the heights of each candidate's inlier features, looked up by their trained pixels
+        fh, present = _feature_heights(ctx, model, height, {v: (j, y) for v, (j, y, _m, _s)
+                                                             in stored.items()})  # fmt: skip
+        return {
+            c.view_id: fh.of(c.view_id, c.inlier_xy[:, :2], present[c.view_id].features.keypoints.xy)
+            for c in cands if c.inlier_xy is not None and c.view_id in present
+        }  # fmt: skip
+
+    known = await asyncio.to_thread(heights_of_inliers)
     matches = []
     for c in cands:
         joints, yaw, mask_png, shape = stored.get(c.view_id, (None, 0.0, None, (0, 0)))
@@ -898,7 +908,7 @@ async def _pose(
             continue  # deleted meanwhile, or uploaded without a camera pose
         matches.append(ViewMatch(
             c.H, c.inlier_xy, _T_cam(joints, ctx.T_ee_cam), taught_at(yaw),
-            None if mask_png is None else mask_from_png(mask_png), shape,
+            None if mask_png is None else mask_from_png(mask_png), shape, known.get(c.view_id),
         ))  # fmt: skip
     # Every taught top view of the model with a region judges answers that disagree by
     # their silhouettes (the region decoded only for the views nearest an answer's).
@@ -913,6 +923,57 @@ async def _pose(
         z_plane_m=ctx.surface_z + height, z_floor_m=ctx.surface_z, query_mask=query_mask,
         silhouettes=silhouettes,
     )  # fmt: skip
+
+
+def _taught_at(ctx: _Ctx, yaw: float) -> NDArray[np.float64]:
+    """The model frame as a teach saw it: the station, turned by the teach's yaw."""
+    T = np.eye(4)
+    co, si = math.cos(yaw), math.sin(yaw)
+    T[:2, :2] = [[co, -si], [si, co]]
+    T[:3, 3] = ctx.station
+    return T
+
+
+def _feature_heights(
+    ctx: _Ctx, model: str, height: float, poses: dict[int, tuple[Any, float]]
+) -> tuple[FeatureHeights, dict[int, Any]]:
+    """The triangulated heights of ``model``'s taught top views (:data:`FEATURE_HEIGHTS`:
+    computed once per set of views and calibration) and the index's views by id; ``poses``
+    gives each view's stored joints and teach yaw (views without joints were uploaded and
+    take no part).  Runs in a worker thread."""
+    live = ctx.rt.live_index
+    with live.reading() as index:
+        present = {v.view_id: v for v in index.views_of(model, viewpoint=1)}
+    taught = [
+        TaughtTopView(vid, present[vid].features, _T_cam(j, ctx.T_ee_cam), _taught_at(ctx, y))
+        for vid, (j, y) in sorted(poses.items()) if j is not None and vid in present
+    ]  # fmt: skip
+    fh = FEATURE_HEIGHTS.get(taught, camera=ctx.camera, z_floor_m=ctx.surface_z,
+                             z_top_m=ctx.surface_z + height)  # fmt: skip
+    return fh, present
+
+
+async def warm_feature_heights(ctx: _Ctx) -> int:
+    """Triangulate every model's taught top views before the first inspection needs them
+    (up to a second or two per model for the wheels on this machine's cores); returns the
+    models done.  A model without a stored height is skipped (its pose is not computed)."""
+    live = ctx.rt.live_index
+    done = 0
+    for m in list(live.models().values()):
+        if m.height_m is None:
+            continue
+        ids = live.views_of(m.id)
+        if not ids:
+            continue
+        async with ctx.rt.database.session() as session:
+            rows = await session.execute(
+                select(TrainedView.id, TrainedView.joints, TrainedView.yaw_rad)
+                .where(TrainedView.id.in_(ids), TrainedView.viewpoint == 1)
+            )  # fmt: skip
+            poses = {int(v): (j, float(y)) for v, j, y in rows.all()}
+        await asyncio.to_thread(_feature_heights, ctx, m.name, float(m.height_m), poses)
+        done += 1
+    return done
 
 
 def _bin_for(rt: Any, part: str | None) -> Any:
@@ -1182,6 +1243,11 @@ def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun
         ctx = await recovery.retry_database(
             "reading the calibration", lambda: context(rt), on_wait=lambda m: job.report(0.0, m)
         )
+        job.report(0.0, "triangulating the models' taught top views")
+        try:
+            await warm_feature_heights(ctx)
+        except Exception:  # the pose triangulates on first use instead
+            log.warning("could not triangulate the taught views ahead of the run", exc_info=True)
         decisions: dict[str, int] = {}
         last = ""
         while not run.stop_requested and (count is None or run.done < count):
