@@ -43,6 +43,12 @@ the most correspondences (each of the flange's bolts looks like the next), the a
 are also judged by the outline: the trained region nearest in viewpoint, moved by each
 answer, against the current region (:func:`silhouette_overlap`).
 
+The heights need not be guessed per inspection: they are the model's.  The taught top
+views were taken from known camera poses with the object in known frames, so features seen
+in several of them are triangulated once (:mod:`backend.inspection.structure`) and the fit
+holds each such feature near its triangulated height (:data:`W_TRIANGULATED`); only the
+features no pair of taught views agreed on keep the weak pull towards the top face.
+
 With the belt running (constant-speed mode, section 4.1) the pose is that at exposure;
 :func:`predict_along_belt` moves it forward by the belt's travel since then.
 """
@@ -128,6 +134,8 @@ class ObjectPose:
     hypotheses: tuple[dict[str, object], ...] = ()
     """With several views: every group of agreeing views considered (its plane answer,
     views, correspondences, silhouette overlap) and which one the pose came from."""
+    triangulated: int = 0
+    """Correspondences of the fit held at a height triangulated from the taught views."""
 
     def public(self) -> dict[str, object]:
         """JSON-friendly form (metres and radians)."""
@@ -141,6 +149,7 @@ class ObjectPose:
             "reproj_px": self.reproj_px,
             "views": self.views,
             "hypotheses": list(self.hypotheses),
+            "triangulated": self.triangulated,
         }
 
 
@@ -257,7 +266,7 @@ def estimate_pose(
     T_delta = np.eye(4)
     T_delta[:2, :2] = R2
     T_delta[:2, 3] = t2
-    method, n, reproj = "plane", len(src), None
+    method, n, reproj, n_tri = "plane", len(src), None, 0
     if inlier_xy is not None and z_floor_m is not None:
         pairs = np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4)
         if len(pairs) >= MIN_PARALLAX_POINTS and np.all(np.isfinite(pairs)):
@@ -267,10 +276,10 @@ def estimate_pose(
                 z_top_m=z_plane_m,
             )  # fmt: skip
             if refined is not None:
-                T_delta, reproj, n = refined
+                T_delta, reproj, n, n_tri = refined
                 method = "parallax"
     T = T_delta @ np.asarray(T_base_obj_taught, dtype=np.float64)
-    return ObjectPose(T, _yaw_of(T), resid, n, method, reproj)
+    return ObjectPose(T, _yaw_of(T), resid, n, method, reproj, triangulated=n_tri)
 
 
 def _plane_fit(
@@ -365,12 +374,13 @@ def _refine(
     T_delta0: NDArray[np.float64],
     z_floor_m: float,
     z_top_m: float,
-) -> tuple[NDArray[np.float64], float, int] | None:
+) -> tuple[NDArray[np.float64], float, int, int] | None:
     """:func:`refine_with_parallax` over the correspondences of one or several trained
     views at once: one motion of the reference view's object frame, each feature on its
     own view's trained ray, moved into the reference frame by its group's map first.
-    Returns ``(T_delta, RMS reprojection error in px, correspondences used)``: at most
-    :data:`MAX_PARALLAX_POINTS` shared out between the views."""
+    Returns ``(T_delta, RMS reprojection error in px, correspondences used, of them held
+    at a triangulated height)``: at most :data:`MAX_PARALLAX_POINTS` shared out between
+    the views."""
     from scipy.optimize import least_squares
     from scipy.sparse import lil_matrix
 
@@ -455,7 +465,7 @@ def _refine(
     ):
         return None
     reproj = float(np.sqrt(np.mean(sol.fun[: 2 * n].reshape(-1, 2) ** 2) * 2))
-    return T, reproj, n
+    return T, reproj, n, int(np.count_nonzero(wp == W_TRIANGULATED))
 
 
 @dataclass(frozen=True, eq=False)
@@ -692,9 +702,10 @@ def estimate_pose_views(
                       z_floor_m=z_floor_m, z_top_m=z_plane_m)  # fmt: skip
     if refined is None:
         return dataclasses.replace(single(), hypotheses=hyps)
-    T_delta, reproj, n_used = refined
+    T_delta, reproj, n_used, n_tri = refined
     T = T_delta @ T_ref
-    return ObjectPose(T, _yaw_of(T), lead.residual_m, n_used, "parallax", reproj, len(groups), hyps)
+    return ObjectPose(T, _yaw_of(T), lead.residual_m, n_used, "parallax", reproj, len(groups), hyps,
+                      n_tri)  # fmt: skip
 
 
 def predict_along_belt(
@@ -706,8 +717,7 @@ def predict_along_belt(
     d = np.array([0.0, 1.0, 0.0]) if direction is None else np.asarray(direction, dtype=float)
     T = pose.T_base_obj.copy()
     T[:3, 3] += travel_m * d / np.linalg.norm(d)
-    return ObjectPose(T, pose.yaw_rad, pose.residual_m, pose.n_points, pose.method,
-                      pose.reproj_px, pose.views)  # fmt: skip
+    return dataclasses.replace(pose, T_base_obj=T)
 
 
 def _const(mask: NDArray[np.bool_] | None) -> Callable[[], NDArray[np.bool_] | None]:

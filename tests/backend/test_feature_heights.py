@@ -173,6 +173,7 @@ def test_a_pose_with_triangulated_heights_is_right_where_the_free_heights_trade_
         return 1e3 * float(np.linalg.norm(p.T_base_obj[:2, 3] - truth[:2, 3]))
 
     assert known.method == free.method == "parallax"
+    assert (known.triangulated, free.triangulated) == (60, 0)
     assert err(known) < 0.5 and err(free) > 2.0 * err(known) + 0.5, (err(free), err(known))
 
 

@@ -118,6 +118,8 @@ def test_teach_then_continuous_inspection_matches_truth(cell):
         assert row["viewpoints_visited"][0] == 1 and row["policy"] == "two-views"
         assert set(row["durations"]) >= {"move", "segment", "match", "decide"}
         assert row["pose"] is not None, row["reason"]
+        # the fit held features at the heights the taught top views triangulated
+        assert row["pose"]["triangulated"] > 0, row["pose"]
         T = np.array(row["pose"]["T_base_obj"])
         Tt = np.array(row["truth"]["T_base_obj"])
         assert np.linalg.norm(T[:2, 3] - Tt[:2, 3]) < 0.004, (name, T[:3, 3], Tt[:3, 3])
