@@ -481,7 +481,7 @@ def main(argv: list[str] | None = None) -> None:
                          "seconds while the belt moves: real time by default)")  # fmt: skip
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument(
-        "--teach-yaws", type=int, default=4, help="teach rounds per model (object yaws)"
+        "--teach-yaws", type=int, default=8, help="teach rounds per model (object yaws)"
     )
     ap.add_argument(
         "--policies", default="naive,two-views,best-next",

@@ -8,8 +8,8 @@ belt looks like a shift), so that fit leans on a weak pull of every height towar
 face and on the other trained views' correspondences.  But a feature's height is a property
 of the model, not of the inspection: every taught top view was taken from a known camera
 pose (its joints through the hand-eye transform) with the object in a known frame (the
-station turned by the teach's yaw), twelve views from camera places up to about 100 mm
-apart relative to the object.  A feature matched between two of them is triangulated in the
+station turned by the teach's yaw): three camera rolls per teach round, 12 or 24 views
+from camera places up to about 100 mm apart relative to the object.  A feature matched between two of them is triangulated in the
 object's frame (the midpoint of the two viewing rays' common perpendicular; Hartley and
 Zisserman, *Multiple View Geometry*, 2nd ed., 2003, chapter 12), and the fit then holds it
 near that height instead of guessing.
