@@ -75,6 +75,9 @@ MAX_SPREAD_M = 0.002
 HEIGHT_SLACK_M = 0.003
 #: Most taught views triangulated together (pairs grow as the square).
 MAX_VIEWS = 24
+#: Features of one view matched at a time against the other's (bounds the working arrays:
+#: a block of rows by the other view's features, at most 4,000 each).
+CHUNK_ROWS = 256
 
 
 @dataclass(frozen=True, eq=False)
@@ -264,25 +267,37 @@ def _guided_matches(
     A, B = ends
     Pj = Dj @ R_obj_camj
     nj = Pj[:, :2] / Pj[:, 2:3]
-    # distance of every j point from every i segment, pixels
     AB = B - A
     L2 = np.maximum(np.sum(AB * AB, axis=1), 1e-18)
-    rel = nj[None, :, :] - A[:, None, :]
-    u = np.clip(np.einsum("ijk,ik->ij", rel, AB) / L2[:, None], 0.0, 1.0)
-    diff = rel - u[..., None] * AB[:, None, :]
-    near = (f * np.sqrt(np.sum(diff * diff, axis=2)) <= EPIPOLAR_PX) & ok_ray[:, None]
-    if not near.any():
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    dd = _distances(di, dj)
-    glob_i = dd.min(axis=1)
-    glob_j = dd.min(axis=0)
-    dc = np.where(near, dd, np.inf)
-    order = np.argsort(dc, axis=1)[:, :2]
-    rows = np.arange(len(dc))
-    d1 = dc[rows, order[:, 0]]
-    d2 = dc[rows, order[:, 1]] if dc.shape[1] > 1 else np.full(len(dc), np.inf)
-    b1 = order[:, 0]
-    back = np.argmin(dc, axis=0)
+    n_i, n_j = len(A), len(nj)
+    d1, d2 = np.full(n_i, np.inf), np.full(n_i, np.inf)
+    b1, glob_i = np.zeros(n_i, np.int64), np.full(n_i, np.inf)
+    glob_j, best_j = np.full(n_j, np.inf), np.full(n_j, np.inf)
+    back = np.full(n_j, -1, np.int64)
+    # rows of i in blocks, so that the (block, N_j) arrays stay small at any feature count
+    for r0 in range(0, n_i, CHUNK_ROWS):
+        r1 = min(n_i, r0 + CHUNK_ROWS)
+        # distance of every j point from each i segment of the block, pixels
+        rel = nj[None, :, :] - A[r0:r1, None, :]
+        u = np.clip(np.einsum("ijk,ik->ij", rel, AB[r0:r1]) / L2[r0:r1, None], 0.0, 1.0)
+        diff = rel - u[..., None] * AB[r0:r1, None, :]
+        near = (f * np.sqrt(np.sum(diff * diff, axis=2)) <= EPIPOLAR_PX) & ok_ray[r0:r1, None]
+        dd = _distances((di[0][r0:r1], di[1]), dj)
+        glob_i[r0:r1] = dd.min(axis=1)
+        np.minimum(glob_j, dd.min(axis=0), out=glob_j)
+        dc = np.where(near, dd, np.inf)
+        rows = np.arange(r1 - r0)
+        order = np.argsort(dc, axis=1)[:, :2]
+        b1[r0:r1] = order[:, 0]
+        d1[r0:r1] = dc[rows, order[:, 0]]
+        if n_j > 1:
+            d2[r0:r1] = dc[rows, order[:, 1]]
+        col = np.argmin(dc, axis=0)
+        col_d = dc[col, np.arange(n_j)]
+        better = col_d < best_j
+        best_j[better] = col_d[better]
+        back[better] = col[better] + r0
+    rows = np.arange(n_i)
     keep = (
         np.isfinite(d1)
         & (d1 < RATIO * d2)

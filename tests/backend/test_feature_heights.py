@@ -203,3 +203,18 @@ def test_the_cache_size_is_bounded(bad):
 def test_heights_must_be_finite_and_ordered(lo, hi):
     with pytest.raises(ValueError, match="z_floor_m"):
         triangulate_heights([], camera=CAM, z_floor_m=lo, z_top_m=hi)
+
+
+def test_matching_in_blocks_of_rows_gives_the_same_heights(monkeypatch):
+    """The guided matching works through one view's features in blocks (bounded memory at
+    any feature count); the blocks must not change the answer."""
+    import backend.inspection.structure as structure
+
+    pts = _points(10, 90)
+    views, _ = _views(pts, _descriptors(90, 10), seed=11)
+    whole = triangulate_heights(views, **KW)
+    monkeypatch.setattr(structure, "CHUNK_ROWS", 7)
+    blocks = triangulate_heights(views, **KW)
+    assert whole.triangulated > 0
+    for vid, z in whole.by_view.items():
+        assert np.array_equal(z, blocks.by_view[vid], equal_nan=True)
