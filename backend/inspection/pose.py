@@ -78,6 +78,7 @@ __all__ = [
     "predict_along_belt",
     "refine_with_parallax",
     "silhouette_overlap",
+    "viewing_rays",
 ]
 
 #: Largest residual of the planar fit accepted, metres.
@@ -304,10 +305,11 @@ def _plane_fit(
     return R2, t2, resid
 
 
-def _rays(
+def viewing_rays(
     px: NDArray[np.float64], camera: PinholeCamera, T_base_cam: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """Undistorted viewing rays (N, 3) of pixels in the base frame (not normalised)."""
+    """Undistorted viewing rays (N, 3) of pixels in the frame ``T_base_cam`` maps the camera
+    into (the base frame here; not normalised)."""
     pts = np.asarray(px, dtype=np.float64).reshape(-1, 1, 2)
     norm = cv2.undistortPoints(pts, camera.K, np.asarray(camera.dist, dtype=np.float64))
     rays = np.concatenate([norm.reshape(-1, 2), np.ones((len(pts), 1))], axis=1)
@@ -397,7 +399,7 @@ def _refine(
         z_prior.append(np.where(tri, zk, z_top_m))
         w_prior.append(np.where(tri, W_TRIANGULATED, W_UNKNOWN))
         Tv = np.asarray(T_view, dtype=np.float64)
-        d = _rays(pairs[:, :2], camera, Tv)
+        d = viewing_rays(pairs[:, :2], camera, Tv)
         if np.any(d[:, 2] > -1e-6):
             return None  # a trained ray that does not go down to the belt
         A = np.asarray(T_align, dtype=np.float64)

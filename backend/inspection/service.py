@@ -888,9 +888,6 @@ async def _pose(
         raise PoseFailed(f"trained view {cand.view_id} has no camera pose (uploaded, not taught)")
     from backend.recognition.images import mask_from_png
 
-    def taught_at(yaw: float) -> NDArray[np.float64]:
-        return _taught_at(ctx, yaw)
-
     def heights_of_inliers() -> dict[int, NDArray[np.float64]]:
         # the heights of each candidate's inlier features, looked up by their trained pixels
         fh, present = _feature_heights(ctx, model, height, {v: (j, y) for v, (j, y, _m, _s)
@@ -907,13 +904,13 @@ async def _pose(
         if joints is None or c.inlier_xy is None:
             continue  # deleted meanwhile, or uploaded without a camera pose
         matches.append(ViewMatch(
-            c.H, c.inlier_xy, _T_cam(joints, ctx.T_ee_cam), taught_at(yaw),
+            c.H, c.inlier_xy, _T_cam(joints, ctx.T_ee_cam), _taught_at(ctx, yaw),
             None if mask_png is None else mask_from_png(mask_png), shape, known.get(c.view_id),
         ))  # fmt: skip
     # Every taught top view of the model with a region judges answers that disagree by
     # their silhouettes (the region decoded only for the views nearest an answer's).
     silhouettes = [
-        SilhouetteView(_T_cam(joints, ctx.T_ee_cam), taught_at(yaw),
+        SilhouetteView(_T_cam(joints, ctx.T_ee_cam), _taught_at(ctx, yaw),
                        functools.cache(functools.partial(mask_from_png, mask_png)))
         for vid, (joints, yaw, mask_png, _shape) in sorted(stored.items())
         if joints is not None and mask_png is not None
@@ -957,22 +954,22 @@ async def warm_feature_heights(ctx: _Ctx) -> int:
     """Triangulate every model's taught top views before the first inspection needs them
     (up to a second or two per model for the wheels on this machine's cores); returns the
     models done.  A model without a stored height is skipped (its pose is not computed)."""
-    live = ctx.rt.live_index
+    models = [m for m in ctx.rt.live_index.models().values() if m.height_m is not None]
+    if not models:
+        return 0
+    async with ctx.rt.database.session() as session:
+        rows = await session.execute(
+            select(TrainedView.model_id, TrainedView.id, TrainedView.joints, TrainedView.yaw_rad)
+            .where(TrainedView.model_id.in_([m.id for m in models]), TrainedView.viewpoint == 1)
+        )  # fmt: skip
+        poses: dict[int, dict[int, tuple[Any, float]]] = {}
+        for mid, vid, j, y in rows.all():
+            poses.setdefault(int(mid), {})[int(vid)] = (j, float(y))
     done = 0
-    for m in list(live.models().values()):
-        if m.height_m is None:
-            continue
-        ids = live.views_of(m.id)
-        if not ids:
-            continue
-        async with ctx.rt.database.session() as session:
-            rows = await session.execute(
-                select(TrainedView.id, TrainedView.joints, TrainedView.yaw_rad)
-                .where(TrainedView.id.in_(ids), TrainedView.viewpoint == 1)
-            )  # fmt: skip
-            poses = {int(v): (j, float(y)) for v, j, y in rows.all()}
-        await asyncio.to_thread(_feature_heights, ctx, m.name, float(m.height_m), poses)
-        done += 1
+    for m in models:
+        if poses.get(m.id):
+            await asyncio.to_thread(_feature_heights, ctx, m.name, float(m.height_m), poses[m.id])
+            done += 1
     return done
 
 

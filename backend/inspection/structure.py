@@ -43,10 +43,10 @@ from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from backend.inspection.pose import viewing_rays
 from vision.camera import PinholeCamera
 from vision.features.types import Features
 
@@ -151,9 +151,7 @@ def _object_rays(v: TaughtTopView, camera: PinholeCamera) -> _Rays:
     T_obj_cam = np.linalg.inv(np.asarray(v.T_base_obj, np.float64)) @ np.asarray(
         v.T_base_cam, np.float64
     )
-    xy = np.asarray(v.features.keypoints.xy, dtype=np.float64).reshape(-1, 1, 2)
-    norm = cv2.undistortPoints(xy, camera.K, np.asarray(camera.dist, np.float64)).reshape(-1, 2)
-    d = np.concatenate([norm, np.ones((len(norm), 1))], axis=1) @ T_obj_cam[:3, :3].T
+    d = viewing_rays(v.features.keypoints.xy, camera, T_obj_cam)
     return T_obj_cam[:3, 3].copy(), d / np.linalg.norm(d, axis=1, keepdims=True), T_obj_cam[:3, :3]
 
 
