@@ -76,8 +76,14 @@ Grey look-alikes (issue 14)
     red-band twin) differ in their grey side scores by chance only, and under dimmed light
     or a colour cast the inspection named the wrong twin on such a difference. When the
     model a side view would confirm or name has a look-alike there that verified too, the
-    side views stop deciding between them: the look ends and they go to the colour
-    tie-break as tied models, and without colour evidence the answer is ``ambiguous``.
+    side views stop deciding between them: they go to the colour tie-break as tied models,
+    and without colour evidence the answer is ``ambiguous``. The look ends there only when
+    colour already singles one out; otherwise the remaining side viewpoint is visited for
+    colour evidence alone (its grey scores still decide nothing between the look-alikes):
+    the first side view may show the twins' difference poorly, or the true twin may verify
+    there only below its own bar, which the tie-break requires on some side view
+    (``benchmarks.inspection``: the plain five-spoke wheel ended ``ambiguous`` after one
+    side view, its red-band twin named from the top and not confirmed).
 
 Colour tie-break (issue 14)
     The features are grey, so two models that differ only by colour (a red band on a tyre's
@@ -482,6 +488,12 @@ async def recognise_views(
         )
         return w if fused[w] > fused_bar and side_ok else None
 
+    def colour_settled() -> bool:
+        """Whether the look may end on look-alikes (module docstring, "Grey look-alikes"):
+        colour singles one of them out with the views taken so far, or there is no colour
+        tie-break to wait for."""
+        return not colour_tiebreak or colour_winner(fused_decision(models)[0]) is not None
+
     models = list(contenders)
     # A model the top view named on its own (no look-alike passed within the margin) stays
     # named unless a side view is won by another model (module docstring, "Fused score"):
@@ -495,6 +507,12 @@ async def recognise_views(
         if len(visited) >= max_views:
             break
         side = await see(vp, vp, models)
+        if alike_seen:
+            # Look-alikes met on an earlier side view: this one only adds colour evidence
+            # (and a side view where the winner passes its own bar) for the tie-break.
+            if colour_settled():
+                break
+            continue
         fused, (decision, model, cont) = fused_decision(models)
         if named is not None:
             own = side.scores.get(named, 0.0)
@@ -506,7 +524,9 @@ async def recognise_views(
                 alike_seen.update([named, *twins])
                 models = [named, *twins]
                 named = None
-                break
+                if colour_settled():
+                    break
+                continue
             if rivals:
                 # Overturned: the top view's choice is contradicted; from here the models
                 # seen are decided like a top view that could not choose.
@@ -523,7 +543,9 @@ async def recognise_views(
                 return result(decision, model, fused, cont)
             alike_seen.update([model, *twins])
             models = [model, *twins]
-            break
+            if colour_settled():
+                break
+            continue
         if cont:
             models = list(cont)
     if len(visited) == 1:  # no contender has side views: the top view is all there is
