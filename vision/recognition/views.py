@@ -83,7 +83,13 @@ Grey look-alikes (issue 14)
     the first side view may show the twins' difference poorly, or the true twin may verify
     there only below its own bar, which the tie-break requires on some side view
     (``benchmarks.inspection``: the plain five-spoke wheel ended ``ambiguous`` after one
-    side view, its red-band twin named from the top and not confirmed).
+    side view, its red-band twin named from the top and not confirmed). For the same reason
+    the ambiguity margin, which narrows the models checked on the next side view to the
+    contenders, keeps a look-alike of a contender that verified on this one, and when the
+    side views end without a decision the fused leader's look-alikes verified on any side
+    view are tied with it for colour, however far below it their grey scores fell (at
+    constant belt speed the plain wheel ended "its twin not confirmed" after both side
+    views: the answer this path gives once the margin has dropped the wheel).
 
 Colour tie-break (issue 14)
     The features are grey, so two models that differ only by colour (a red band on a tyre's
@@ -456,13 +462,21 @@ async def recognise_views(
         table = choice.confusion.get(vp, {})
         return [
             b
-            for b in models
+            for b in side.scores
             if b != m
             and side.scores.get(b, 0.0) > 0.0
             and min(table.get(m, {}).get(b, 0.0), table.get(b, {}).get(m, 0.0)) > LOOKALIKE_SHARE
         ]
 
     alike_seen: set[str] = set()  # grey look-alikes of a side view's leader (colour decides)
+
+    def alike_on_sides(m: str) -> list[str]:
+        """The grey look-alikes of ``m`` verified on some side view visited so far."""
+        out: list[str] = []
+        for vp, r in zip(visited, views, strict=True):
+            if vp in (2, 3):
+                out += [b for b in lookalikes(m, r, vp) if b not in out]
+        return out
 
     def colour_winner(fused: dict[str, float]) -> str | None:
         """The tied model colour singles out (module docstring), or ``None``."""
@@ -547,7 +561,12 @@ async def recognise_views(
                 break
             continue
         if cont:
-            models = list(cont)
+            # The margin narrows the models to the side view's contenders, but it never
+            # drops a grey look-alike of one that verified here ("Grey look-alikes").
+            kept = list(cont)
+            for m in cont:
+                kept += [b for b in lookalikes(m, side, vp) if b not in kept]
+            models = kept
     if len(visited) == 1:  # no contender has side views: the top view is all there is
         return single(top)
     fused, (decision, model, cont) = fused_decision(models)
@@ -557,6 +576,14 @@ async def recognise_views(
         # The side check did not confirm the winner on its own view: report the doubt.
         decision, model, cont = "ambiguous", None, cont
     if decision == "ambiguous" and colour_tiebreak:
+        # The fused leader's grey look-alikes verified on a side view are tied with it
+        # whatever their grey scores ("Grey look-alikes"): colour decides among them.
+        lead = max(fused, key=lambda m: (fused[m], m), default=None)
+        twins = [] if lead is None else alike_on_sides(lead)
+        if lead is not None and twins:
+            alike_seen.update([lead, *twins])
+            models = [*models, *(b for b in twins if b not in models)]
+            fused = fused_decision(models)[0]
         winner = colour_winner(fused)
         if winner is not None:
             return result("recognized", winner, fused, (winner,))
