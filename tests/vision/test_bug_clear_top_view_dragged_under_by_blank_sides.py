@@ -346,3 +346,20 @@ async def test_a_lookalike_kept_for_colour_must_pass_its_own_side_bar(index, scr
     colour({"A": 2.4, "B": 0.0})
     r = await recognise_views(_look, index, policy="two-views", threshold=_with_side_confusion(0.9))
     assert (r.decision, r.model) == ("ambiguous", None)
+
+
+# Issue 14 (a re-run of the twins, best-next): the plain wheel was NAMED as its red-band twin
+# after one side view. The twin led from the top by more than the margin; on side view 2
+# both verified below their own bars, and the fused score (the top view's grey score
+# carrying it) confirmed the twin. A look-alike verified beside the named model now sends
+# them to colour whether or not the named model passed its bar there.
+
+
+@pytest.mark.parametrize("policy", ["two-views", "best-next"])
+async def test_a_top_name_is_not_confirmed_by_grey_beside_a_verified_lookalike(
+    index, scripted, colour, policy
+):
+    scripted({1: {"B": 0.773, "A": 0.579}, 2: {"A": 0.207, "B": 0.249}, 3: {"A": 0.3, "B": 0.25}})
+    colour({"A": 0.0, "B": 4.8})  # the object is A by colour
+    r = await recognise_views(_look, index, policy=policy, threshold=_with_side_confusion(0.9))
+    assert (r.decision, r.model, r.viewpoints) == ("recognized", "A", (1, 2, 3))

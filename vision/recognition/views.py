@@ -531,7 +531,10 @@ async def recognise_views(
         if named is not None:
             own = side.scores.get(named, 0.0)
             rivals = [m for m in models if m != named and won_by(m, named, side, vp)]
-            twins = lookalikes(named, side, vp) if own > bar(named, vp) else []
+            # A look-alike verified beside it: whether or not it passed its own bar here, the
+            # grey scores (this view's, and the top view's where they are look-alikes too)
+            # cannot say which of them it is.
+            twins = lookalikes(named, side, vp) if own > 0.0 else []
             if twins:
                 # Grey cannot tell it from a look-alike that verified here too: colour
                 # decides among them (module docstring, "Grey look-alikes").
