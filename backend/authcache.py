@@ -86,9 +86,9 @@ class AuthCache:
         self.generation = 0
         _caches.add(self)
 
-    def get(self, token_hash: str) -> User | None:
-        """A fresh, detached copy of the cached user of ``token_hash`` (None: ask the
-        database)."""
+    def _fresh(self, token_hash: str) -> _Entry | None:
+        """The entry of ``token_hash`` if still valid: within the TTL and before the
+        token's expiry, checked on every hit (an entry past either is dropped)."""
         with self._lock:
             e = self._entries.get(token_hash)
             if e is None:
@@ -98,8 +98,22 @@ class AuthCache:
             ):
                 del self._entries[token_hash]
                 return None
+            return e
+
+    def get(self, token_hash: str) -> User | None:
+        """A fresh, detached copy of the cached user of ``token_hash`` (None: ask the
+        database)."""
+        e = self._fresh(token_hash)
+        if e is None:
+            return None
         uid, name, role, disabled, created = e.user
         return User(id=uid, name=name, role=role, disabled=disabled, created_at=created)
+
+    def role_of(self, token_hash: str) -> str | None:
+        """The role name of the cached user of ``token_hash``, under the same checks as
+        :meth:`get` (None: ask the database), without building a :class:`User`."""
+        e = self._fresh(token_hash)
+        return None if e is None else e.user[2]
 
     def put(
         self, token_hash: str, user: User, expires_at: datetime | None, *, generation: int

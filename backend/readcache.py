@@ -26,6 +26,10 @@ keeps it correct:
   miss too and open its own session);
 - bounded: at most ``max_entries`` entries (the oldest go first); entries are the small
   JSON-ready dicts the routes answer.
+
+:meth:`ReadCache.peek` gives the entry a request would be answered from, without reading
+(the fast path of :mod:`backend.api.fastpath` answers from it, and keeps the answer's JSON
+per entry: an :class:`Entry` is compared by identity).
 """
 
 from __future__ import annotations
@@ -44,7 +48,7 @@ from sqlalchemy.orm import ORMExecuteState, Session
 
 from backend.db.models import Role
 
-__all__ = ["ALL_TABLES", "MAX_ENTRIES", "TTL_S", "ReadCache"]
+__all__ = ["ALL_TABLES", "MAX_ENTRIES", "TTL_S", "Entry", "ReadCache"]
 
 #: How long an answer is reused, seconds: the bound on seeing another process's writes.
 TTL_S = 1.0
@@ -71,11 +75,18 @@ class _Flight:
     future: asyncio.Future[Any]
 
 
-@dataclass(frozen=True)
-class _Entry:
+@dataclass(frozen=True, eq=False)
+class Entry:
+    """One cached answer.  Equal only to itself: a new read makes a new entry, so an
+    entry's identity stands for its answer (what the fast path keys its JSON on)."""
+
+    #: ``time.monotonic()`` after which it is not served.
     until: float
+    #: The role it was read for (served to that role and stronger ones only).
     role: Role
+    #: The tables it read (a commit writing one of them drops it).
     tables: frozenset[str]
+    #: The answer, shared: not to be mutated.
     value: Any
 
 
@@ -102,7 +113,7 @@ class ReadCache:
             raise ValueError(f"max_entries must be within 1..100000, got {max_entries!r}")
         self.ttl_s = float(ttl_s)
         self.max_entries = max_entries
-        self._entries: dict[Hashable, _Entry] = {}
+        self._entries: dict[Hashable, Entry] = {}
         self._lock = threading.Lock()
         self._generation: dict[str, int] = {}
         self._inflight: dict[Hashable, _Flight] = {}
@@ -134,9 +145,8 @@ class ReadCache:
         hash(key)  # a TypeError now, not inside the lock
         now = time.monotonic()
         with self._lock:
-            e = self._entries.get(key)
-            if e is not None and now < e.until and e.tables == deps and role >= e.role:
-                self.hits += 1
+            e = self._fresh(key, role, deps, now)
+            if e is not None:
                 return e.value
             gen = self._gen(deps)
         if self.ttl_s <= 0:
@@ -179,10 +189,29 @@ class ReadCache:
         with self._lock:
             if self._gen(deps) == gen:  # nothing it read was written meanwhile
                 self._entries.pop(key, None)
-                self._entries[key] = _Entry(now + self.ttl_s, role, deps, value)
+                self._entries[key] = Entry(now + self.ttl_s, role, deps, value)
                 while len(self._entries) > self.max_entries:
                     del self._entries[next(iter(self._entries))]
         return value
+
+    def _fresh(self, key: Hashable, role: Role, deps: frozenset[str], now: float) -> Entry | None:
+        """The entry of ``key`` if it may answer ``role`` now (counted as a hit); the
+        caller holds the lock."""
+        e = self._entries.get(key)
+        if e is not None and now < e.until and e.tables == deps and role >= e.role:
+            self.hits += 1
+            return e
+        return None
+
+    def peek(self, key: Hashable, *, role: Role, tables: Iterable[str]) -> Entry | None:
+        """The entry :meth:`get_or_read` would answer ``key`` from now for ``role`` (the
+        same freshness, tables and role rule), or None; never reads.  A hit is counted."""
+        if not isinstance(role, Role):
+            raise TypeError(f"role must be a Role, got {role!r}")
+        deps = tables if isinstance(tables, frozenset) else frozenset(tables)
+        now = time.monotonic()
+        with self._lock:
+            return self._fresh(key, role, deps, now)
 
     def invalidate(self, tables: Iterable[str]) -> int:
         """Drop the entries that read one of ``tables`` (:data:`ALL_TABLES`: every entry);
