@@ -7,10 +7,10 @@ handlers, the WebSocket and services get what they need from these dependencies.
 
 The dependencies that only fetch an object are ``async def`` although they never wait:
 FastAPI runs a plain ``def`` dependency in a worker thread, a thread hop per dependency
-and request (a third of a cached read's CPU, and GIL hand-overs with the simulator's
-thread).  The sign-in rule is one class, :class:`RoleCheck`; the fast path of the hot
-reads (:mod:`backend.api.fastpath`) reads a route's :class:`RoleCheck` and asks the same
-sign-in cache through :func:`cached_role`.
+and request (a quarter of a cached read's busy time on the event loop, and GIL hand-overs
+with the simulator's threads).  The sign-in rule is one class, :class:`RoleCheck`; the
+fast path of the hot reads (:mod:`backend.api.fastpath`) reads a route's
+:class:`RoleCheck` and asks the same sign-in cache through :func:`cached_role`.
 """
 
 from __future__ import annotations
