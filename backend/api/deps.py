@@ -25,6 +25,7 @@ from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.api.errors import ApiError
 from backend.auth import authenticate_with_expiry, hash_token, well_formed
+from backend.authcache import Lookup, SignIn
 from backend.cell import Cell
 from backend.db.models import Role, User
 from backend.db.session import Database
@@ -208,26 +209,28 @@ PURE_DEPENDENCIES: frozenset[Callable[..., Any]] = frozenset(
 )
 
 
+def _lookup(db: Database, token: str, secret: str) -> Lookup:
+    """The database sign-in of ``token`` (what the sign-in cache runs on a miss and to
+    refresh an entry ahead of its expiry): its user and expiry, or None when refused."""
+
+    async def lookup() -> SignIn | None:
+        async with db.api_slot(), db.session() as session:
+            return await authenticate_with_expiry(session, token, secret)
+
+    return lookup
+
+
 async def _signed_in(
     conn: HTTPConnection, db: Database, token: str, settings: Settings
 ) -> User | None:
     """The user of ``token``: from the runtime's short-lived sign-in cache
-    (:mod:`backend.authcache`), else from the database (then cached)."""
+    (:mod:`backend.authcache`: refreshed ahead of its expiry, one database lookup per
+    token at a time), else from the database (then cached)."""
     secret = settings.secret_key.get_secret_value()
     cache = get_runtime(conn).auth_cache
     if not well_formed(token):
         return None
-    key = hash_token(token, secret)
-    user = cache.get(key)
-    if user is not None:
-        return user
-    generation = cache.generation
-    async with db.api_slot(), db.session() as session:
-        found = await authenticate_with_expiry(session, token, secret)
-    if found is None:
-        return None
-    cache.put(key, found[0], found[1], generation=generation)
-    return found[0]
+    return await cache.sign_in(hash_token(token, secret), _lookup(db, token, secret))
 
 
 class RoleCheck:
@@ -300,8 +303,9 @@ def require_role(role: Role) -> RoleCheck:
 async def cached_role(conn: HTTPConnection) -> Role | None:
     """The role a :class:`RoleCheck` would find for this request from memory alone: the
     anonymous engineer when ``auth_enabled`` is off; else the role of a well-formed bearer
-    token the sign-in cache holds valid (TTL and the token's expiry checked on this hit),
-    from an address the throttle does not block.  None in every other case (a token the
+    token the sign-in cache holds valid (TTL and the token's expiry checked on this hit;
+    refreshed ahead as :class:`RoleCheck`'s sign-in is), from an address the throttle does
+    not block.  None in every other case (a token the
     cache does not hold, none, a blocked address, the cell not running): the dependency
     itself must decide, from the database, and answer any refusal."""
     settings = get_settings(conn)
@@ -317,8 +321,10 @@ async def cached_role(conn: HTTPConnection) -> Role | None:
     creds = await _bearer(conn)
     if creds is None or creds.scheme.lower() != "bearer" or not well_formed(creds.credentials):
         return None
-    key = hash_token(creds.credentials, settings.secret_key.get_secret_value())
-    role = rt.auth_cache.role_of(key)
+    secret = settings.secret_key.get_secret_value()
+    key = hash_token(creds.credentials, secret)
+    # A hit late in the entry's TTL looks the token up again in the background.
+    role = rt.auth_cache.role_of(key, refresh=_lookup(rt.database, creds.credentials, secret))
     return None if role is None else Role[role]
 
 
