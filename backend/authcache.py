@@ -167,6 +167,9 @@ class AuthCache:
         self._inflight: dict[str, _Flight] = {}
         self._refreshing: set[asyncio.Task[None]] = set()
         self._failing = False  # the last background lookup failed (logged once)
+        #: Tokens whose background lookup failed, with the entry it was for: that entry is
+        #: left to expire, not looked up again on every later hit.
+        self._not_again: dict[str, _Entry] = {}
         self._closed = False
         #: Database lookups made by :meth:`sign_in` (requests and background), requests
         #: that shared one in flight, background lookups started and failed.
@@ -188,7 +191,10 @@ class AuthCache:
             if now >= e.until or (e.expires_at is not None and e.expires_at <= utcnow()):
                 del self._entries[token_hash]
                 return None
-        if refresh is not None and now >= e.until - REFRESH_AHEAD_FRACTION * self.ttl_s:
+        if (
+            refresh is not None and now >= e.until - REFRESH_AHEAD_FRACTION * self.ttl_s
+            and self._not_again.get(token_hash) is not e
+        ):  # fmt: skip
             self._refresh(token_hash, refresh)
         return e
 
@@ -290,6 +296,8 @@ class AuthCache:
         """The background lookup: the entry replaced (the token still valid) or dropped
         (refused now); shared with requests that miss meanwhile; never raises but its
         cancellation."""
+        with self._lock:
+            old = self._entries.get(token_hash)
         started = time.monotonic()
         try:
             found = await lookup()
@@ -302,6 +310,11 @@ class AuthCache:
             if not isinstance(exc, Exception):
                 raise
             self.refresh_failures += 1
+            if old is not None:
+                with self._lock:
+                    self._not_again[token_hash] = old
+                    while len(self._not_again) > MAX_REFRESHING * 4:  # bounded: oldest go
+                        del self._not_again[next(iter(self._not_again))]
             if not self._failing:
                 self._failing = True
                 log.warning(
@@ -315,6 +328,8 @@ class AuthCache:
         if self._failing:
             self._failing = False
             log.info("sign-in cache: background lookups succeed again")
+        with self._lock:
+            self._not_again.pop(token_hash, None)
         if found is None:  # revoked, expired or disabled since: refused from now on
             flight.future.set_result(None)
             with self._lock:

@@ -173,6 +173,8 @@ class ReadCache:
         self.refresh_failures = 0
         self._refreshing: set[asyncio.Task[None]] = set()
         self._failing = False  # the last re-read failed (logged once until one succeeds)
+        #: Entries whose re-read failed: left to expire, not re-read on every later hit.
+        self._not_again: weakref.WeakSet[Entry] = weakref.WeakSet()
         self._closed = False
         _caches.add(self)
 
@@ -265,6 +267,7 @@ class ReadCache:
             not self.refresh_ahead or self._closed or e.read is None
             or now < e.until - REFRESH_AHEAD_FRACTION * self.ttl_s
             or key in self._inflight or len(self._refreshing) >= MAX_REFRESHING
+            or e in self._not_again
         ):  # fmt: skip
             return
         try:
@@ -296,6 +299,7 @@ class ReadCache:
             if not isinstance(exc, Exception):
                 raise
             self.refresh_failures += 1
+            self._not_again.add(old)
             if not self._failing:
                 self._failing = True
                 log.warning(
