@@ -322,3 +322,23 @@ def test_routes_the_fast_path_cannot_answer_safely_are_refused(settings) -> None
     # The app's own list is accepted (every route's dependencies are known).
     real = create_app(settings)
     assert len(FastReads(inner, routes=real.routes, reads=FAST_READS).paths) == len(FAST_READS)
+
+
+def test_steady_reads_stay_on_the_fast_path_across_the_caches_ttls(client, headers) -> None:
+    """Refresh ahead through the fast path's own lookups (``ReadCache.peek``,
+    ``deps.cached_role``): a console polling every 50 ms for longer than both caches'
+    TTLs is answered from memory throughout; no request falls through at an expiry."""
+    layer = fast_reads_of(client.app)
+    rt = client.app.state.runtime
+    hdr = headers["viewer"]
+    for route in ("/api/cells", "/api/models"):  # warm: entries and sign-in cached
+        assert client.get(route, headers=hdr).status_code == 200
+    passed, reads, lookups = layer.passed, rt.read_cache.misses, rt.auth_cache.lookups
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 2.5 * max(rt.read_cache.ttl_s, rt.auth_cache.ttl_s):
+        for route in ("/api/cells", "/api/models"):
+            assert client.get(route, headers=hdr).status_code == 200
+        time.sleep(0.05)
+    assert rt.read_cache.refreshes >= 4 and rt.auth_cache.refreshes >= 2
+    assert layer.passed == passed and rt.read_cache.misses == reads
+    assert rt.auth_cache.lookups == lookups + rt.auth_cache.refreshes
