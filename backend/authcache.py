@@ -277,7 +277,7 @@ class AuthCache:
         it, :data:`MAX_REFRESHING` run, or this is not called from a coroutine."""
         if (
             not self.refresh_ahead or self._closed or self.ttl_s <= 0
-            or token_hash in self._inflight or len(self._refreshing) >= MAX_REFRESHING
+            or token_hash in self._inflight or self._busy()
         ):  # fmt: skip
             return
         try:
@@ -338,6 +338,15 @@ class AuthCache:
         flight.future.set_result((_row(found[0]), _aware(found[1])))
         self.put(token_hash, found[0], found[1], generation=flight.generation, started=started)
 
+    def _busy(self) -> bool:
+        """Whether :data:`MAX_REFRESHING` background reads run (tasks that ended on a loop
+        closed before their done callback ran are dropped first)."""
+        if len(self._refreshing) < MAX_REFRESHING:
+            return False
+        for task in [t for t in self._refreshing if t.done()]:
+            self._refreshing.discard(task)  # in place: the tasks' done callbacks hold it
+        return len(self._refreshing) >= MAX_REFRESHING
+
     @property
     def refreshing(self) -> int:
         """Background lookups in flight."""
@@ -354,7 +363,9 @@ class AuthCache:
         self._closed = True
         loop = asyncio.get_running_loop()
         for task in list(self._refreshing):
-            if task.get_loop() is loop:
+            if task.done():  # ended on a loop that closed before its done callback ran
+                self._refreshing.discard(task)
+            elif task.get_loop() is loop:
                 await cancel_and_wait(task)
             else:
                 task.get_loop().call_soon_threadsafe(task.cancel)

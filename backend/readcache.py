@@ -266,7 +266,7 @@ class ReadCache:
         if (
             not self.refresh_ahead or self._closed or e.read is None
             or now < e.until - REFRESH_AHEAD_FRACTION * self.ttl_s
-            or key in self._inflight or len(self._refreshing) >= MAX_REFRESHING
+            or key in self._inflight or self._busy()
             or e in self._not_again
         ):  # fmt: skip
             return
@@ -318,6 +318,15 @@ class ReadCache:
             key, flight.gen, Entry(start + self.ttl_s, old.role, old.tables, value, old.read)
         )
 
+    def _busy(self) -> bool:
+        """Whether :data:`MAX_REFRESHING` background reads run (tasks that ended on a loop
+        closed before their done callback ran are dropped first)."""
+        if len(self._refreshing) < MAX_REFRESHING:
+            return False
+        for task in [t for t in self._refreshing if t.done()]:
+            self._refreshing.discard(task)  # in place: the tasks' done callbacks hold it
+        return len(self._refreshing) >= MAX_REFRESHING
+
     @property
     def refreshing(self) -> int:
         """Background re-reads in flight."""
@@ -335,7 +344,9 @@ class ReadCache:
         loop = asyncio.get_running_loop()
         tasks = list(self._refreshing)
         for task in tasks:
-            if task.get_loop() is loop:
+            if task.done():  # ended on a loop that closed before its done callback ran
+                self._refreshing.discard(task)
+            elif task.get_loop() is loop:
                 await cancel_and_wait(task)
             else:
                 task.get_loop().call_soon_threadsafe(task.cancel)
