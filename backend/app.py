@@ -11,10 +11,11 @@ from fastapi.responses import FileResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
 from backend import __version__
-from backend.api import api_router
+from backend.api import FAST_READS, api_router
 from backend.api.deps import install_runtime
 from backend.api.docs import install_docs
 from backend.api.errors import install_error_handlers
+from backend.api.fastpath import FastReads
 from backend.api.headers import SecurityHeaders, install_cors
 from backend.api.limits import UrlLengthLimit
 from backend.api.replay import install_replay
@@ -61,6 +62,8 @@ def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None 
     install_runtime(app, None, settings=settings)
     install_error_handlers(app)
     install_docs(app)
+    if settings.fast_reads:  # innermost: the layers below apply to its answers too
+        app.add_middleware(FastReads, routes=app.routes, reads=FAST_READS)
     app.add_middleware(UrlLengthLimit)
     install_cors(app, settings)
     app.add_middleware(SecurityHeaders, viser_port=settings.viser_port)

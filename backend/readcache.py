@@ -26,16 +26,35 @@ keeps it correct:
   miss too and open its own session);
 - bounded: at most ``max_entries`` entries (the oldest go first); entries are the small
   JSON-ready dicts the routes answer.
+
+**Refresh ahead.**  Under steady load every entry expired under the requests' feet: the
+requests that arrived then waited on SQLite (behind the inspection's writes) for the one
+read of the key.  A hit on an entry in the last :data:`REFRESH_AHEAD_FRACTION` of its TTL
+(by :meth:`ReadCache.get_or_read` or :meth:`ReadCache.peek`) is answered from it and
+starts one background re-read of the key with the read that made the entry, for the role
+the entry was read for; the new entry replaces the old one before its ``until``.  The
+rules above hold for it: it is registered as the key's read in flight (one per key;
+requests that miss meanwhile share it), it is not stored when a commit wrote one of its
+tables since it started, its ``until`` counts from its start, the old entry is never
+served past its own ``until``.  At most :data:`MAX_REFRESHING` run at once (beyond it an
+entry expires as without refresh); a failure is logged once per run of failures and leaves
+the entry to expire; :meth:`ReadCache.close` (the runtime's shutdown, before the database
+engine is disposed) cancels and awaits them.
+
+:meth:`ReadCache.peek` gives the entry a request would be answered from, without reading
+(the fast path of :mod:`backend.api.fastpath` answers from it, and keeps the answer's JSON
+per entry: an :class:`Entry` is compared by identity).
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
 import weakref
 from collections.abc import Awaitable, Callable, Hashable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 from sqlalchemy import event
@@ -43,13 +62,34 @@ from sqlalchemy import inspect as sa_inspect
 from sqlalchemy.orm import ORMExecuteState, Session
 
 from backend.db.models import Role
+from backend.taskutil import cancel_and_wait
 
-__all__ = ["ALL_TABLES", "MAX_ENTRIES", "TTL_S", "ReadCache"]
+__all__ = [
+    "ALL_TABLES",
+    "MAX_ENTRIES",
+    "MAX_REFRESHING",
+    "REFRESH_AHEAD_FRACTION",
+    "TTL_S",
+    "Entry",
+    "ReadCache",
+]
+
+log = logging.getLogger(__name__)
 
 #: How long an answer is reused, seconds: the bound on seeing another process's writes.
 TTL_S = 1.0
 #: Most answers kept.
 MAX_ENTRIES = 512
+#: The last part of an entry's TTL in which a hit starts its background re-read.  A re-read
+#: under load waits for the database behind the inspection's writes and the API's
+#: connection slots (read p99 117-817 ms on the database routes, docs/plant.md "Load"):
+#: the window must outlast that for the new entry to be in place before the old one's
+#: ``until``; a wider one reads a key more often (under steady hits once per
+#: ``(1 - fraction) * TTL``: 0.4 reads it every 0.6 TTL instead of every TTL).
+REFRESH_AHEAD_FRACTION = 0.4
+#: Most background re-reads in flight over one cache: each holds one of the API's 10
+#: database connection slots (``backend.db.session.API_SLOTS``), most stay for requests.
+MAX_REFRESHING = 4
 #: Stands for "every table" (a statement whose table is not known).
 ALL_TABLES = "*"
 _PENDING = "visioncell_readcache_tables"
@@ -71,12 +111,21 @@ class _Flight:
     future: asyncio.Future[Any]
 
 
-@dataclass(frozen=True)
-class _Entry:
+@dataclass(frozen=True, eq=False)
+class Entry:
+    """One cached answer.  Equal only to itself: a new read makes a new entry, so an
+    entry's identity stands for its answer (what the fast path keys its JSON on)."""
+
+    #: ``time.monotonic()`` after which it is not served.
     until: float
+    #: The role it was read for (served to that role and stronger ones only).
     role: Role
+    #: The tables it read (a commit writing one of them drops it).
     tables: frozenset[str]
+    #: The answer, shared: not to be mutated.
     value: Any
+    #: The read that made it (its refresh ahead reads with it; None: never refreshed).
+    read: Callable[[], Awaitable[Any]] | None = field(default=None, repr=False)
 
 
 class ReadCache:
@@ -89,9 +138,15 @@ class ReadCache:
         Reuse time, seconds, in [0, 10]; 0 turns the cache off (every read is computed).
     max_entries : int
         Most entries kept, 1..100000.
+    refresh_ahead : bool
+        Re-read an entry in the background when it is hit in the last
+        :data:`REFRESH_AHEAD_FRACTION` of its TTL (see the module doc); False: entries
+        expire and the next request reads.
     """
 
-    def __init__(self, *, ttl_s: float = TTL_S, max_entries: int = MAX_ENTRIES) -> None:
+    def __init__(
+        self, *, ttl_s: float = TTL_S, max_entries: int = MAX_ENTRIES, refresh_ahead: bool = True
+    ) -> None:
         if isinstance(ttl_s, bool) or not isinstance(ttl_s, int | float):
             raise TypeError(f"ttl_s must be a number, got {ttl_s!r}")
         if not 0.0 <= float(ttl_s) <= 10.0:
@@ -100,9 +155,12 @@ class ReadCache:
             raise TypeError(f"max_entries must be an int, got {max_entries!r}")
         if not 1 <= max_entries <= 100_000:
             raise ValueError(f"max_entries must be within 1..100000, got {max_entries!r}")
+        if not isinstance(refresh_ahead, bool):
+            raise TypeError(f"refresh_ahead must be a bool, got {refresh_ahead!r}")
+        self.refresh_ahead = refresh_ahead
         self.ttl_s = float(ttl_s)
         self.max_entries = max_entries
-        self._entries: dict[Hashable, _Entry] = {}
+        self._entries: dict[Hashable, Entry] = {}
         self._lock = threading.Lock()
         self._generation: dict[str, int] = {}
         self._inflight: dict[Hashable, _Flight] = {}
@@ -110,6 +168,14 @@ class ReadCache:
         self.hits = 0
         self.misses = 0
         self.shared = 0
+        #: Background re-reads started, and those that failed.
+        self.refreshes = 0
+        self.refresh_failures = 0
+        self._refreshing: set[asyncio.Task[None]] = set()
+        self._failing = False  # the last re-read failed (logged once until one succeeds)
+        #: Entries whose re-read failed: left to expire, not re-read on every later hit.
+        self._not_again: weakref.WeakSet[Entry] = weakref.WeakSet()
+        self._closed = False
         _caches.add(self)
 
     def _gen(self, tables: Iterable[str]) -> tuple[int, ...]:
@@ -134,11 +200,11 @@ class ReadCache:
         hash(key)  # a TypeError now, not inside the lock
         now = time.monotonic()
         with self._lock:
-            e = self._entries.get(key)
-            if e is not None and now < e.until and e.tables == deps and role >= e.role:
-                self.hits += 1
-                return e.value
+            e = self._fresh(key, role, deps, now)
             gen = self._gen(deps)
+        if e is not None:
+            self._refresh_if_due(key, e, now)
+            return e.value
         if self.ttl_s <= 0:
             self.misses += 1
             return await read()
@@ -176,13 +242,138 @@ class ReadCache:
             if self._inflight.get(key) is mine:
                 del self._inflight[key]
         mine.future.set_result(value)
-        with self._lock:
-            if self._gen(deps) == gen:  # nothing it read was written meanwhile
-                self._entries.pop(key, None)
-                self._entries[key] = _Entry(now + self.ttl_s, role, deps, value)
-                while len(self._entries) > self.max_entries:
-                    del self._entries[next(iter(self._entries))]
+        self._store(key, gen, Entry(now + self.ttl_s, role, deps, value, read))
         return value
+
+    def _store(self, key: Hashable, gen: tuple[int, ...], entry: Entry) -> None:
+        """Keep ``entry``, read from generation ``gen``, unless a commit wrote one of its
+        tables since (the generation rule) or a later read of the key is kept already."""
+        with self._lock:
+            if self._gen(entry.tables) != gen:  # something it read was written meanwhile
+                return
+            old = self._entries.get(key)
+            if old is not None and old.until > entry.until:
+                return
+            self._entries.pop(key, None)
+            self._entries[key] = entry
+            while len(self._entries) > self.max_entries:
+                del self._entries[next(iter(self._entries))]
+
+    def _refresh_if_due(self, key: Hashable, e: Entry, now: float) -> None:
+        """Start the background re-read of ``key`` when ``e``, just hit, is in the last
+        :data:`REFRESH_AHEAD_FRACTION` of its TTL, no read of the key is in flight and
+        fewer than :data:`MAX_REFRESHING` re-reads run."""
+        if (
+            not self.refresh_ahead or self._closed or e.read is None
+            or now < e.until - REFRESH_AHEAD_FRACTION * self.ttl_s
+            or key in self._inflight or self._busy()
+            or e in self._not_again
+        ):  # fmt: skip
+            return
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:  # not called from a coroutine: nowhere to run it
+            return
+        with self._lock:
+            gen = self._gen(e.tables)
+        flight = _Flight(loop, e.role, e.tables, gen, loop.create_future())
+        self._inflight[key] = flight
+        task = loop.create_task(self._refresh(key, e, flight), name=f"read-cache refresh {key!r}")
+        self._refreshing.add(task)
+        task.add_done_callback(self._refreshing.discard)
+        self.refreshes += 1
+
+    async def _refresh(self, key: Hashable, old: Entry, flight: _Flight) -> None:
+        """The background re-read of ``key`` (``old.read``, for ``old.role``), shared with
+        the requests that miss meanwhile; never raises but its cancellation."""
+        assert old.read is not None
+        start = time.monotonic()
+        try:
+            value = await old.read()
+        except asyncio.CancelledError:
+            flight.future.cancel()  # its waiters read themselves (get_or_read)
+            raise
+        except BaseException as exc:
+            flight.future.set_exception(exc)
+            flight.future.exception()  # retrieved: no "never retrieved" warning
+            if not isinstance(exc, Exception):
+                raise
+            self.refresh_failures += 1
+            self._not_again.add(old)
+            if not self._failing:
+                self._failing = True
+                log.warning(
+                    "read cache: background re-read of %r failed (logged once until one "
+                    "succeeds; the entry expires as usual): %r", key, exc,
+                )  # fmt: skip
+            return
+        finally:
+            if self._inflight.get(key) is flight:
+                del self._inflight[key]
+        flight.future.set_result(value)
+        if self._failing:
+            self._failing = False
+            log.info("read cache: background re-reads succeed again")
+        self._store(
+            key, flight.gen, Entry(start + self.ttl_s, old.role, old.tables, value, old.read)
+        )
+
+    def _busy(self) -> bool:
+        """Whether :data:`MAX_REFRESHING` background reads run (tasks that ended on a loop
+        closed before their done callback ran are dropped first)."""
+        if len(self._refreshing) < MAX_REFRESHING:
+            return False
+        for task in [t for t in self._refreshing if t.done()]:
+            self._refreshing.discard(task)  # in place: the tasks' done callbacks hold it
+        return len(self._refreshing) >= MAX_REFRESHING
+
+    @property
+    def refreshing(self) -> int:
+        """Background re-reads in flight."""
+        return len(self._refreshing)
+
+    def open(self) -> None:
+        """Let background re-reads start again after :meth:`close` (a runtime entered again)."""
+        self._closed = False
+
+    async def close(self) -> None:
+        """Cancel the background re-reads and wait for their end (those of this event
+        loop; another loop's are only cancelled), start none until :meth:`open`, and drop
+        every entry (their reads hold the database about to be disposed)."""
+        self._closed = True
+        loop = asyncio.get_running_loop()
+        tasks = list(self._refreshing)
+        for task in tasks:
+            if task.done():  # ended on a loop that closed before its done callback ran
+                self._refreshing.discard(task)
+            elif task.get_loop() is loop:
+                await cancel_and_wait(task)
+            else:
+                task.get_loop().call_soon_threadsafe(task.cancel)
+        self.invalidate({ALL_TABLES})
+
+    def _fresh(self, key: Hashable, role: Role, deps: frozenset[str], now: float) -> Entry | None:
+        """The entry of ``key`` if it may answer ``role`` now (counted as a hit); the
+        caller holds the lock."""
+        e = self._entries.get(key)
+        if e is not None and now < e.until and e.tables == deps and role >= e.role:
+            self.hits += 1
+            return e
+        return None
+
+    def peek(self, key: Hashable, *, role: Role, tables: Iterable[str]) -> Entry | None:
+        """The entry :meth:`get_or_read` would answer ``key`` from now for ``role`` (the
+        same freshness, tables and role rule), or None; never waits.  A hit is counted,
+        and starts the entry's refresh ahead as in :meth:`get_or_read`."""
+        if not isinstance(role, Role):
+            raise TypeError(f"role must be a Role, got {role!r}")
+        deps = tables if isinstance(tables, frozenset) else frozenset(tables)
+        now = time.monotonic()
+        with self._lock:
+            e = self._fresh(key, role, deps, now)
+        if e is not None:
+            self._refresh_if_due(key, e, now)
+        return e
 
     def invalidate(self, tables: Iterable[str]) -> int:
         """Drop the entries that read one of ``tables`` (:data:`ALL_TABLES`: every entry);

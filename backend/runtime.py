@@ -155,9 +155,11 @@ class CellRuntime:
         self.inspection_run: Any = None
         #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).
         #: Successful sign-ins reused for 2 s (``backend.authcache``).
-        self.auth_cache = AuthCache()
+        self.auth_cache = AuthCache(refresh_ahead=settings.refresh_ahead)
         #: Hot list and status reads reused for ``read_cache_ttl_s`` (``backend.readcache``).
-        self.read_cache = ReadCache(ttl_s=settings.read_cache_ttl_s)
+        self.read_cache = ReadCache(
+            ttl_s=settings.read_cache_ttl_s, refresh_ahead=settings.refresh_ahead
+        )
         #: On PostgreSQL: drops the sign-ins other processes revoke (``backend.authsync``).
         self.auth_sync: AuthSync | None = None
         self.signin_throttle = SignInThrottle(
@@ -240,6 +242,12 @@ class CellRuntime:
         s = self.settings
         db = Database(s.database_url, busy_timeout_s=s.database_busy_timeout_s)
         stack.push_async_callback(db.dispose)
+        # The caches' background reads use the database: cancelled and awaited just before
+        # it is disposed (the exit stack runs last in, first out).
+        self.read_cache.open()
+        self.auth_cache.open()
+        stack.push_async_callback(self.read_cache.close)
+        stack.push_async_callback(self.auth_cache.close)
         await check_database(db)
         self._database = db
         self.cell_id = await ensure_cell_row(db, s.cell_name)

@@ -2,6 +2,7 @@
 
 from fastapi import APIRouter
 
+from backend.api.fastpath import FastRead
 from backend.api.routes import (
     audit,
     calibration,
@@ -22,7 +23,7 @@ from backend.api.routes import (
 )
 from backend.api.schemas import ERROR_RESPONSES
 
-__all__ = ["api_router"]
+__all__ = ["FAST_READS", "api_router"]
 
 api_router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
 for _r in (
@@ -44,3 +45,17 @@ for _r in (
     reports,
 ):
     api_router.include_router(_r.router)
+
+#: The hot reads the fast path answers from memory (``backend.api.fastpath``): what the
+#: console polls.
+FAST_READS = (
+    FastRead(health.read_health, health.fast_read_health),
+    FastRead(health.read_status, health.fast_read_status),
+    FastRead(robot.read_state, robot.fast_read_state),
+    FastRead(camera.read_camera_status, camera.fast_read_camera_status),
+    FastRead(camera.read_frame, camera.fast_read_frame),
+    FastRead(jobs.read_jobs, jobs.fast_read_jobs),
+    FastRead(cells.read_cells, cells.fast_read_cells),
+    FastRead(inspections.read_inspections, inspections.fast_read_inspections),
+    FastRead(models.read_models, models.fast_read_models, providers=(models.get_live_index,)),
+)

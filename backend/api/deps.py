@@ -4,11 +4,18 @@ the cell, the simulator.
 This module is the one place that knows where the app keeps its
 :class:`~backend.runtime.CellRuntime` (:func:`install_runtime`, :func:`runtime_of`);
 handlers, the WebSocket and services get what they need from these dependencies.
+
+The dependencies that only fetch an object are ``async def`` although they never wait:
+FastAPI runs a plain ``def`` dependency in a worker thread, a thread hop per dependency
+and request (a quarter of a cached read's busy time on the event loop, and GIL hand-overs
+with the simulator's threads).  The sign-in rule is one class, :class:`RoleCheck`; the
+fast path of the hot reads (:mod:`backend.api.fastpath`) reads a route's
+:class:`RoleCheck` and asks the same sign-in cache through :func:`cached_role`.
 """
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine, Hashable, Iterable
+from collections.abc import AsyncIterator, Awaitable, Callable, Hashable, Iterable
 from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 from fastapi import Depends, FastAPI
@@ -18,6 +25,7 @@ from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.api.errors import ApiError
 from backend.auth import authenticate_with_expiry, hash_token, well_formed
+from backend.authcache import Lookup, SignIn
 from backend.cell import Cell
 from backend.db.models import Role, User
 from backend.db.session import Database
@@ -31,16 +39,19 @@ if TYPE_CHECKING:
     from robot.sim import SimEngine
 
 __all__ = [
+    "PURE_DEPENDENCIES",
     "CellDep",
     "DatabaseDep",
     "EngineerUser",
     "OperatorUser",
+    "RoleCheck",
     "RuntimeDep",
     "SessionDep",
     "SettingsDep",
     "SimDep",
     "View3DDep",
     "ViewerUser",
+    "cached_role",
     "client_address",
     "get_cell",
     "get_database",
@@ -105,20 +116,30 @@ def get_settings(conn: HTTPConnection) -> Settings:
     return conn.app.state.settings
 
 
-def get_database(conn: HTTPConnection) -> Database:
+async def _runtime_dependency(conn: HTTPConnection) -> CellRuntime:
+    """:func:`get_runtime` as a dependency (on the event loop, no worker thread)."""
+    return get_runtime(conn)
+
+
+async def _settings_dependency(conn: HTTPConnection) -> Settings:
+    """:func:`get_settings` as a dependency (on the event loop, no worker thread)."""
+    return get_settings(conn)
+
+
+async def get_database(conn: HTTPConnection) -> Database:
     return get_runtime(conn).database
 
 
-def get_cell(conn: HTTPConnection) -> Cell:
+async def get_cell(conn: HTTPConnection) -> Cell:
     return get_runtime(conn).cell
 
 
-def get_sim_or_none(conn: HTTPConnection) -> SimEngine | None:
+async def get_sim_or_none(conn: HTTPConnection) -> SimEngine | None:
     """The simulation engine, or None when the cell drives real (or ideal) hardware."""
     return get_runtime(conn).sim
 
 
-def get_view3d(conn: HTTPConnection) -> View3D | None:
+async def get_view3d(conn: HTTPConnection) -> View3D | None:
     """The 3D view, or None when it is off (or the cell is not running)."""
     rt = runtime_of(conn.app)
     return rt.view3d if rt is not None and rt.running else None
@@ -136,7 +157,7 @@ async def get_session(
         yield session
 
 
-def get_read_cache(conn: HTTPConnection) -> ReadCache:
+async def get_read_cache(conn: HTTPConnection) -> ReadCache:
     cache: ReadCache = get_runtime(conn).read_cache
     return cache
 
@@ -163,8 +184,8 @@ async def read_through(
 
 # Types the runtime's module would import at start-up are written as Any here (FastAPI only
 # needs the dependency); the functions above carry the precise types.
-RuntimeDep = Annotated[Any, Depends(get_runtime)]
-SettingsDep = Annotated[Settings, Depends(get_settings)]
+RuntimeDep = Annotated[Any, Depends(_runtime_dependency)]
+SettingsDep = Annotated[Settings, Depends(_settings_dependency)]
 DatabaseDep = Annotated[Database, Depends(get_database)]
 SimDep = Annotated[Any, Depends(get_sim_or_none)]
 View3DDep = Annotated[Any, Depends(get_view3d)]
@@ -172,33 +193,68 @@ SessionDep = Annotated[AsyncSession, Depends(get_session, scope="function")]
 CellDep = Annotated[Cell, Depends(get_cell)]
 ReadCacheDep = Annotated[ReadCache, Depends(get_read_cache)]
 
+#: Dependencies that only fetch an object of the running system (and answer 503 while the
+#: cell is not running, which the fast path checks itself): what a route the fast path
+#: answers may depend on besides its :class:`RoleCheck` (``backend.api.fastpath``).
+PURE_DEPENDENCIES: frozenset[Callable[..., Any]] = frozenset(
+    {
+        _runtime_dependency,
+        _settings_dependency,
+        get_database,
+        get_cell,
+        get_sim_or_none,
+        get_view3d,
+        get_read_cache,
+    }
+)
+
+
+def _lookup(db: Database, token: str, secret: str) -> Lookup:
+    """The database sign-in of ``token`` (what the sign-in cache runs on a miss and to
+    refresh an entry ahead of its expiry): its user and expiry, or None when refused."""
+
+    async def lookup() -> SignIn | None:
+        async with db.api_slot(), db.session() as session:
+            return await authenticate_with_expiry(session, token, secret)
+
+    return lookup
+
 
 async def _signed_in(
     conn: HTTPConnection, db: Database, token: str, settings: Settings
 ) -> User | None:
     """The user of ``token``: from the runtime's short-lived sign-in cache
-    (:mod:`backend.authcache`), else from the database (then cached)."""
+    (:mod:`backend.authcache`: refreshed ahead of its expiry, one database lookup per
+    token at a time), else from the database (then cached)."""
     secret = settings.secret_key.get_secret_value()
     cache = get_runtime(conn).auth_cache
     if not well_formed(token):
         return None
-    key = hash_token(token, secret)
-    user = cache.get(key)
-    if user is not None:
-        return user
-    generation = cache.generation
-    async with db.api_slot(), db.session() as session:
-        found = await authenticate_with_expiry(session, token, secret)
-    if found is None:
-        return None
-    cache.put(key, found[0], found[1], generation=generation)
-    return found[0]
+    return await cache.sign_in(hash_token(token, secret), _lookup(db, token, secret))
 
 
-def require_role(role: Role) -> Callable[..., Coroutine[Any, Any, User]]:
-    """Dependency: the token's user, who must hold at least ``role``."""
+class RoleCheck:
+    """Dependency: the token's user, who must hold at least :attr:`role`
+    (``Depends(require_role(Role.operator))``).
 
-    async def current_user(
+    Refusals, in order: 429 for a client address the sign-in throttle blocks (even with a
+    correct token), 401 without a bearer token or with a bad, expired or revoked one (a
+    failure for the throttle), 403 for a weaker role.  With ``auth_enabled`` off every
+    caller is an anonymous engineer.  The fast path (``backend.api.fastpath``) takes a
+    route's minimum role from its :class:`RoleCheck` and asks :meth:`allows`."""
+
+    def __init__(self, role: Role) -> None:
+        if not isinstance(role, Role):
+            raise TypeError(f"role must be a Role, got {role!r}")
+        #: The weakest role let through.
+        self.role = role
+
+    def allows(self, role: Role) -> bool:
+        """Whether a user holding ``role`` may pass."""
+        return role >= self.role
+
+    async def __call__(
+        self,
         conn: HTTPConnection,
         settings: SettingsDep,
         db: DatabaseDep,
@@ -227,15 +283,49 @@ def require_role(role: Role) -> Callable[..., Coroutine[Any, Any, User]]:
                 "invalid, expired or revoked token",
                 headers={"WWW-Authenticate": "Bearer"},
             )
-        if Role[user.role] < role:
+        if not self.allows(Role[user.role]):
             raise ApiError(
                 403,
                 "forbidden",
-                f"this needs the {role.name} role; user {user.name!r} is {user.role}",
+                f"this needs the {self.role.name} role; user {user.name!r} is {user.role}",
             )
         return user
 
-    return current_user
+    def __repr__(self) -> str:
+        return f"RoleCheck({self.role.name})"
+
+
+def require_role(role: Role) -> RoleCheck:
+    """Dependency: the token's user, who must hold at least ``role`` (:class:`RoleCheck`)."""
+    return RoleCheck(role)
+
+
+async def cached_role(conn: HTTPConnection) -> Role | None:
+    """The role a :class:`RoleCheck` would find for this request from memory alone: the
+    anonymous engineer when ``auth_enabled`` is off; else the role of a well-formed bearer
+    token the sign-in cache holds valid (TTL and the token's expiry checked on this hit;
+    refreshed ahead as :class:`RoleCheck`'s sign-in is), from an address the throttle does
+    not block.  None in every other case (a token the
+    cache does not hold, none, a blocked address, the cell not running): the dependency
+    itself must decide, from the database, and answer any refusal."""
+    settings = get_settings(conn)
+    if not settings.auth_enabled:
+        return Role.engineer
+    rt = runtime_of(conn.app)
+    if rt is None or not rt.running:
+        return None
+    try:
+        rt.signin_throttle.check(client_address(conn))
+    except TooManyAttempts:
+        return None
+    creds = await _bearer(conn)
+    if creds is None or creds.scheme.lower() != "bearer" or not well_formed(creds.credentials):
+        return None
+    secret = settings.secret_key.get_secret_value()
+    key = hash_token(creds.credentials, secret)
+    # A hit late in the entry's TTL looks the token up again in the background.
+    role = rt.auth_cache.role_of(key, refresh=_lookup(rt.database, creds.credentials, secret))
+    return None if role is None else Role[role]
 
 
 ViewerUser = Annotated[User, Depends(require_role(Role.viewer))]

@@ -249,6 +249,14 @@ class CameraFeed:
             cached = self._jpeg = (seq, quality, buf.tobytes())
         return cached[2]
 
+    def encoded_jpeg(self, *, quality: int = 80) -> bytes | None:
+        """The newest frame's JPEG if :meth:`latest_jpeg` has encoded it already at this
+        ``quality`` (None: it needs encoding, or there is no frame); never encodes."""
+        cached = self._jpeg
+        if self._frame is None or cached is None:
+            return None
+        return cached[2] if cached[0] == self._frames and cached[1] == quality else None
+
     def status(self) -> CameraStatus:
         """Name, health, frame count, rate and last error of the camera."""
         return CameraStatus(

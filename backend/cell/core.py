@@ -227,8 +227,12 @@ class Cell(CellMotion):
         return self.feed.latest_jpeg(quality=quality)
 
     async def latest_jpeg_async(self, *, quality: int = 80) -> bytes | None:
-        """:meth:`latest_jpeg` with the encoding in a worker thread (off the event loop)."""
+        """:meth:`latest_jpeg` with the encoding in a worker thread (off the event loop);
+        a frame encoded already is answered at once."""
         self.feed.note_demand()
+        jpeg = self.feed.encoded_jpeg(quality=quality)
+        if jpeg is not None:
+            return jpeg
         return await asyncio.to_thread(self.feed.latest_jpeg, quality=quality, demand=False)
 
     def camera_status(self) -> CameraStatus:

@@ -6,15 +6,20 @@ bounded, and a read that raced a commit is not kept."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
+import gc
+import logging
 import sqlite3
 import time
 
 import pytest
+from fastapi.testclient import TestClient
 from sqlalchemy import text, update
 
+from backend.app import create_app
 from backend.db.models import Cell, ObjectKind, ObjectModel, Role
 from backend.db.session import Database
-from backend.readcache import ALL_TABLES, TTL_S, ReadCache
+from backend.readcache import ALL_TABLES, MAX_REFRESHING, REFRESH_AHEAD_FRACTION, TTL_S, ReadCache
 
 
 def _db_file(settings) -> str:
@@ -287,3 +292,273 @@ def test_a_cancelled_reader_leaves_its_waiters_to_read_themselves() -> None:
         return await waiter
 
     assert asyncio.run(run()) == "v" and calls == 2
+
+
+# -- refresh ahead ------------------------------------------------------------------------------
+class _Gated:
+    """A read answering ``v1``, ``v2``, ... that, from its second call on, waits for
+    :attr:`gate` (a background re-read held in flight while the test looks)."""
+
+    def __init__(self, *, fail: bool = False) -> None:
+        self.calls = 0
+        self.gate = asyncio.Event()
+        self.fail = fail
+
+    async def __call__(self) -> str:
+        self.calls += 1
+        n = self.calls
+        if n > 1:
+            await self.gate.wait()
+        if self.fail:
+            raise RuntimeError("database went away")
+        return f"v{n}"
+
+
+def _due_in(cache: ReadCache) -> float:
+    """Seconds from an entry's read until a hit refreshes it (and a margin)."""
+    return cache.ttl_s * (1.0 - REFRESH_AHEAD_FRACTION) + 0.02
+
+
+@pytest.mark.parametrize("how", ["get_or_read", "peek"])
+def test_refresh_ahead_serves_the_old_entry_and_replaces_it_without_a_wait(how) -> None:
+    cache, reads = ReadCache(ttl_s=0.5), _Gated()
+
+    async def hit() -> object:
+        if how == "peek":  # the fast path's way in
+            e = cache.peek("k", role=Role.viewer, tables=("cells",))
+            return None if e is None else e.value
+        return await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
+
+    async def run() -> None:
+        await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
+        first = cache.peek("k", role=Role.viewer, tables=("cells",))
+        assert first is not None and cache.refreshing == 0  # young: no refresh yet
+        await asyncio.sleep(_due_in(cache))
+        # Answered at once from the old entry (the re-read is held at its gate) ...
+        assert await asyncio.wait_for(hit(), 0.05) == "v1"
+        assert cache.refreshing == 1 and reads.calls == 2
+        for _ in range(5):  # ... and only one re-read of the key, however many hits
+            assert await hit() == "v1"
+        assert cache.refreshing == 1 and reads.calls == 2 and cache.refreshes == 1
+        reads.gate.set()
+        while cache.refreshing:
+            await asyncio.sleep(0.005)
+        new = cache.peek("k", role=Role.viewer, tables=("cells",))
+        assert new is not None and new.value == "v2" and new.until > first.until
+        assert new.role is Role.viewer  # read for the role of the entry it replaced
+        assert reads.calls == 2 and cache.misses == 1  # no request read
+
+    asyncio.run(run())
+
+
+def test_the_refresh_keeps_the_entry_s_role() -> None:
+    cache, reads = ReadCache(ttl_s=0.3), _Gated()
+    reads.gate.set()
+
+    async def run() -> None:
+        await cache.get_or_read("k", role=Role.operator, tables=("cells",), read=reads)
+        await asyncio.sleep(_due_in(cache))
+        # An engineer's hit refreshes it; the new entry is still the operator's.
+        await cache.get_or_read("k", role=Role.engineer, tables=("cells",), read=reads)
+        while cache.refreshing:
+            await asyncio.sleep(0.005)
+        assert cache.peek("k", role=Role.viewer, tables=("cells",)) is None
+        e = cache.peek("k", role=Role.operator, tables=("cells",))
+        assert e is not None and e.value == "v2" and e.role is Role.operator
+
+    asyncio.run(run())
+
+
+def test_background_re_reads_are_bounded() -> None:
+    cache = ReadCache(ttl_s=0.5)
+    reads = {k: _Gated() for k in range(MAX_REFRESHING + 3)}
+
+    async def run() -> None:
+        for k, read in reads.items():
+            await cache.get_or_read(k, role=Role.viewer, tables=("cells",), read=read)
+        await asyncio.sleep(_due_in(cache))
+        for k in reads:
+            assert cache.peek(k, role=Role.viewer, tables=("cells",)) is not None
+        assert cache.refreshing == MAX_REFRESHING == cache.refreshes
+        await asyncio.sleep(0.01)  # the re-reads run up to their gates
+        assert sum(r.calls for r in reads.values()) == len(reads) + MAX_REFRESHING
+        await cache.close()
+
+    asyncio.run(run())
+
+
+def test_an_entry_is_never_served_past_its_until_while_its_refresh_hangs() -> None:
+    cache, reads = ReadCache(ttl_s=0.3), _Gated()
+
+    async def run() -> None:
+        await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
+        e = cache.peek("k", role=Role.viewer, tables=("cells",))
+        assert e is not None
+        await asyncio.sleep(_due_in(cache))
+        assert cache.peek("k", role=Role.viewer, tables=("cells",)) is e  # refresh started
+        await asyncio.sleep(max(0.0, e.until - time.monotonic()) + 0.01)
+        assert cache.peek("k", role=Role.viewer, tables=("cells",)) is None  # expired
+        # A request now waits for the re-read in flight (shared), not the old answer.
+        waiter = asyncio.create_task(
+            cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
+        )
+        await asyncio.sleep(0.02)
+        assert not waiter.done() and cache.shared == 1
+        reads.gate.set()
+        assert await waiter == "v2" and reads.calls == 2
+
+    asyncio.run(run())
+
+
+def test_a_commit_during_a_refresh_is_not_overwritten_by_its_stale_read() -> None:
+    cache, reads = ReadCache(ttl_s=0.5), _Gated()
+
+    async def run() -> None:
+        await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
+        await asyncio.sleep(_due_in(cache))
+        cache.peek("k", role=Role.viewer, tables=("cells",))
+        assert cache.refreshing == 1
+        assert cache.invalidate({"cells"}) == 1  # a commit wrote cells: the entry goes ...
+        reads.gate.set()  # ... and the re-read that started before it finishes
+        while cache.refreshing:
+            await asyncio.sleep(0.005)
+        assert cache.peek("k", role=Role.viewer, tables=("cells",)) is None  # not kept
+        got = await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
+        assert got == "v3"  # the next request reads after the commit
+
+    asyncio.run(run())
+
+
+def test_a_commit_through_a_session_during_a_refresh_wins(settings) -> None:
+    cache = ReadCache(ttl_s=0.5)
+
+    async def run() -> None:
+        db = Database(settings.database_url)
+        gate = asyncio.Event()
+
+        async def describe() -> str:  # the cell's description, as a route would read it
+            async with db.session() as s:
+                got = await s.scalar(text("SELECT description FROM cells WHERE name = 'refreshed'"))
+            await gate.wait()  # a commit lands after the read, before it is stored
+            return str(got)
+
+        try:
+            async with db.session() as s:
+                s.add(Cell(name="refreshed", description="as read"))
+            gate.set()
+            before = await cache.get_or_read(
+                "d", role=Role.viewer, tables=("cells",), read=describe
+            )
+            gate.clear()
+            await asyncio.sleep(_due_in(cache))
+            cache.peek("d", role=Role.viewer, tables=("cells",))  # starts the re-read
+            await asyncio.sleep(0.05)  # it has read the old description
+            async with db.session() as s:
+                await s.execute(update(Cell).values(description=f"{before}, changed"))
+            gate.set()
+            while cache.refreshing:
+                await asyncio.sleep(0.005)
+            got = await cache.get_or_read("d", role=Role.viewer, tables=("cells",), read=describe)
+            assert before == "as read" and got == "as read, changed"
+        finally:
+            await cache.close()
+            await db.dispose()
+
+    asyncio.run(run())
+
+
+def test_a_failed_refresh_is_logged_once_and_harmless(caplog) -> None:
+    cache, reads = ReadCache(ttl_s=0.3), _Gated()
+    reads.gate.set()
+    unhandled: list[dict] = []
+
+    async def run() -> None:
+        asyncio.get_running_loop().set_exception_handler(lambda _loop, ctx: unhandled.append(ctx))
+        for _ in range(2):  # two entries, each refreshed once; both re-reads fail
+            reads.fail = False
+            await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
+            e = cache.peek("k", role=Role.viewer, tables=("cells",))
+            assert e is not None
+            await asyncio.sleep(_due_in(cache))
+            reads.fail = True
+            assert cache.peek("k", role=Role.viewer, tables=("cells",)) is e  # starts it
+            while cache.refreshing:
+                await asyncio.sleep(0.005)
+            assert cache.peek("k", role=Role.viewer, tables=("cells",)) is e  # still served
+            await asyncio.sleep(max(0.0, e.until - time.monotonic()) + 0.01)
+            assert cache.peek("k", role=Role.viewer, tables=("cells",)) is None  # expired
+        gc.collect()
+        await asyncio.sleep(0)
+
+    with caplog.at_level(logging.INFO, logger="backend.readcache"):
+        asyncio.run(run())
+    gc.collect()
+    warnings = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(warnings) == 1 and "went away" in warnings[0].getMessage()
+    # One re-read per entry (a failed one is not tried again on the entry's later hits).
+    assert cache.refresh_failures == 2 and reads.calls == 4 and unhandled == []
+
+
+def test_shutdown_leaves_no_background_read() -> None:
+    cache, reads = ReadCache(ttl_s=0.3), _Gated()
+
+    async def run() -> asyncio.Task[None]:
+        await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
+        await asyncio.sleep(_due_in(cache))
+        cache.peek("k", role=Role.viewer, tables=("cells",))
+        (task,) = cache._refreshing
+        await asyncio.sleep(0.01)  # the re-read waits at its gate
+        await cache.close()  # the gate never opens: the re-read hangs until cancelled
+        assert task.cancelled() and cache.refreshing == 0 and len(cache) == 0
+        # Closed: a hit starts no re-read until the cache is opened again.
+        await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=lambda: _v("w"))
+        await asyncio.sleep(_due_in(cache))
+        cache.peek("k", role=Role.viewer, tables=("cells",))
+        assert cache.refreshing == 0
+        cache.open()
+        cache.peek("k", role=Role.viewer, tables=("cells",))
+        assert cache.refreshing == 1
+        await cache.close()
+        return task
+
+    asyncio.run(run())
+    assert reads.calls == 2
+
+
+async def _v(value: str) -> str:
+    return value
+
+
+def test_the_runtime_cancels_background_reads_before_the_engine_goes(
+    settings, tokens, monkeypatch
+) -> None:
+    order: list[str] = []
+    real_dispose = Database.dispose
+
+    async def dispose(self: Database) -> None:
+        order.append("dispose")
+        await real_dispose(self)
+
+    monkeypatch.setattr(Database, "dispose", dispose)
+    app = create_app(settings)
+    with TestClient(app) as client:
+        rt = client.app.state.runtime
+
+        async def hang() -> str:
+            try:
+                await asyncio.Event().wait()
+            finally:
+                order.append("re-read ended")
+            return "never"
+
+        async def start() -> None:
+            await rt.read_cache.get_or_read("x", role=Role.viewer, tables=("cells",),
+                                            read=lambda: _v("old"))  # fmt: skip
+            e = rt.read_cache._entries["x"]
+            rt.read_cache._entries["x"] = dataclasses.replace(e, until=time.monotonic() + 0.01,
+                                                               read=hang)  # fmt: skip
+            rt.read_cache.peek("x", role=Role.viewer, tables=("cells",))
+
+        client.portal.call(start)
+        assert rt.read_cache.refreshing == 1
+    assert order[:2] == ["re-read ended", "dispose"] and rt.read_cache.refreshing == 0

@@ -17,8 +17,11 @@ from backend.api.deps import (
     View3DDep,
     ViewerUser,
 )
+from backend.api.fastpath import FastRequest, Fresh
+from backend.cell import Cell
 from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Role
+from backend.settings import Settings
 
 router = APIRouter(tags=["health"])
 
@@ -41,13 +44,23 @@ class StatusOut(BaseModel):
     versions: dict[str, str]
 
 
-@router.get("/health", summary="Liveness; needs no token", response_model=HealthOut)
-async def read_health(view: View3DDep) -> dict[str, Any]:
+def health_answer(view: Any) -> dict[str, Any]:
+    """The liveness answer (``view``: the 3D view or None)."""
     return {
         "status": "ok",
         "version": __version__,
         "viser_port": view.port if view is not None else None,
     }
+
+
+@router.get("/health", summary="Liveness; needs no token", response_model=HealthOut)
+async def read_health(view: View3DDep) -> dict[str, Any]:
+    return health_answer(view)
+
+
+async def fast_read_health(req: FastRequest) -> Fresh | None:
+    """:func:`read_health` of the running cell."""
+    return Fresh.of_content(health_answer(req.runtime.view3d))
 
 
 def _versions() -> dict[str, str]:
@@ -66,27 +79,18 @@ def _versions() -> dict[str, str]:
     }
 
 
-@router.get("/status", summary="Driver, camera, database and versions", response_model=StatusOut)
-async def read_status(
-    user: ViewerUser,
-    settings: SettingsDep,
-    db: DatabaseDep,
-    cell: CellDep,
-    view: View3DDep,
-    cache: ReadCacheDep,
+#: The read-cache key and tables of the status's database probe.
+STATUS_DB_KEY = "status-database"
+STATUS_DB_TABLES = ("alembic_version",)
+
+
+def status_answer(
+    settings: Settings, cell: Cell, view: Any, db_ok: bool, revision: str | None
 ) -> dict[str, Any]:
+    """The status answer from the database probe (``db_ok``, ``revision``) and the cell's
+    state now."""
     state = cell.driver.state
     cam = cell.camera_status()
-
-    async def probe() -> tuple[bool, str | None]:
-        ok = await db.ping()
-        return ok, (await current_revision(db.engine) if ok else None)
-
-    # Two round trips to the database, reused for the read cache's TTL (a database that
-    # goes away shows within it); the cell's own state below is read on every request.
-    db_ok, revision = await cache.get_or_read(
-        "status-database", role=Role[user.role], tables=("alembic_version",), read=probe
-    )
     return {
         "driver": {
             "name": cell.driver.name,
@@ -111,3 +115,37 @@ async def read_status(
         "jobs": {"running": [j.public() for j in cell.jobs.running()]},
         "versions": _versions(),
     }
+
+
+@router.get("/status", summary="Driver, camera, database and versions", response_model=StatusOut)
+async def read_status(
+    user: ViewerUser,
+    settings: SettingsDep,
+    db: DatabaseDep,
+    cell: CellDep,
+    view: View3DDep,
+    cache: ReadCacheDep,
+) -> dict[str, Any]:
+    async def probe() -> tuple[bool, str | None]:
+        ok = await db.ping()
+        return ok, (await current_revision(db.engine) if ok else None)
+
+    # Two round trips to the database, reused for the read cache's TTL (a database that
+    # goes away shows within it); the cell's own state is read on every request.
+    db_ok, revision = await cache.get_or_read(
+        STATUS_DB_KEY, role=Role[user.role], tables=STATUS_DB_TABLES, read=probe
+    )
+    return status_answer(settings, cell, view, db_ok, revision)
+
+
+async def fast_read_status(req: FastRequest) -> Fresh | None:
+    """:func:`read_status` when the database probe's read-cache entry is fresh for the
+    role (the cell's state changes all the time: its answer is kept while equal)."""
+    if req.role is None:
+        return None
+    rt = req.runtime
+    entry = rt.read_cache.peek(STATUS_DB_KEY, role=req.role, tables=STATUS_DB_TABLES)
+    if entry is None:
+        return None
+    db_ok, revision = entry.value
+    return Fresh.of_content(status_answer(req.settings, rt.cell, rt.view3d, db_ok, revision))

@@ -6,6 +6,7 @@ The work is in :mod:`backend.inspection`; handlers only parse, call it and shape
 
 from __future__ import annotations
 
+from collections.abc import Hashable, Mapping
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
@@ -24,6 +25,7 @@ from backend.api.deps import (
     ViewerUser,
     read_through,
 )
+from backend.api.fastpath import FastRequest, Fresh
 from backend.api.types import DbId, Limit, Offset
 from backend.inspection import results, service
 
@@ -110,6 +112,25 @@ async def stop_run(_: OperatorUser, rt: RuntimeDep) -> dict[str, Any]:
     return {"job": run.job.public()}
 
 
+#: What the inspection list reads (its read-cache entries go when one of them is written).
+INSPECTION_TABLES = ("inspections", "inspection_images")
+
+
+def inspections_key(cell_id: int | None, params: Mapping[str, Any]) -> tuple[Hashable, ...]:
+    """The read-cache key of one page of this cell's inspection list; ``params`` by the
+    query parameters' names."""
+    return ("inspections", cell_id, *(params[name] for name in _LIST_PARAMS))
+
+
+_LIST_PARAMS = ("limit", "offset", "decision", "model", "policy", "since", "until")
+
+
+def inspections_answer(value: tuple[list[dict[str, Any]], int]) -> dict[str, Any]:
+    """The list's answer from its read (rows, total)."""
+    data, total = value
+    return {"data": data, "count": total}
+
+
 @router.get("/inspections", summary="Stored inspections of this cell, newest first")
 async def read_inspections(
     user: ViewerUser,
@@ -130,11 +151,23 @@ async def read_inspections(
             model=model, policy=policy, since=since, until=until,
         )  # fmt: skip
 
-    key = ("inspections", rt.cell_id, limit, offset, decision, model, policy, since, until)
-    data, total = await read_through(
-        cache, db, user, key, tables=("inspections", "inspection_images"), read=read
-    )
-    return {"data": data, "count": total}
+    params = {"limit": limit, "offset": offset, "decision": decision, "model": model,
+              "policy": policy, "since": since, "until": until}  # fmt: skip
+    key = inspections_key(rt.cell_id, params)
+    value = await read_through(cache, db, user, key, tables=INSPECTION_TABLES, read=read)
+    return inspections_answer(value)
+
+
+async def fast_read_inspections(req: FastRequest) -> Fresh | None:
+    """:func:`read_inspections` from its read-cache entry, if it has a fresh one for the
+    role."""
+    if req.role is None:
+        return None
+    key = inspections_key(req.runtime.cell_id, req.params)
+    entry = req.runtime.read_cache.peek(key, role=req.role, tables=INSPECTION_TABLES)
+    if entry is None:
+        return None
+    return Fresh((entry,), lambda: inspections_answer(entry.value))
 
 
 @router.get("/inspections/{inspection_id}", summary="One inspection")

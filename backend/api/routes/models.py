@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Hashable
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
@@ -29,6 +30,7 @@ from backend.api.deps import (
     ViewerUser,
     read_through,
 )
+from backend.api.fastpath import FastRequest, Fresh
 from backend.api.uploads import read_capped
 from backend.recognition import images as im
 from backend.recognition import models as svc
@@ -59,7 +61,7 @@ def _by(user: Any, reason: str | None) -> audit.By:
     return audit.By(audit.Actor.of(user), reason)
 
 
-def get_live_index(runtime: RuntimeDep) -> LiveIndex:
+async def get_live_index(runtime: RuntimeDep) -> LiveIndex:
     """The live index of the running cell (built from the database at start-up)."""
     return runtime.live_index
 
@@ -189,6 +191,21 @@ def _view_out(row: Any, live: LiveIndex) -> dict[str, Any]:
 # -- models ---------------------------------------------------------------------------------
 
 
+#: What the model list reads (its read-cache entries go when one of them is written).
+MODEL_TABLES = ("object_models", "trained_views")
+
+
+def models_key(limit: int, offset: int, part: str | None) -> tuple[Hashable, ...]:
+    """The read-cache key of one page of the model list."""
+    return ("models", limit, offset, part)
+
+
+def models_answer(value: tuple[list[dict[str, Any]], int], live: LiveIndex) -> dict[str, Any]:
+    """The list's answer from its read (rows and view counts, total) and the live index."""
+    data, total = value
+    return {"data": [_live_out(d, live) for d in data], "count": total}
+
+
 @router.get("", response_model=ModelList, summary="Object models, by name")
 async def read_models(
     user: ViewerUser,
@@ -206,11 +223,29 @@ async def read_models(
 
     # The rows and view counts from the database, cached; the live index's part (in
     # memory, changed without a commit) per request.
-    data, total = await read_through(
-        cache, db, user, ("models", limit, offset, part),
-        tables=("object_models", "trained_views"), read=read,
-    )  # fmt: skip
-    return {"data": [_live_out(d, live) for d in data], "count": total}
+    value = await read_through(
+        cache, db, user, models_key(limit, offset, part), tables=MODEL_TABLES, read=read
+    )
+    return models_answer(value, live)
+
+
+async def fast_read_models(req: FastRequest) -> Fresh | None:
+    """:func:`read_models` from its read-cache entry, if it has a fresh one for the role;
+    its answer is kept while the live index has not changed (its generation)."""
+    if req.role is None:
+        return None
+    p = req.params
+    key = models_key(p["limit"], p["offset"], p["part"])
+    entry = req.runtime.read_cache.peek(key, role=req.role, tables=MODEL_TABLES)
+    if entry is None:
+        return None
+    live = req.runtime.live_index
+    generation = live.generation
+    return Fresh(
+        (entry, generation),
+        lambda: models_answer(entry.value, live),
+        still=lambda: live.generation == generation,
+    )
 
 
 @router.post(

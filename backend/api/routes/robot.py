@@ -9,6 +9,7 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field, model_validator
 
 from backend.api.deps import CellDep, OperatorUser, ViewerUser
+from backend.api.fastpath import FastRequest, Fresh
 from backend.api.schemas import JobOut, PoseIn, RobotStateOut
 from backend.api.types import JointList, RollRad, Speed
 from backend.jobs import Job
@@ -71,9 +72,19 @@ _JOB_ANSWERS: dict[int | str, dict[str, Any]] = {
 }
 
 
+def state_answer(cell: Any) -> dict[str, Any]:
+    """The arm's state answer now."""
+    return {"state": cell.driver.state.as_dict(), "speed": cell.speed, "driver": cell.driver.name}
+
+
 @router.get("/state", summary="Latest joint state", response_model=StateOut)
 async def read_state(_: ViewerUser, cell: CellDep) -> dict[str, Any]:
-    return {"state": cell.driver.state.as_dict(), "speed": cell.speed, "driver": cell.driver.name}
+    return state_answer(cell)
+
+
+async def fast_read_state(req: FastRequest) -> Fresh | None:
+    """:func:`read_state` (kept while the state is equal: at rest)."""
+    return Fresh.of_content(state_answer(req.runtime.cell))
 
 
 @router.post(
