@@ -52,7 +52,7 @@ from sqlalchemy.orm import ORMExecuteState, Session
 
 from backend.db.models import ApiToken, User
 from backend.db.types import utcnow
-from backend.taskutil import cancel_and_wait
+from backend.taskutil import BackgroundTasks
 
 __all__ = [
     "AUTH_CHANNEL",
@@ -165,12 +165,11 @@ class AuthCache:
         #: Grows with every :meth:`clear`; :meth:`put` drops a sign-in read before it.
         self.generation = 0
         self._inflight: dict[str, _Flight] = {}
-        self._refreshing: set[asyncio.Task[None]] = set()
+        self._background = BackgroundTasks(MAX_REFRESHING)
         self._failing = False  # the last background lookup failed (logged once)
         #: Tokens whose background lookup failed, with the entry it was for: that entry is
         #: left to expire, not looked up again on every later hit.
         self._not_again: dict[str, _Entry] = {}
-        self._closed = False
         #: Database lookups made by :meth:`sign_in` (requests and background), requests
         #: that shared one in flight, background lookups started and failed.
         self.lookups = 0
@@ -276,8 +275,8 @@ class AuthCache:
         """Start the background lookup of ``token_hash`` unless off, one is in flight for
         it, :data:`MAX_REFRESHING` run, or this is not called from a coroutine."""
         if (
-            not self.refresh_ahead or self._closed or self.ttl_s <= 0
-            or token_hash in self._inflight or self._busy()
+            not self.refresh_ahead or self._background.closed or self.ttl_s <= 0
+            or token_hash in self._inflight or self._background.full()
         ):  # fmt: skip
             return
         try:
@@ -285,11 +284,9 @@ class AuthCache:
         except RuntimeError:
             return
         flight = self._start(token_hash, loop)
-        task = loop.create_task(
-            self._refresh_run(token_hash, lookup, flight), name="sign-in refresh"
+        self._background.spawn(
+            loop, self._refresh_run(token_hash, lookup, flight), name="sign-in refresh"
         )
-        self._refreshing.add(task)
-        task.add_done_callback(self._refreshing.discard)
         self.refreshes += 1
 
     async def _refresh_run(self, token_hash: str, lookup: Lookup, flight: _Flight) -> None:
@@ -338,37 +335,20 @@ class AuthCache:
         flight.future.set_result((_row(found[0]), _aware(found[1])))
         self.put(token_hash, found[0], found[1], generation=flight.generation, started=started)
 
-    def _busy(self) -> bool:
-        """Whether :data:`MAX_REFRESHING` background reads run (tasks that ended on a loop
-        closed before their done callback ran are dropped first)."""
-        if len(self._refreshing) < MAX_REFRESHING:
-            return False
-        for task in [t for t in self._refreshing if t.done()]:
-            self._refreshing.discard(task)  # in place: the tasks' done callbacks hold it
-        return len(self._refreshing) >= MAX_REFRESHING
-
     @property
     def refreshing(self) -> int:
         """Background lookups in flight."""
-        return len(self._refreshing)
+        return len(self._background)
 
     def open(self) -> None:
         """Let background lookups start again after :meth:`close`."""
-        self._closed = False
+        self._background.open()
 
     async def close(self) -> None:
         """Cancel the background lookups and wait for their end (those of this event
         loop; another loop's are only cancelled), start none until :meth:`open`, and
         forget every entry."""
-        self._closed = True
-        loop = asyncio.get_running_loop()
-        for task in list(self._refreshing):
-            if task.done():  # ended on a loop that closed before its done callback ran
-                self._refreshing.discard(task)
-            elif task.get_loop() is loop:
-                await cancel_and_wait(task)
-            else:
-                task.get_loop().call_soon_threadsafe(task.cancel)
+        await self._background.close()
         self.clear()
 
     def put(

@@ -62,7 +62,7 @@ from sqlalchemy import inspect as sa_inspect
 from sqlalchemy.orm import ORMExecuteState, Session
 
 from backend.db.models import Role
-from backend.taskutil import cancel_and_wait
+from backend.taskutil import BackgroundTasks
 
 __all__ = [
     "ALL_TABLES",
@@ -171,11 +171,10 @@ class ReadCache:
         #: Background re-reads started, and those that failed.
         self.refreshes = 0
         self.refresh_failures = 0
-        self._refreshing: set[asyncio.Task[None]] = set()
+        self._background = BackgroundTasks(MAX_REFRESHING)
         self._failing = False  # the last re-read failed (logged once until one succeeds)
         #: Entries whose re-read failed: left to expire, not re-read on every later hit.
         self._not_again: weakref.WeakSet[Entry] = weakref.WeakSet()
-        self._closed = False
         _caches.add(self)
 
     def _gen(self, tables: Iterable[str]) -> tuple[int, ...]:
@@ -264,9 +263,9 @@ class ReadCache:
         :data:`REFRESH_AHEAD_FRACTION` of its TTL, no read of the key is in flight and
         fewer than :data:`MAX_REFRESHING` re-reads run."""
         if (
-            not self.refresh_ahead or self._closed or e.read is None
+            not self.refresh_ahead or self._background.closed or e.read is None
             or now < e.until - REFRESH_AHEAD_FRACTION * self.ttl_s
-            or key in self._inflight or self._busy()
+            or key in self._inflight or self._background.full()
             or e in self._not_again
         ):  # fmt: skip
             return
@@ -278,9 +277,9 @@ class ReadCache:
             gen = self._gen(e.tables)
         flight = _Flight(loop, e.role, e.tables, gen, loop.create_future())
         self._inflight[key] = flight
-        task = loop.create_task(self._refresh(key, e, flight), name=f"read-cache refresh {key!r}")
-        self._refreshing.add(task)
-        task.add_done_callback(self._refreshing.discard)
+        self._background.spawn(
+            loop, self._refresh(key, e, flight), name=f"read-cache refresh {key!r}"
+        )
         self.refreshes += 1
 
     async def _refresh(self, key: Hashable, old: Entry, flight: _Flight) -> None:
@@ -318,38 +317,20 @@ class ReadCache:
             key, flight.gen, Entry(start + self.ttl_s, old.role, old.tables, value, old.read)
         )
 
-    def _busy(self) -> bool:
-        """Whether :data:`MAX_REFRESHING` background reads run (tasks that ended on a loop
-        closed before their done callback ran are dropped first)."""
-        if len(self._refreshing) < MAX_REFRESHING:
-            return False
-        for task in [t for t in self._refreshing if t.done()]:
-            self._refreshing.discard(task)  # in place: the tasks' done callbacks hold it
-        return len(self._refreshing) >= MAX_REFRESHING
-
     @property
     def refreshing(self) -> int:
         """Background re-reads in flight."""
-        return len(self._refreshing)
+        return len(self._background)
 
     def open(self) -> None:
         """Let background re-reads start again after :meth:`close` (a runtime entered again)."""
-        self._closed = False
+        self._background.open()
 
     async def close(self) -> None:
         """Cancel the background re-reads and wait for their end (those of this event
         loop; another loop's are only cancelled), start none until :meth:`open`, and drop
         every entry (their reads hold the database about to be disposed)."""
-        self._closed = True
-        loop = asyncio.get_running_loop()
-        tasks = list(self._refreshing)
-        for task in tasks:
-            if task.done():  # ended on a loop that closed before its done callback ran
-                self._refreshing.discard(task)
-            elif task.get_loop() is loop:
-                await cancel_and_wait(task)
-            else:
-                task.get_loop().call_soon_threadsafe(task.cancel)
+        await self._background.close()
         self.invalidate({ALL_TABLES})
 
     def _fresh(self, key: Hashable, role: Role, deps: frozenset[str], now: float) -> Entry | None:

@@ -192,7 +192,7 @@ def test_close_cancels_background_lookups():
         await asyncio.sleep(0.4 * (1 - REFRESH_AHEAD_FRACTION) + 0.02)
         lookup.delay_s = 60.0
         cache.get("h", refresh=lookup)
-        (task,) = cache._refreshing
+        (task,) = cache._background.tasks
         await asyncio.sleep(0.01)
         await cache.close()
         assert task.cancelled() and cache.refreshing == 0 and len(cache) == 0

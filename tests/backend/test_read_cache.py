@@ -506,7 +506,7 @@ def test_shutdown_leaves_no_background_read() -> None:
         await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
         await asyncio.sleep(_due_in(cache))
         cache.peek("k", role=Role.viewer, tables=("cells",))
-        (task,) = cache._refreshing
+        (task,) = cache._background.tasks
         await asyncio.sleep(0.01)  # the re-read waits at its gate
         await cache.close()  # the gate never opens: the re-read hangs until cancelled
         assert task.cancelled() and cache.refreshing == 0 and len(cache) == 0
