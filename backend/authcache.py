@@ -52,7 +52,7 @@ from sqlalchemy.orm import ORMExecuteState, Session
 
 from backend.db.models import ApiToken, User
 from backend.db.types import utcnow
-from backend.taskutil import BackgroundTasks
+from backend.taskutil import BackgroundTasks, work_for_waiters
 
 __all__ = [
     "AUTH_CHANNEL",
@@ -246,14 +246,7 @@ class AuthCache:
         mine = self._start(token_hash, loop)
         started = time.monotonic()
         try:
-            found = await lookup()
-        except asyncio.CancelledError:
-            mine.future.cancel()
-            raise
-        except BaseException as exc:
-            mine.future.set_exception(exc)
-            mine.future.exception()  # retrieved: no "never retrieved" warning
-            raise
+            found = await work_for_waiters(mine.future, lookup())
         finally:
             if self._inflight.get(token_hash) is mine:
                 del self._inflight[token_hash]

@@ -62,7 +62,7 @@ from sqlalchemy import inspect as sa_inspect
 from sqlalchemy.orm import ORMExecuteState, Session
 
 from backend.db.models import Role
-from backend.taskutil import BackgroundTasks
+from backend.taskutil import BackgroundTasks, work_for_waiters
 
 __all__ = [
     "ALL_TABLES",
@@ -229,14 +229,7 @@ class ReadCache:
         mine = _Flight(loop, role, deps, gen, loop.create_future())
         self._inflight[key] = mine
         try:
-            value = await read()
-        except asyncio.CancelledError:
-            mine.future.cancel()
-            raise
-        except BaseException as exc:
-            mine.future.set_exception(exc)
-            mine.future.exception()  # retrieved: no "never retrieved" warning
-            raise
+            value = await work_for_waiters(mine.future, read())
         finally:
             if self._inflight.get(key) is mine:
                 del self._inflight[key]

@@ -12,10 +12,12 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Coroutine
-from typing import Any
+from collections.abc import Awaitable, Coroutine
+from typing import Any, TypeVar
 
-__all__ = ["BackgroundTasks", "cancel_and_wait"]
+T = TypeVar("T")
+
+__all__ = ["BackgroundTasks", "cancel_and_wait", "work_for_waiters"]
 
 
 async def cancel_and_wait(task: asyncio.Task[Any], *, every_s: float = 0.5) -> None:
@@ -94,3 +96,19 @@ class BackgroundTasks:
                 await cancel_and_wait(task)
             else:
                 task.get_loop().call_soon_threadsafe(task.cancel)
+
+
+async def work_for_waiters(future: asyncio.Future[Any], work: Awaitable[T]) -> T:
+    """Await ``work`` on behalf of the requests waiting on ``future`` (a read shared while
+    in flight): its exception is set on ``future`` (marked retrieved, so an unwaited future
+    logs nothing) and raised again, its cancellation cancels ``future``; its value is
+    returned for the caller to set on ``future`` in the form the waiters expect."""
+    try:
+        return await work
+    except asyncio.CancelledError:
+        future.cancel()
+        raise
+    except BaseException as exc:
+        future.set_exception(exc)
+        future.exception()
+        raise
