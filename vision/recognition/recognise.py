@@ -3,7 +3,8 @@
 Pipeline of :func:`recognise`: features of the query (inside the object mask) -> votes of an
 approximate-nearest-neighbour search over every trained view of the viewpoint
 (:mod:`vision.recognition.search`) -> geometric verification of the best-voted views only
-(``max_models`` models, ``views_per_model`` views each) -> a score per model -> the decision.
+(``max_models`` models, ``views_per_model`` views each, and more of a model's views while
+their features fit its budget, :data:`VERIFY_FEATURES`) -> a score per model -> the decision.
 
 Score of a model
     The registration score of its best verified view, as defined in
@@ -88,6 +89,20 @@ def search_of(viewpoint: int) -> tuple[int, ...]:
 #: the best view's votes (fewer than 2 agreeing descriptors cannot fix an affine map).
 MIN_VOTES = 2.0
 REL_VOTES = 0.2
+#: Verification budget per model beyond its ``views_per_model`` best-voted views, in trained
+#: features: more of its voted views are verified, in order of votes, while the features of
+#: the views verified for it stay within ``views_per_model`` times this (and at most
+#: :data:`MAX_VIEWS_VERIFIED` views).  The cost of verifying a view grows with its features
+#: (exact matching against the query, then the fit), so this is the budget of two views of a
+#: richly textured part (1,000 features each) spent on as many views of a plain one as fit.
+#: Votes rank the views of a plain part poorly: its taught top views show the same surface
+#: at other yaws, and with 55-75 features each they draw 8-21 votes with little between
+#: them, while their registration scores spread from 0.05 to 0.53.  Two views by votes
+#: missed the one that registers: the valve block's top view scored 0.00-0.12 against
+#: 0.27-0.42 from its best view, and was reported unknown (``benchmarks.inspection``, constant
+#: belt speed; ``benchmarks.recognition_budget`` measures it).
+VERIFY_FEATURES = 1_000
+MAX_VIEWS_VERIFIED = 32
 
 
 @dataclass(frozen=True, eq=False)
@@ -351,10 +366,13 @@ def evaluate(
     votes = searcher.votes(
         query, k=DEFAULT_K, models=None if models is None else names, exclude_view=exclude_view
     )
-    # Best views per model, models ranked by their best view's votes.
+    # Best views per model, models ranked by their best view's votes; beyond its
+    # ``views_per_model`` views, a model's next-voted views while its budget lasts.
     order = np.argsort(-votes, kind="stable")
     floor = max(MIN_VOTES, REL_VOTES * float(votes[order[0]]))
+    budget = views_per_model * VERIFY_FEATURES
     chosen: dict[str, list[int]] = {}
+    spent: dict[str, int] = {}
     for pos in order:
         if votes[pos] < floor:
             break
@@ -366,9 +384,17 @@ def evaluate(
             if len(chosen) >= max_models:
                 continue
             picks = chosen[v.model] = []
-        if len(picks) < views_per_model:
+            spent[v.model] = 0
+        cost = len(v.features)
+        if len(picks) < views_per_model or (
+            len(picks) < MAX_VIEWS_VERIFIED and spent[v.model] + cost <= budget
+        ):
             picks.append(pos)
-        if len(chosen) >= max_models and all(len(p) >= views_per_model for p in chosen.values()):
+            spent[v.model] += cost
+        if len(chosen) >= max_models and all(
+            len(p) >= MAX_VIEWS_VERIFIED or (len(p) >= views_per_model and spent[m] >= budget)
+            for m, p in chosen.items()
+        ):
             break
     t1 = time.perf_counter()
     best: dict[str, Candidate] = {}
