@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import importlib
 import json
 import math
@@ -42,7 +43,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from benchmarks.recognition_yaw import _cached, _log
+from benchmarks.recognition_yaw import _cached, _log, render_teach
 
 RULES = ("budget", "by votes")
 
@@ -77,8 +78,11 @@ def run(
     offset_mm: float = 20.0,
     seed: int = 0,
     cache: Path | None = None,
+    names: list[str] | None = None,
+    untrained: list[str] | None = None,
 ) -> dict[str, Any]:
-    """Teach the top views, choose the thresholds and recognise (module docstring)."""
+    """Teach the top views, choose the thresholds and recognise (module docstring);
+    ``names`` and ``untrained`` replace the catalogue's trainable and untrained entries."""
     from backend.hardware import headless_mujoco
 
     headless_mujoco()
@@ -96,8 +100,10 @@ def run(
     engine = SimEngine()
     try:
         belt = engine.config.layout.conveyor
-        names = [n for n, e in CATALOGUE.items() if e.trainable]
-        untrained = [n for n, e in CATALOGUE.items() if not e.trainable]
+        if names is None:
+            names = [n for n, e in CATALOGUE.items() if e.trainable]
+        if untrained is None:
+            untrained = [n for n, e in CATALOGUE.items() if not e.trainable]
         point = np.asarray(belt.station_point, dtype=np.float64)
         shots = plan_shots(
             point, (1,), T_ee_cam=np.asarray(NOMINAL_T_EE_CAM), object_height_m=0.1,
@@ -113,16 +119,7 @@ def run(
         for k, name in enumerate(names):
             _log(f"  teaching {k + 1}/{len(names)}: {name}")
             for yaw in teach_yaws_rad(teach_yaws):
-
-                def render(name: str = name, yaw: float = yaw) -> list[tuple[Any, Any]]:
-                    engine.clear_objects()
-                    engine.spawn(name, s_m=belt.station_s_m, yaw_rad=yaw)
-                    got = []
-                    for s in shots:
-                        rgb = capture(engine, s.q).rgb
-                        got.append((rgb, segment_object(rgb, backgrounds[s.key]).mask))
-                    return got
-
+                render = functools.partial(render_teach, engine, name, yaw, shots, backgrounds)
                 key = f"budget-teach-{name}-{math.degrees(yaw):.1f}"
                 for (rgb, mask), s in zip(_cached(cache, key, render), shots, strict=True):
                     index.add(name, rgb, viewpoint=s.viewpoint, mask=mask.astype(np.uint8))
@@ -196,6 +193,7 @@ def run(
                 "verify_ms_p50": float(np.median([r["verify_ms"] for r in rows])),
                 "verify_ms_p95": float(np.percentile([r["verify_ms"] for r in rows], 95)),
                 "per_model": per_model,
+                "rows": rows,
             }
             _log(f"  {rule}: {out['rules'][rule]['named_top_pct']:.1f} % named from the top")
         return out

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import functools
 import json
 import math
 import pickle
@@ -63,6 +64,23 @@ def _cached(cache: Path | None, key: str, make: Any) -> Any:
     cache.mkdir(parents=True, exist_ok=True)
     with f.open("wb") as fh:
         pickle.dump(got, fh)
+    return got
+
+
+def render_teach(
+    engine: Any, name: str, yaw: float, shots: Any, backgrounds: dict[Any, Any]
+) -> list[tuple[Any, Any]]:
+    """The teach shots of ``name`` put on the station at ``yaw``: each shot's image and the
+    active contour's region in it (from that shot's empty-belt background)."""
+    from backend.recognition.segment import segment_object
+    from robot.sim.imaging import capture
+
+    engine.clear_objects()
+    engine.spawn(name, s_m=engine.config.layout.conveyor.station_s_m, yaw_rad=yaw)
+    got = []
+    for s in shots:
+        rgb = capture(engine, s.q).rgb
+        got.append((rgb, segment_object(rgb, backgrounds[s.key]).mask))
     return got
 
 
@@ -135,15 +153,7 @@ def run(
             for yaw in yaws:
                 key = f"teach-{name}-{math.degrees(yaw):.1f}"
 
-                def render(name: str = name, yaw: float = yaw) -> list[tuple[Any, Any]]:
-                    engine.clear_objects()
-                    engine.spawn(name, s_m=belt.station_s_m, yaw_rad=yaw)
-                    got = []
-                    for s in shots:
-                        rgb = capture(engine, s.q).rgb
-                        got.append((rgb, segment_object(rgb, backgrounds[s.key]).mask))
-                    return got
-
+                render = functools.partial(render_teach, engine, name, yaw, shots, backgrounds)
                 for s, (rgb, mask) in zip(shots, _cached(cache, key, render), strict=True):
                     index.add(name, rgb, viewpoint=s.viewpoint, mask=mask.astype(np.uint8))
                     if old_index is not None:
