@@ -43,7 +43,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from benchmarks.recognition_yaw import _cached, _log, render_teach
+from benchmarks.recognition_yaw import _cached, _log, render_query, render_teach
 
 RULES = ("budget", "by votes")
 
@@ -88,7 +88,6 @@ def run(
     headless_mujoco()
     from backend.calibration.autoplan import NOMINAL_T_EE_CAM
     from backend.recognition.index import FEATURE_OPTIONS
-    from backend.recognition.segment import segment_object
     from backend.recognition.teach import TOP_ROLLS_RAD, plan_shots, teach_yaws_rad
     from robot.sim import CATALOGUE, SimEngine
     from robot.sim.imaging import capture
@@ -134,10 +133,8 @@ def run(
                 def shoot(
                     name: str = name, yaw: float = yaw, ds: float = ds, dl: float = dl
                 ) -> Any:
-                    engine.clear_objects()
-                    engine.spawn(name, s_m=belt.station_s_m + ds, lateral_m=dl, yaw_rad=yaw)
-                    rgb = capture(engine, top.q).rgb
-                    return rgb, segment_object(rgb, backgrounds[top.key]).mask
+                    rgb, region = render_query(engine, name, yaw, ds, dl, top, backgrounds)
+                    return rgb, region.mask
 
                 key = f"budget-query-{name}-{yaw:.6f}-{ds:.6f}-{dl:.6f}"
                 rgb, mask = _cached(cache, key, shoot)

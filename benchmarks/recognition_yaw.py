@@ -84,6 +84,27 @@ def render_teach(
     return got
 
 
+def render_query(
+    engine: Any,
+    name: str,
+    yaw: float,
+    ds: float,
+    dl: float,
+    shot: Any,
+    backgrounds: dict[Any, Any],
+) -> tuple[Any, Any]:
+    """``name`` put alone on the belt ``ds`` along from the station and ``dl`` across,
+    turned by ``yaw``, seen from ``shot``: the image and the active contour's region."""
+    from backend.recognition.segment import segment_object
+    from robot.sim.imaging import capture
+
+    engine.clear_objects()
+    s_m = engine.config.layout.conveyor.station_s_m + ds
+    engine.spawn(name, s_m=s_m, lateral_m=dl, yaw_rad=yaw)
+    rgb = capture(engine, shot.q).rgb
+    return rgb, segment_object(rgb, backgrounds[shot.key])
+
+
 def run(
     *,
     cache: Path | None = None,
@@ -109,7 +130,6 @@ def run(
     from backend.inspection.roi import height_bound, side_query, side_roi
     from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
     from backend.recognition.index import FEATURE_OPTIONS
-    from backend.recognition.segment import segment_object
     from backend.recognition.teach import TOP_ROLLS_RAD, plan_shots, teach_yaws_rad
     from robot.kinematics import T_base_ee
     from robot.sim import CATALOGUE, SimEngine
@@ -194,10 +214,7 @@ def run(
                 def shoot(
                     name: str = name, yaw: float = yaw, ds: float = ds, dl: float = dl
                 ) -> Any:
-                    engine.clear_objects()
-                    engine.spawn(name, s_m=belt.station_s_m + ds, lateral_m=dl, yaw_rad=yaw)
-                    rgb = capture(engine, top.q).rgb
-                    region = segment_object(rgb, backgrounds[top.key])
+                    rgb, region = render_query(engine, name, yaw, ds, dl, top, backgrounds)
                     sides = {}
                     for vp in (2, 3):
                         plan = plan_viewpoints(
