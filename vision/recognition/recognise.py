@@ -445,7 +445,9 @@ def recognise(
     models : sequence of str, optional
         Only consider these models (the side-view check of section 3.5.3).
     max_models, views_per_model : int
-        Verification budget: best-voted models (1..16) and views per model (1..8).
+        Verification budget: best-voted models (1..16) and the views verified per model
+        at least (1..8); more of a model's voted views are verified while their features
+        fit ``views_per_model`` times :data:`VERIFY_FEATURES`.
     search : tuple of int, optional
         Viewpoints whose trained views are compared (default: ``viewpoint`` alone; the
         thresholds stay those of ``viewpoint``). The side policies search both side

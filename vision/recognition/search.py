@@ -18,7 +18,8 @@ casts a vote for its view, of weight ``1 / (models in the group)``. A distinctiv
 (a group of one) is Lowe's test exactly; two models with identical top views split the votes
 instead of losing them all, so both reach verification and the decision can say
 "ambiguous". A query descriptor votes at most once per view. Views are then ranked by votes;
-only the best few are verified geometrically (:mod:`vision.recognition.recognise`).
+only the best few are verified geometrically, as many of a model's as a feature budget allows
+(:mod:`vision.recognition.recognise`).
 """
 
 from __future__ import annotations
