@@ -459,7 +459,7 @@ def _refine(
         try:
             sol = least_squares(
                 residuals, x0, bounds=(lb, ub), jac_sparsity=sparsity, loss="soft_l1",
-                f_scale=PARALLAX_F_SCALE_PX, x_scale="jac", max_nfev=200, args=(k,),
+                f_scale=PARALLAX_F_SCALE_PX, x_scale="jac", max_nfev=1000, args=(k,),
             )  # fmt: skip
         except (ValueError, np.linalg.LinAlgError):
             return None
