@@ -70,14 +70,26 @@ def _scene(yaw_now, dx, dy, roll_view, seed=0):
     T_view, T_now = _cam(roll_view), _cam(0.0)
     pa = _project(T_view, (local @ taught.T)[:, :3])
     pb = _project(T_now, (local @ truth.T)[:, :3])
-    A, _ = cv2.estimateAffine2D(pa, pb)  # what verification fits (one plane's map)
+    return (*_observed(pa, pb, T_view, T_now, taught), truth)
+
+
+def _observed(pa, pb, T_view, T_now, taught, robust=True):
+    """What the verification hands the pose: one plane's map of the trained pixels ``pa``
+    onto the current ones ``pb`` (RANSAC, or least squares over all of them), the
+    correspondences, and the arguments of :func:`estimate_pose` (the trained region: the
+    features' bounding box)."""
+    if robust:
+        A, _ = cv2.estimateAffine2D(pa, pb)
+    else:
+        X = np.c_[pa, np.ones(len(pa))]
+        A = np.linalg.lstsq(X, pb, rcond=None)[0].T
     H = np.vstack([A, [0.0, 0.0, 1.0]])
     mask = np.zeros((480, 640), bool)
     lo, hi = pa.min(0).astype(int), pa.max(0).astype(int)
     mask[lo[1] : hi[1], lo[0] : hi[0]] = True
     kw = dict(camera=CAM, T_base_cam_view=T_view, T_base_cam_now=T_now,
               T_base_obj_taught=taught, z_plane_m=TOP, view_mask=mask, view_shape=(480, 640))  # fmt: skip
-    return H, np.c_[pa, pb], kw, truth
+    return H, np.c_[pa, pb], kw
 
 
 def _err_mm(pose, truth):

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from backend.inspection.pose import estimate_pose
-from tests.backend.test_bug_pose_parallax import CAM, SURFACE, TOP, _cam, _planar, _project
+from tests.backend.test_bug_pose_parallax import SURFACE, TOP, _cam, _observed, _planar, _project
 
 #: How far the shading lags the part's turn, degrees (3-5 px at the bolt circle).
 LAG_DEG = 4.0
@@ -42,14 +42,7 @@ def _flange(yaw_now: float, dx: float, dy: float, roll_view: float, n_stuck: int
     moved = local @ truth.T
     moved[:n_stuck] = local[:n_stuck] @ lagging.T
     pb = _project(T_now, moved[:, :3]) + rng.normal(0, 0.4, (n, 2))
-    A = np.c_[pa, np.ones(n)]
-    H = np.vstack([np.linalg.lstsq(A, pb, rcond=None)[0].T, [0.0, 0.0, 1.0]])
-    mask = np.zeros((480, 640), bool)
-    lo, hi = pa.min(0).astype(int), pa.max(0).astype(int)
-    mask[lo[1] : hi[1], lo[0] : hi[0]] = True
-    kw = dict(camera=CAM, T_base_cam_view=T_view, T_base_cam_now=T_now,
-              T_base_obj_taught=taught, z_plane_m=TOP, view_mask=mask, view_shape=(480, 640))  # fmt: skip
-    return H, np.c_[pa, pb], kw, truth
+    return (*_observed(pa, pb, T_view, T_now, taught, robust=False), truth)
 
 
 def _yaw_err_deg(pose, truth) -> float:
