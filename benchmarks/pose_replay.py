@@ -322,6 +322,11 @@ def main(argv: list[str] | None = None) -> None:
     if not 1 <= args.limit <= MAX_REPLAY:
         ap.error(f"--limit must be in 1..{MAX_REPLAY}, got {args.limit}")
     parts = tuple(p.strip() for p in args.parts.split(",") if p.strip())
+    from robot.sim.catalogue import CATALOGUE
+
+    unknown = [p for p in parts if p not in CATALOGUE]
+    if unknown:
+        ap.error(f"--parts: not in the catalogue: {unknown}; valid: {', '.join(CATALOGUE)}")
     rows = replay(args.dir, parts, args.limit)
     summary = summarise(rows)
     if args.plot is not None:

@@ -80,6 +80,7 @@ def test_replay_scores_recorded_and_current_answers(tmp_path, capsys):
         (["replay", "/nonexistent/records"], "no such directory"),
         (["replay", ".", "--limit", "0"], "--limit must be in"),
         (["replay", ".", "--", "--objects", "3"], "takes no benchmarks.inspection arguments"),
+        (["replay", ".", "--parts", "pipe-flange,flux-capacitor"], "'flux-capacitor'"),
     ],
 )
 def test_bad_arguments_are_named(argv, message, capsys):
