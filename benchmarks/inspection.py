@@ -149,10 +149,16 @@ def _errors(row: dict[str, Any], kind: str) -> tuple[float | None, float | None]
     if travel is not None:
         T = np.array(row["pose"]["T_base_obj"])
         Tt[1, 3] += float(travel)
-    pos = float(np.linalg.norm(T[:2, 3] - Tt[:2, 3]) * 1e3)
-    if kind in SYMMETRIC:
+    return pose_errors(T, Tt, kind in SYMMETRIC)
+
+
+def pose_errors(T: Any, T_true: Any, symmetric: bool = False) -> tuple[float, float | None]:
+    """Position error on the belt plane (mm) and yaw error (deg; None for a part with
+    rotational symmetry) of the pose ``T`` against ``T_true`` (4x4 each)."""
+    pos = float(np.linalg.norm(T[:2, 3] - T_true[:2, 3]) * 1e3)
+    if symmetric:
         return pos, None
-    d = math.atan2(T[1, 0], T[0, 0]) - math.atan2(Tt[1, 0], Tt[0, 0])
+    d = math.atan2(T[1, 0], T[0, 0]) - math.atan2(T_true[1, 0], T_true[0, 0])
     return pos, abs(math.degrees(math.remainder(d, 2 * math.pi)))
 
 

@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import contextvars
 import json
-import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -127,7 +126,7 @@ def load_record(path: Path) -> dict[str, Any]:
         for i in range(int(meta["matches"])):
             p = f"m{i}_"
             shape = tuple(int(v) for v in z[p + "view_shape"])
-            heights = z[p + "heights"] if p + "heights" in z else None  # noqa: SIM401
+            heights = z.get(p + "heights")
             matches.append(ViewMatch(z[p + "H"], z[p + "inlier_xy"], z[p + "T_cam"],
                                      z[p + "T_obj"], _unpack(z, p + "mask"), shape, heights))  # fmt: skip
         sil = [
@@ -147,13 +146,6 @@ def load_record(path: Path) -> dict[str, Any]:
         truth = {"name": meta["truth_name"], "T": np.asarray(meta["truth_T"], np.float64)}
     return {"matches": matches, "kw": kw, "silhouettes": sil, "truth": truth,
             "result_T": result_T}  # fmt: skip
-
-
-def errors(T: NDArray[np.float64], T_true: NDArray[np.float64]) -> tuple[float, float]:
-    """Position (mm, on the belt plane) and yaw (deg) error of a pose."""
-    pos = float(np.linalg.norm(T[:2, 3] - T_true[:2, 3]) * 1e3)
-    d = math.atan2(T[1, 0], T[0, 0]) - math.atan2(T_true[1, 0], T_true[0, 0])
-    return pos, abs(math.degrees(math.remainder(d, 2 * math.pi)))
 
 
 def record(out_dir: Path, argv: list[str]) -> None:
@@ -199,6 +191,7 @@ def replay(
 ) -> list[dict[str, Any]]:
     """Fit every record of ``in_dir`` again; one row per record with a truth."""
     from backend.inspection.pose import PoseFailed, estimate_pose_views
+    from benchmarks.inspection import SYMMETRIC, pose_errors
     from robot.sim.catalogue import CATALOGUE
 
     files = sorted(in_dir.glob("*.npz"))[:limit]
@@ -211,20 +204,16 @@ def replay(
             t = rec["truth"]
             if t is None or (parts and t["name"] not in parts):
                 continue
+            try:
+                T_now = estimate_pose_views(rec["matches"], silhouettes=rec["silhouettes"],
+                                            **rec["kw"]).T_base_obj  # fmt: skip
+            except PoseFailed:
+                T_now = None
+            symmetric = t["name"] in CATALOGUE and CATALOGUE[t["name"]].kind in SYMMETRIC
             row: dict[str, Any] = {"file": f.name, "name": t["name"]}
-            symmetric = t["name"] in CATALOGUE and CATALOGUE[t["name"]].kind == "wheel"
-            for key, T in (("recorded", rec["result_T"]), ("now", None)):
-                if key == "now":
-                    try:
-                        T = estimate_pose_views(rec["matches"], silhouettes=rec["silhouettes"],
-                                                **rec["kw"]).T_base_obj  # fmt: skip
-                    except PoseFailed:
-                        T = None
-                if T is None:
-                    row[key] = None
-                    continue
-                pos, yaw = errors(T, t["T"])
-                row[key] = {"pos_mm": pos, "yaw_deg": None if symmetric else yaw}
+            for key, T in (("recorded", rec["result_T"]), ("now", T_now)):
+                err = None if T is None else pose_errors(T, t["T"], symmetric)
+                row[key] = None if err is None else {"pos_mm": err[0], "yaw_deg": err[1]}
             rows.append(row)
     return rows
 
