@@ -46,8 +46,12 @@ answer, against the current region (:func:`silhouette_overlap`).
 The heights need not be guessed per inspection: they are the model's.  The taught top
 views were taken from known camera poses with the object in known frames, so features seen
 in several of them are triangulated once (:mod:`backend.inspection.structure`) and the fit
-holds each such feature near its triangulated height (:data:`W_TRIANGULATED`); only the
-features no pair of taught views agreed on keep the weak pull towards the top face.
+holds each such feature near its triangulated height (:data:`W_TRIANGULATED`).  The pipe
+flange's shiny steel and round outlines leave few features that two taught views match to
+each other (4 % of them), but most current keypoints are matched by two to five of the
+agreeing views: where their trained rays meet in the model's frame is the feature's place,
+and the fit holds it there as firmly as the rays' angle fixes it (:func:`_rays_met`).  Only
+the features placed neither way keep the weak pull towards the top face.
 
 With the belt running (constant-speed mode, section 4.1) the pose is that at exposure;
 :func:`predict_along_belt` moves it forward by the belt's travel since then.
@@ -143,7 +147,8 @@ class ObjectPose:
     """With several views: every group of agreeing views considered (its plane answer,
     views, correspondences, silhouette overlap) and which one the pose came from."""
     triangulated: int = 0
-    """Correspondences of the fit held at a height triangulated from the taught views."""
+    """Correspondences of the fit held at a height triangulated from the taught views (the
+    model's own, or where two of the agreeing views' rays to one current keypoint meet)."""
 
     def public(self) -> dict[str, object]:
         """JSON-friendly form (metres and radians)."""
@@ -279,7 +284,7 @@ def estimate_pose(
         pairs = np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4)
         if len(pairs) >= MIN_PARALLAX_POINTS and np.all(np.isfinite(pairs)):
             refined = _refine(
-                [(pairs, T_base_cam_view, np.eye(4), heights)], camera=camera,
+                [(pairs, T_base_cam_view, np.eye(4), heights, None)], camera=camera,
                 T_base_cam_now=T_base_cam_now, T_delta0=T_delta, z_floor_m=z_floor_m,
                 z_top_m=z_plane_m,
             )  # fmt: skip
@@ -356,7 +361,7 @@ def refine_with_parallax(
     """
     refined = _refine(
         [(np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4), T_base_cam_view, np.eye(4),
-          heights)],
+          heights, None)],
         camera=camera, T_base_cam_now=T_base_cam_now, T_delta0=T_delta0, z_floor_m=z_floor_m,
         z_top_m=z_top_m,
     )  # fmt: skip
@@ -366,10 +371,10 @@ def refine_with_parallax(
 #: One trained view's share of a joint fit: its correspondences (trained ``x, y``, current
 #: ``x, y``), its camera pose, the planar map from its teach-time object frame to the
 #: reference view's (``T_taught_ref @ inv(T_taught_view)``; identity for the reference),
-#: and the triangulated heights of its trained features (``nan`` where unknown) or None.
-_Group = tuple[
-    NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None
-]
+#: the triangulated heights of its trained features (``nan`` where unknown) or None, and
+#: how firmly each is held, pixels per metre (None: :data:`W_TRIANGULATED` for all).
+_Group = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+               NDArray[np.float64] | None, NDArray[np.float64] | None]  # fmt: skip
 
 #: Weight of a triangulated height's prior, pixels per metre: a millimetre off it costs as
 #: much as a pixel of reprojection error (the triangulation's own error is about that).
@@ -398,20 +403,23 @@ def _refine(
 
     per_view = max(MIN_PARALLAX_POINTS, MAX_PARALLAX_POINTS // max(1, len(groups)))
     P0, D = [], []
-    obs_all, z_prior, w_prior = [], [], []
-    for pairs, T_view, T_align, known in groups:
+    obs_all, z_prior, w_prior, held = [], [], [], []
+    for pairs, T_view, T_align, known, firm in groups:
         zk = np.full(len(pairs), np.nan) if known is None else np.asarray(known, np.float64)
         if len(zk) != len(pairs):
             zk = np.full(len(pairs), np.nan)
+        wk = np.full(len(pairs), W_TRIANGULATED) if firm is None else np.asarray(firm, np.float64)
+        if len(wk) != len(pairs):
+            wk = np.full(len(pairs), W_TRIANGULATED)
         # A keypoint with two dominant orientations is two keypoints at one place, and two
         # such matched to two give the same correspondence twice: counted once.
         _, first = np.unique(np.round(pairs, 2), axis=0, return_index=True)
         first = np.sort(first)
-        pairs, zk = pairs[first], zk[first]
-        pairs, zk = pairs[:per_view], zk[:per_view]
-        tri = np.isfinite(zk)
+        pairs, zk, wk = pairs[first][:per_view], zk[first][:per_view], wk[first][:per_view]
+        tri = np.isfinite(zk) & np.isfinite(wk) & (wk > 0)
         z_prior.append(np.where(tri, zk, z_top_m))
-        w_prior.append(np.where(tri, W_TRIANGULATED, W_UNKNOWN))
+        w_prior.append(np.where(tri, np.minimum(wk, W_TRIANGULATED), 0.0))
+        held.append(tri)
         Tv = np.asarray(T_view, dtype=np.float64)
         d = viewing_rays(pairs[:, :2], camera, Tv)
         if np.any(d[:, 2] > -1e-6):
@@ -427,7 +435,8 @@ def _refine(
             ).reshape(-1, 2)
         )
     C0, d, obs = np.concatenate(P0), np.concatenate(D), np.concatenate(obs_all)
-    zp, wp = np.concatenate(z_prior), np.concatenate(w_prior)
+    zp, wp, tri_all = np.concatenate(z_prior), np.concatenate(w_prior), np.concatenate(held)
+    wp = np.where(tri_all, wp, W_UNKNOWN)
     n = len(d)
     Tn = np.asarray(T_base_cam_now, dtype=np.float64)
     f = float(camera.K[0, 0])
@@ -487,7 +496,7 @@ def _refine(
         if sol is None:
             return None
     n = len(keep)
-    wp = wp[keep]
+    tri_all = tri_all[keep]
     yaw, tx, ty = (float(v) for v in sol.x[:3])
     T = np.eye(4)
     c, si = math.cos(yaw), math.sin(yaw)
@@ -503,7 +512,7 @@ def _refine(
     ):
         return None
     reproj = float(np.sqrt(np.mean(sol.fun[: 2 * n].reshape(-1, 2) ** 2) * 2))
-    return T, reproj, n, int(np.count_nonzero(wp == W_TRIANGULATED))
+    return T, reproj, n, int(np.count_nonzero(tri_all))
 
 
 @dataclass(frozen=True, eq=False)
@@ -729,12 +738,20 @@ def estimate_pose_views(
     if len(best) == 1 or best_n < MIN_PARALLAX_POINTS:
         return dataclasses.replace(single(), hypotheses=hyps)
     T_ref = np.asarray(lead_m.T_base_obj_taught, dtype=np.float64)
+    views = [m for m, _p in best]
+    met = _rays_met(views, camera=camera, z_floor_m=z_floor_m, z_top_m=z_plane_m)
     groups: list[_Group] = []
-    for m, _p in best:
+    for m, (z_met, w_met) in zip(views, met, strict=True):
         pairs = np.asarray(m.inlier_xy, dtype=np.float64).reshape(-1, 4)
         if len(pairs) and np.all(np.isfinite(pairs)):
+            known = None if m.heights is None else np.asarray(m.heights, dtype=np.float64)
+            if known is None or len(known) != len(pairs):
+                known = np.full(len(pairs), np.nan)
+            # the model's own triangulation first (several taught pairs agreed on it)
+            taught = np.isfinite(known)
             A = T_ref @ np.linalg.inv(np.asarray(m.T_base_obj_taught, dtype=np.float64))
-            groups.append((pairs, m.T_base_cam_view, A, m.heights))
+            groups.append((pairs, m.T_base_cam_view, A, np.where(taught, known, z_met),
+                           np.where(taught, W_TRIANGULATED, w_met)))  # fmt: skip
     T_delta0 = lead.T_base_obj @ np.linalg.inv(T_ref)
     refined = _refine(groups, camera=camera, T_base_cam_now=T_base_cam_now, T_delta0=T_delta0,
                       z_floor_m=z_floor_m, z_top_m=z_plane_m)  # fmt: skip
@@ -744,6 +761,84 @@ def estimate_pose_views(
     T = T_delta @ T_ref
     return ObjectPose(T, _yaw_of(T), lead.residual_m, n_used, "parallax", reproj, len(groups), hyps,
                       n_tri)  # fmt: skip
+
+
+#: Correspondences of two agreeing trained views share a current keypoint when their
+#: current points lie within this distance, pixels (one detection gives one point).
+SAME_KEYPOINT_PX = 0.5
+#: Their trained rays meet at a point of the part when they pass within this distance of
+#: each other in the model's frame, pixels at the point's depth (``benchmarks.pose_replay``
+#: on the pipe flange: 1 and 2 px alike; README, twelfth part).
+RAYS_MEET_PX = 2.0
+
+
+def _rays_met(
+    views: list[ViewMatch], *, camera: PinholeCamera, z_floor_m: float, z_top_m: float
+) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """Per view of an agreeing group, per correspondence: the base-frame height where its
+    trained ray meets another view's ray to the same current keypoint (``nan`` where none
+    does), and how firmly that fixes it, pixels per metre: a pixel along either ray moves
+    the meeting point by ``depth / (f sin angle)``, so rays a few degrees apart fix the
+    height to millimetres, not to the teach's fraction of one.
+
+    The views were taught at other yaws and camera rolls, so a point of the part is seen
+    along trained rays that cross in the model's frame, and where they cross is its place:
+    the current view triangulates the features it matched twice, as the taught views do
+    for the features they matched to each other (:mod:`backend.inspection.structure`, which
+    finds few of the pipe flange's).  A highlight on shiny steel or the outline of a round
+    surface stays with the lights or the camera while the part turns, and its rays pass
+    each other by."""
+    from scipy.spatial import cKDTree
+
+    f = float(camera.K[0, 0])
+    origins, dirs, cur, owner, index = [], [], [], [], []
+    for v, m in enumerate(views):
+        pairs = np.asarray(m.inlier_xy, dtype=np.float64).reshape(-1, 4)
+        if not len(pairs):
+            continue
+        T = np.linalg.inv(np.asarray(m.T_base_obj_taught, np.float64)) @ np.asarray(
+            m.T_base_cam_view, np.float64
+        )
+        d = viewing_rays(pairs[:, :2], camera, T)
+        dirs.append(d / np.linalg.norm(d, axis=1, keepdims=True))
+        # the model frames are level and differ by a turn about z, so a height in the
+        # model's frame moves to the base by the view's station height
+        origins.append(np.broadcast_to(T[:3, 3] + [0.0, 0.0, m.T_base_obj_taught[2, 3]], d.shape))
+        cur.append(pairs[:, 2:])
+        owner.append(np.full(len(pairs), v))
+        index.append(np.arange(len(pairs)))
+    out = [(np.full(len(m.inlier_xy), np.nan), np.zeros(len(m.inlier_xy))) for m in views]
+    if not dirs:
+        return out
+    o, d, c = np.concatenate(origins), np.concatenate(dirs), np.concatenate(cur)
+    who, idx = np.concatenate(owner), np.concatenate(index)
+    # pairs of correspondences to one current keypoint from two views (a tree: memory and
+    # time grow with the pairs found, not with the square of the correspondences)
+    near = cKDTree(c).query_pairs(SAME_KEYPOINT_PX, output_type="ndarray").reshape(-1, 2)
+    near = near[who[near[:, 0]] != who[near[:, 1]]]
+    a, b = np.r_[near[:, 0], near[:, 1]], np.r_[near[:, 1], near[:, 0]]
+    # closest points of the lines o_a + s d_a and o_b + t d_b (unit directions)
+    w0 = o[a] - o[b]
+    cos = np.sum(d[a] * d[b], axis=1)
+    p, q = np.sum(d[a] * w0, axis=1), np.sum(d[b] * w0, axis=1)
+    den = 1.0 - cos * cos
+    ok = den > 1e-6
+    den = np.where(ok, den, 1.0)
+    s, t = (cos * q - p) / den, (q - cos * p) / den
+    Pa, Pb = o[a] + s[:, None] * d[a], o[b] + t[:, None] * d[b]
+    depth = np.minimum(s, t)
+    gap_px = f * np.linalg.norm(Pa - Pb, axis=1) / np.where(depth > 0, depth, 1.0)
+    z = 0.5 * (Pa[:, 2] + Pb[:, 2])
+    ok &= (depth > 0) & (gap_px <= RAYS_MEET_PX) & (z >= z_floor_m - 0.003) & (z <= z_top_m + 0.003)
+    firm = f * np.sqrt(np.clip(den, 0.0, 1.0)) / np.where(depth > 0, depth, 1.0)
+    z_met, w_met = np.full(len(d), np.nan), np.zeros(len(d))
+    # per correspondence, its firmest meeting (written last)
+    for k in np.flatnonzero(ok)[np.argsort(firm[ok], kind="stable")]:
+        z_met[a[k]], w_met[a[k]] = z[k], firm[k]
+    for v in range(len(views)):
+        zs, ws = out[v]
+        zs[idx[who == v]], ws[idx[who == v]] = z_met[who == v], w_met[who == v]
+    return out
 
 
 def predict_along_belt(
