@@ -77,6 +77,7 @@ __all__ = [
     "PoseFailed",
     "SilhouetteView",
     "ViewMatch",
+    "closest_points",
     "estimate_pose",
     "estimate_pose_views",
     "plane_points",
@@ -763,6 +764,23 @@ def estimate_pose_views(
                       n_tri)  # fmt: skip
 
 
+def closest_points(
+    o1: NDArray[np.float64], d1: NDArray[np.float64], o2: NDArray[np.float64],
+    d2: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+           NDArray[np.float64]]:  # fmt: skip
+    """Closest points ``o1 + s d1`` and ``o2 + t d2`` of pairs of lines with unit directions
+    (rows), with ``s``, ``t`` and the squared sine of the angle between the lines (parallel
+    lines, sine below 1e-6: ``s = t = 0`` rather than a division by zero)."""
+    w0 = o1 - o2
+    cos = np.sum(d1 * d2, axis=-1)
+    p, q = np.sum(d1 * w0, axis=-1), np.sum(d2 * w0, axis=-1)
+    sin2 = np.clip(1.0 - cos * cos, 0.0, 1.0)
+    den = np.where(sin2 > 1e-12, sin2, np.inf)
+    s, t = (cos * q - p) / den, (q - cos * p) / den
+    return o1 + s[..., None] * d1, o2 + t[..., None] * d2, s, t, sin2
+
+
 #: Correspondences of two agreeing trained views share a current keypoint when their
 #: current points lie within this distance, pixels (one detection gives one point).
 SAME_KEYPOINT_PX = 0.5
@@ -817,20 +835,13 @@ def _rays_met(
     near = cKDTree(c).query_pairs(SAME_KEYPOINT_PX, output_type="ndarray").reshape(-1, 2)
     near = near[who[near[:, 0]] != who[near[:, 1]]]
     a, b = np.r_[near[:, 0], near[:, 1]], np.r_[near[:, 1], near[:, 0]]
-    # closest points of the lines o_a + s d_a and o_b + t d_b (unit directions)
-    w0 = o[a] - o[b]
-    cos = np.sum(d[a] * d[b], axis=1)
-    p, q = np.sum(d[a] * w0, axis=1), np.sum(d[b] * w0, axis=1)
-    den = 1.0 - cos * cos
-    ok = den > 1e-6
-    den = np.where(ok, den, 1.0)
-    s, t = (cos * q - p) / den, (q - cos * p) / den
-    Pa, Pb = o[a] + s[:, None] * d[a], o[b] + t[:, None] * d[b]
+    Pa, Pb, s, t, sin2 = closest_points(o[a], d[a], o[b], d[b])
+    ok = sin2 > 1e-6
     depth = np.minimum(s, t)
     gap_px = f * np.linalg.norm(Pa - Pb, axis=1) / np.where(depth > 0, depth, 1.0)
     z = 0.5 * (Pa[:, 2] + Pb[:, 2])
     ok &= (depth > 0) & (gap_px <= RAYS_MEET_PX) & (z >= z_floor_m - 0.003) & (z <= z_top_m + 0.003)
-    firm = f * np.sqrt(np.clip(den, 0.0, 1.0)) / np.where(depth > 0, depth, 1.0)
+    firm = f * np.sqrt(sin2) / np.where(depth > 0, depth, 1.0)
     z_met, w_met = np.full(len(d), np.nan), np.zeros(len(d))
     # per correspondence, its firmest meeting (written last)
     for k in np.flatnonzero(ok)[np.argsort(firm[ok], kind="stable")]:

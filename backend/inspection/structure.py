@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from backend.inspection.pose import viewing_rays
+from backend.inspection.pose import closest_points, viewing_rays
 from vision.camera import PinholeCamera
 from vision.features.types import Features
 
@@ -325,18 +325,9 @@ def _pair(
     heights to both views' votes."""
     oi, Di, _ = ri
     oj, Dj, _ = rj
-    d1, d2 = Di[ia], Dj[jb]
-    w0 = oi - oj
-    # Closest points o_i + s d1 and o_j + t d2 of two lines with unit directions.
-    c = np.sum(d1 * d2, axis=1)
-    p, q = d1 @ w0, d2 @ w0
-    den = 1.0 - c * c
-    ok = den > math.sin(MIN_ANGLE_RAD) ** 2
-    den = np.where(ok, den, 1.0)
-    s = (c * q - p) / den
-    t = (q - c * p) / den
-    P1 = oi + s[:, None] * d1
-    P2 = oj + t[:, None] * d2
+    P1, P2, s, t, sin2 = closest_points(np.broadcast_to(oi, (len(ia), 3)), Di[ia],
+                                        np.broadcast_to(oj, (len(jb), 3)), Dj[jb])  # fmt: skip
+    ok = sin2 > math.sin(MIN_ANGLE_RAD) ** 2
     X = 0.5 * (P1 + P2)
     gap = np.linalg.norm(P1 - P2, axis=1)
     near = np.minimum(s, t)
