@@ -1,4 +1,4 @@
-"""Bug: the pipe flange's yaw kept a tail near 1 degree after the twelfth-part fit changes.
+"""Bug: the pipe flange's yaw kept a tail near 1 degree after the eleventh part's fit changes.
 
 Its taught top views triangulate few of its features (4 %: shiny steel and round outlines
 leave few that two taught views match along their epipolar segments), so most of its
