@@ -80,6 +80,7 @@ __all__ = [
     "closest_points",
     "estimate_pose",
     "estimate_pose_views",
+    "object_rays",
     "plane_points",
     "predict_along_belt",
     "refine_with_parallax",
@@ -329,6 +330,19 @@ def viewing_rays(
     return rays @ np.asarray(T_base_cam, dtype=np.float64)[:3, :3].T
 
 
+def object_rays(
+    px: NDArray[np.float64],
+    camera: PinholeCamera,
+    T_base_cam: NDArray[np.float64],
+    T_base_obj: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The camera centre (3,), the unit viewing rays (N, 3) of pixels ``px`` and the camera
+    rotation (3, 3), all in the object frame ``T_base_obj`` of the shot."""
+    T = np.linalg.inv(np.asarray(T_base_obj, np.float64)) @ np.asarray(T_base_cam, np.float64)
+    d = viewing_rays(px, camera, T)
+    return T[:3, 3].copy(), d / np.linalg.norm(d, axis=1, keepdims=True), T[:3, :3]
+
+
 def refine_with_parallax(
     inlier_xy: NDArray[np.float64],
     *,
@@ -419,7 +433,7 @@ def _refine(
         pairs, zk, wk = pairs[first][:per_view], zk[first][:per_view], wk[first][:per_view]
         tri = np.isfinite(zk) & np.isfinite(wk) & (wk > 0)
         z_prior.append(np.where(tri, zk, z_top_m))
-        w_prior.append(np.where(tri, np.minimum(wk, W_TRIANGULATED), 0.0))
+        w_prior.append(np.where(tri, np.minimum(wk, W_TRIANGULATED), W_UNKNOWN))
         held.append(tri)
         Tv = np.asarray(T_view, dtype=np.float64)
         d = viewing_rays(pairs[:, :2], camera, Tv)
@@ -437,7 +451,6 @@ def _refine(
         )
     C0, d, obs = np.concatenate(P0), np.concatenate(D), np.concatenate(obs_all)
     zp, wp, tri_all = np.concatenate(z_prior), np.concatenate(w_prior), np.concatenate(held)
-    wp = np.where(tri_all, wp, W_UNKNOWN)
     n = len(d)
     Tn = np.asarray(T_base_cam_now, dtype=np.float64)
     f = float(camera.K[0, 0])
@@ -814,14 +827,12 @@ def _rays_met(
         pairs = np.asarray(m.inlier_xy, dtype=np.float64).reshape(-1, 4)
         if not len(pairs):
             continue
-        T = np.linalg.inv(np.asarray(m.T_base_obj_taught, np.float64)) @ np.asarray(
-            m.T_base_cam_view, np.float64
-        )
-        d = viewing_rays(pairs[:, :2], camera, T)
-        dirs.append(d / np.linalg.norm(d, axis=1, keepdims=True))
+        centre, d, _ = object_rays(pairs[:, :2], camera, m.T_base_cam_view, m.T_base_obj_taught)
+        dirs.append(d)
         # the model frames are level and differ by a turn about z, so a height in the
         # model's frame moves to the base by the view's station height
-        origins.append(np.broadcast_to(T[:3, 3] + [0.0, 0.0, m.T_base_obj_taught[2, 3]], d.shape))
+        lift = np.array([0.0, 0.0, float(np.asarray(m.T_base_obj_taught)[2, 3])])
+        origins.append(np.broadcast_to(centre + lift, d.shape))
         cur.append(pairs[:, 2:])
         owner.append(np.full(len(pairs), v))
         index.append(np.arange(len(pairs)))

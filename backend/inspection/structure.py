@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from backend.inspection.pose import closest_points, viewing_rays
+from backend.inspection.pose import closest_points, object_rays
 from vision.camera import PinholeCamera
 from vision.features.types import Features
 
@@ -148,11 +148,7 @@ _Rays = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
 def _object_rays(v: TaughtTopView, camera: PinholeCamera) -> _Rays:
     """The view's camera centre, unit viewing rays of its keypoints and camera rotation, in
     its object frame."""
-    T_obj_cam = np.linalg.inv(np.asarray(v.T_base_obj, np.float64)) @ np.asarray(
-        v.T_base_cam, np.float64
-    )
-    d = viewing_rays(v.features.keypoints.xy, camera, T_obj_cam)
-    return T_obj_cam[:3, 3].copy(), d / np.linalg.norm(d, axis=1, keepdims=True), T_obj_cam[:3, :3]
+    return object_rays(v.features.keypoints.xy, camera, v.T_base_cam, v.T_base_obj)
 
 
 def triangulate_heights(
