@@ -324,21 +324,53 @@ def test_routes_the_fast_path_cannot_answer_safely_are_refused(settings) -> None
     assert len(FastReads(inner, routes=real.routes, reads=FAST_READS).paths) == len(FAST_READS)
 
 
-def test_steady_reads_stay_on_the_fast_path_across_the_caches_ttls(client, headers) -> None:
+class _SteppedClock:
+    """A ``time`` stand-in for the caches: ``monotonic`` moves only when the test steps it,
+    so a test process stalled by a busy machine cannot let an entry expire between polls."""
+
+    def __init__(self) -> None:
+        self.now = time.monotonic()
+
+    def monotonic(self) -> float:
+        return self.now
+
+
+def _settle(*caches: Any, limit_s: float = 30.0) -> None:
+    """Wait (in real time, bounded) until no background re-read of ``caches`` is running."""
+    t0 = time.monotonic()
+    while any(c.refreshing for c in caches):
+        assert time.monotonic() - t0 < limit_s, "a background re-read never ended"
+        time.sleep(0.005)
+
+
+def test_steady_reads_stay_on_the_fast_path_across_the_caches_ttls(
+    client, headers, monkeypatch
+) -> None:
     """Refresh ahead through the fast path's own lookups (``ReadCache.peek``,
     ``deps.cached_role``): a console polling every 50 ms for longer than both caches'
-    TTLs is answered from memory throughout; no request falls through at an expiry."""
+    TTLs is answered from memory throughout; no request falls through at an expiry.
+
+    The caches' clock is stepped 50 ms per poll, after the re-reads a poll started have
+    ended: the behaviour is checked, not how fast this machine runs them (under a loaded
+    CI run a stall of the test longer than the refresh window let an entry expire)."""
+    import backend.authcache
+    import backend.readcache
+
+    clock = _SteppedClock()
+    monkeypatch.setattr(backend.readcache, "time", clock)
+    monkeypatch.setattr(backend.authcache, "time", clock)
     layer = fast_reads_of(client.app)
     rt = client.app.state.runtime
     hdr = headers["viewer"]
     for route in ("/api/cells", "/api/models"):  # warm: entries and sign-in cached
         assert client.get(route, headers=hdr).status_code == 200
     passed, reads, lookups = layer.passed, rt.read_cache.misses, rt.auth_cache.lookups
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < 2.5 * max(rt.read_cache.ttl_s, rt.auth_cache.ttl_s):
+    t0 = clock.now
+    while clock.now - t0 < 2.5 * max(rt.read_cache.ttl_s, rt.auth_cache.ttl_s):
         for route in ("/api/cells", "/api/models"):
             assert client.get(route, headers=hdr).status_code == 200
-        time.sleep(0.05)
+        _settle(rt.read_cache, rt.auth_cache)
+        clock.now += 0.05
     assert rt.read_cache.refreshes >= 4 and rt.auth_cache.refreshes >= 2
     assert layer.passed == passed and rt.read_cache.misses == reads
     assert rt.auth_cache.lookups == lookups + rt.auth_cache.refreshes
