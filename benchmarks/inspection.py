@@ -183,6 +183,13 @@ def _record(
         if entry.trainable
         else row["decision"] == "unknown",
         "views": len(row["viewpoints_visited"]),
+        # the pose's second top view (the first rested on too little), and a correctly
+        # named object left without a pose (too little in both top views)
+        "second_top_view": list(row["viewpoints_visited"]).count(1) > 1,
+        "pose_refused": entry.trainable
+        and row["decision"] == "recognized"
+        and row["model"] == name
+        and row["pose"] is None,
         "pos_err_mm": pos,
         "yaw_err_deg": yaw,
         "vision_per_view_s": vision / n,
@@ -457,6 +464,8 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 "yaw_err_deg_p50": _q(yaw, 50),
                 "yaw_err_deg_max": None if not yaw else max(yaw),
                 "views_mean": float(np.mean([r["views"] for r in rs])),
+                "second_top_views": sum(r["second_top_view"] for r in rs),
+                "poses_refused": sum(r["pose_refused"] for r in rs),
                 "vision_per_view_ms_p95": 1e3
                 * (_q([r["vision_per_view_s"] for r in rs], 95) or 0.0),
                 "cycle_s_p50": _q([r["cycle_s"] for r in rs], 50),
@@ -545,14 +554,15 @@ def main(argv: list[str] | None = None) -> None:
         title=f"Inspection in the simulator ({res['n_models']} models taught in {res['teach_s']:.0f} s)"
     )
     for col in ("condition", "policy", "n", "named %", "unknown %", "pos mm p50/max",
-                "yaw deg p50/max", "views", "vision/view ms p95", "cycle s p50/p95", "right bin %"):  # fmt: skip
+                "yaw deg p50/max", "no pose", "views", "2nd top", "vision/view ms p95", "cycle s p50/p95", "right bin %"):  # fmt: skip
         table.add_column(col)
     for s in summary:
         table.add_row(
             s["condition"], s["policy"], str(s["objects"]), _f(s["named_pct"]), _f(s["unknown_pct"]),
             f"{_f(s['pos_err_mm_p50'], '{:.2f}')}/{_f(s['pos_err_mm_max'], '{:.2f}')}",
             f"{_f(s['yaw_err_deg_p50'], '{:.2f}')}/{_f(s['yaw_err_deg_max'], '{:.2f}')}",
-            f"{s['views_mean']:.2f}", f"{s['vision_per_view_ms_p95']:.0f}",
+            str(s["poses_refused"]), f"{s['views_mean']:.2f}", str(s["second_top_views"]),
+            f"{s['vision_per_view_ms_p95']:.0f}",
             f"{_f(s['cycle_s_p50'], '{:.2f}')}/{_f(s['cycle_s_p95'], '{:.2f}')}",
             _f(s["picks_right_bin_pct"]),
         )  # fmt: skip

@@ -154,3 +154,51 @@ def test_estop_during_inspection_ends_it_failed_with_reason(cell):
     row = page["data"][0]
     assert row["decision"] == "failed" and "emergency stop" in row["reason"], row
     assert client.post("/api/robot/reset", headers=h["engineer"]).status_code in (200, 202, 204)
+
+
+def test_a_pose_on_too_little_is_looked_at_again_from_the_top(cell, monkeypatch):
+    """The first top view's pose counted as resting on too little (the plane answer: one
+    trained view, fewer than ``MIN_PARALLAX_POINTS`` correspondences): the inspection takes
+    a second top view, turned about the camera's axis, and its pose is the one stored."""
+    import dataclasses
+
+    from backend.inspection import service
+
+    client, h = cell
+    eng, op = h["engineer"], h["operator"]
+    engine = client.app.state.runtime.sim
+    if client.get("/api/models", headers=op).json()["count"] == 0:  # run alone
+        _teach(client, eng, engine, engine.config.layout.conveyor.station_s_m)
+    real, methods = service._pose, []
+
+    async def first_on_too_little(*a, **k):
+        p = await real(*a, **k)
+        methods.append(p.method)
+        return dataclasses.replace(p, method="plane") if len(methods) == 1 else p
+
+    monkeypatch.setattr(service, "_pose", first_on_too_little)
+    engine.clear_objects()
+    engine.configure_conveyor(running=False, mode="index", dwell_s=None)
+    station = engine.config.layout.conveyor.station_s_m
+    engine.spawn("gear-housing", s_m=station - 0.002, lateral_m=0.002, yaw_rad=0.7)
+    r = client.post("/api/inspections", json={"policy": "two-views", "wait_s": 60}, headers=op)
+    assert r.status_code == 202, r.text
+    assert _wait(client, op, r.json()["job"]["id"])["state"] == "done"
+    engine.clear_objects()
+    row = client.get("/api/inspections?limit=1", headers=op).json()["data"][0]
+    assert row["decision"] == "recognized" and row["model"] == "gear-housing", row["reason"]
+    assert len(methods) == 2, methods  # the first top view's fit, then the second's
+    visited = row["viewpoints_visited"]
+    assert visited[0] == 1 and visited[-1] == 1 and visited.count(1) == 2, visited
+    assert len(row["images"]) == len(visited)
+    pose = row["pose"]
+    assert pose is not None, row["reason"]
+    assert pose["second_top_view"]["first"]["method"] == "plane"
+    assert pose["second_top_view"]["chosen"] == "second", pose["second_top_view"]
+    assert pose["method"] == "parallax"
+    T, Tt = np.array(pose["T_base_obj"]), np.array(row["truth"]["T_base_obj"])
+    assert np.linalg.norm(T[:2, 3] - Tt[:2, 3]) < 0.004, (T[:3, 3], Tt[:3, 3])
+    dyaw = math.atan2(T[1, 0], T[0, 0]) - math.atan2(Tt[1, 0], Tt[0, 0])
+    assert abs(math.remainder(dyaw, 2 * math.pi)) < math.radians(2.0)
+    last = client.get(row["images"][-1], headers=h["viewer"])
+    assert last.status_code == 200 and last.content[:2] == b"\xff\xd8"
