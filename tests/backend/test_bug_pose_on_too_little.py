@@ -51,22 +51,26 @@ def _top_mask() -> np.ndarray:
     return mask.astype(bool)
 
 
-def _pose(x_mm: float, yaw_deg: float, method: str, n: int = 6) -> ObjectPose:
+def _pose(x_mm: float, yaw_deg: float, method: str, n: int = 6, views: int | None = None,
+          y_mm: float = 0.0) -> ObjectPose:  # fmt: skip
     T = np.eye(4)
     a = math.radians(yaw_deg)
     T[:2, :2] = [[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]]
-    T[:3, 3] = SPEC.station_point + np.array([x_mm * 1e-3, 0.0, 0.0])
-    return ObjectPose(T, a, 0.0, n, method, views=1 if method == "plane" else 3)
+    T[:3, 3] = SPEC.station_point + np.array([x_mm * 1e-3, y_mm * 1e-3, 0.0])
+    views = (1 if method == "plane" else 3) if views is None else views
+    return ObjectPose(T, a, 0.0, n, method, views=views)
 
 
 class _Cell:
-    def __init__(self) -> None:
+    def __init__(self, travel_m: float | None = None) -> None:
         self.looked: list[np.ndarray] = []
+        self.meta = {} if travel_m is None else {"belt_travel_m": travel_m}
 
     async def look(self, q: Any, speed: Any = None) -> Any:
         self.looked.append(np.asarray(q, dtype=np.float64))
         rgb = np.full((480, 640, 3), 90, np.uint8)
-        return SimpleNamespace(rgb=rgb, robot_state=SimpleNamespace(q=np.asarray(q)), meta={})
+        state = SimpleNamespace(q=np.asarray(q))
+        return SimpleNamespace(rgb=rgb, robot_state=state, meta=dict(self.meta))
 
 
 class _Live:
@@ -79,9 +83,18 @@ class _Live:
 
 
 def _run(monkeypatch: pytest.MonkeyPatch, first: ObjectPose | None, second: Any,
-         first_err: str = "") -> tuple[Any, _Cell, _Live, list[tuple[Any, ...]]]:  # fmt: skip
-    cell, live = _Cell(), _Live()
-    rt = SimpleNamespace(cell=cell, live_index=live, sim=None)
+         first_err: str = "", belt: tuple[float, float] | None = None,
+         ) -> tuple[Any, _Cell, _Live, list[tuple[Any, ...]]]:  # fmt: skip
+    """The second top view after ``first``, the fit there answering ``second``; ``belt``:
+    (travel now, travel at the second exposure) of a belt running at 0.05 m/s from 0."""
+    cell, live = _Cell(None if belt is None else belt[1]), _Live()
+    sim = None
+    if belt is not None:
+        conveyor = SimpleNamespace(running=True, mode="continuous", speed_m_s=0.05,
+                                   travel_m=belt[0])  # fmt: skip
+        layout = SimpleNamespace(conveyor=SimpleNamespace(end_y_m=SPEC.station_point[1] + 1.0))
+        sim = SimpleNamespace(conveyor_state=conveyor, config=SimpleNamespace(layout=layout))
+    rt = SimpleNamespace(cell=cell, live_index=live, sim=sim)
     ctx = service._Ctx(rt, CAMERA, T_EE_CAM, "test", SPEC.station_point, SPEC.surface_z_m)
     calls: list[tuple[Any, ...]] = []
 
@@ -97,7 +110,8 @@ def _run(monkeypatch: pytest.MonkeyPatch, first: ObjectPose | None, second: Any,
     got = asyncio.run(service._second_top_view(
         ctx, opts, "pipe-flange", SPEC.station_point.copy(), first=first, first_err=first_err,
         T_plan=T_EE_CAM, top_mask=_top_mask(), T_cam_top=T_CAM_TOP, height=0.05, travel0=0.0,
-        gain=None, mode="index", speed_m_s=0.0,
+        gain=None, mode="index" if belt is None else "continuous",
+        speed_m_s=0.0 if belt is None else 0.05,
     ))  # fmt: skip
     return got, cell, live, calls
 
@@ -137,15 +151,16 @@ def test_two_plane_answers_that_agree_are_taken(monkeypatch) -> None:
 @pytest.mark.parametrize(
     ("second", "why"),
     [
-        (_pose(4.5, 0.2, "plane"), "again, 4.0 mm and 0.0 deg from the first"),  # moved
-        (_pose(0.5, 1.5, "plane"), "again, 0.0 mm and 1.3 deg from the first"),  # turned
+        (_pose(4.5, 0.2, "plane"), "4.0 mm and 0.0 deg from the first"),  # moved
+        (_pose(0.5, 1.5, "plane"), "0.0 mm and 1.3 deg from the first"),  # turned
+        (_pose(3.0, 0.2, "parallax", 12, views=1), "one trained view's 12 correspondences"),
         (PoseFailed("no trained top view of pipe-flange verified on this view"), "verified"),
     ],
 )
 def test_plane_answers_that_disagree_leave_no_pose(monkeypatch, second, why) -> None:
     got, cell, _live, _calls = _run(monkeypatch, _pose(0.5, 0.2, "plane", n=5), second)
     assert got.pose is None and "chosen" not in got.summary
-    assert got.error.startswith("the top view gave only a plane answer (one trained view")
+    assert got.error.startswith("the top view's pose rested on too little (the plane answer")
     assert why in got.error
     assert got.shot is not None and len(cell.looked) == 1  # the look is stored all the same
 
@@ -169,3 +184,39 @@ def test_an_unreachable_second_view_leaves_no_pose(monkeypatch) -> None:
     got, cell, _live, calls = _run(monkeypatch, _pose(0.5, 0.2, "plane"), _pose(0, 0, "parallax"))
     assert got.pose is None and got.shot is None and not cell.looked and not calls
     assert "cannot be reached: outside the workspace" in got.error
+
+
+def test_what_rests_on_too_little() -> None:
+    assert service.rests_on_too_little(None)
+    assert service.rests_on_too_little(_pose(0, 0, "plane"))
+    # one trained view's own joint fit: 3.0 mm off on 12 correspondences in a fresh run
+    assert service.rests_on_too_little(_pose(0, 0, "parallax", 12, views=1))
+    assert not service.rests_on_too_little(_pose(0, 0, "parallax", 12, views=2))
+
+
+def test_a_first_view_of_one_trained_view_alone_is_checked_too(monkeypatch) -> None:
+    first = _pose(3.0, 0.3, "parallax", 12, views=1)
+    got, *_ = _run(monkeypatch, first, _pose(0.1, 0.1, "parallax", 30, views=4))
+    assert got.used and got.pose.views == 4
+    got, *_ = _run(monkeypatch, first, _pose(2.6, 0.1, "parallax", 10, views=1))
+    assert got.pose is first  # two one-view answers that agree
+    got, *_ = _run(monkeypatch, first, _pose(0.1, 0.1, "parallax", 10, views=1))
+    assert got.pose is None and "rested on too little (one trained view's 12" in got.error
+
+
+def test_at_constant_speed_the_first_answer_is_carried_before_they_are_compared(
+    monkeypatch,
+) -> None:
+    """The belt carried the object 80 mm between the exposures: two answers that agree
+    once the first is carried are taken (the first, of the top view's exposure); without
+    the carrying they would be 80 mm apart."""
+    first = _pose(0.3, 0.2, "plane")
+    got, _cell, _live, calls = _run(
+        monkeypatch, first, _pose(0.3, 0.4, "plane", y_mm=80.5), belt=(0.02, 0.08)
+    )
+    assert got.pose is first and not got.used and got.summary["chosen"] == "first"
+    # the view was planned over where the belt will have carried it, not at the station
+    T_cam = calls[0][2]
+    assert T_cam[1, 3] > T_CAM_TOP[1, 3] + 0.05
+    got, *_ = _run(monkeypatch, first, _pose(0.3, 0.4, "plane", y_mm=86.0), belt=(0.02, 0.08))
+    assert got.pose is None and "6.0 mm and 0.2 deg from the first" in got.error
