@@ -936,8 +936,9 @@ async def _second_top_view(
     travel0: float, gain: Any, mode: str, speed_m_s: float,
 ) -> _SecondTop:  # fmt: skip
     """Look at the object from the top again (turned by :data:`SECOND_TOP_ROLL_RAD`; at
-    constant speed over where the belt will have carried it) and compute the pose there, the region being the first top view's
-    ``top_mask`` carried into the new view (:func:`side_roi`, up to ``height``).
+    constant speed over where the belt will have carried it) and compute the pose there,
+    in the first top view's region ``top_mask`` carried into the new view
+    (:func:`side_roi`, up to ``height``).
 
     The second view's pose is taken unless it too rests on too little
     (:func:`rests_on_too_little`); two such answers are taken when they agree within
@@ -945,8 +946,7 @@ async def _second_top_view(
     carried by the belt's travel between the exposures); otherwise there is no pose, with
     the reason (a pose resting on one view's handful of features would be picked wrong)."""
     rt = ctx.rt
-    first_b = _pose_brief(first, first_err)
-    summary: dict[str, Any] = {"first": first_b}
+    summary: dict[str, Any] = {"first": _pose_brief(first, first_err)}
 
     def none(why: str, shot: Any = None) -> _SecondTop:
         summary.setdefault("second", {"error": why})
