@@ -16,7 +16,10 @@ One inspection (:func:`inspect_object`):
    from where the top view found the object (predicted along the belt when it moves);
 4. **decide**: ``recognized`` (a model), ``unknown`` (no model passes, or models too alike:
    ambiguous) or ``failed`` (nothing found, segmentation, a move, e-stop, stop), with the reason;
-5. **pose** (:mod:`backend.inspection.pose`) from the trained top view's homography;
+5. **pose** (:mod:`backend.inspection.pose`) from the trained top views that verify on the
+   top view; when it rests on too little (:func:`rests_on_too_little`) a second top view,
+   turned about the camera's axis, gives it, or the object has no pose
+   (:func:`_second_top_view`);
 6. **pick** (``sort`` on): the part's bin, or only the approach pose (``sort`` off);
 7. **store** one row (:mod:`backend.inspection.results`) and publish an
    :class:`InspectionDone` event.
@@ -828,10 +831,11 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
         if mode == "continuous":
             # predicted from the exposure the pose is of; the travel reported counts from
             # the top view's (the truth's) exposure
-            pose = predict_along_belt(pose, _belt(rt)[2] - travel_pose)
+            travel_now = _belt(rt)[2]
+            pose = predict_along_belt(pose, travel_now - travel_pose)
             pub.update(T_base_obj=pose.T_base_obj.tolist(),
                        position_m=[float(v) for v in pose.T_base_obj[:3, 3]],
-                       predicted_travel_m=_belt(rt)[2] - travel0,
+                       predicted_travel_m=travel_now - travel0,
                        at_exposure_travel_m=travel_pose - travel0)  # fmt: skip
         pub.update(camera_model=ctx.source, belt_mode=mode, z_plane_m=ctx.surface_z + height,
                    second_top_view=second)  # fmt: skip
