@@ -56,7 +56,9 @@ from backend.inspection.pose import (
     ViewMatch,
     estimate_pose_views,
     plane_points,
+    pose_apart,
     predict_along_belt,
+    rests_on_too_little,
 )
 from backend.inspection.roi import SideRoi, height_bound, side_query, side_roi
 from backend.inspection.structure import FeatureHeights, HeightCache, TaughtTopView
@@ -516,30 +518,54 @@ class _SideView:
     notes: tuple[str, ...]
 
 
-async def _side_view(ctx: _Ctx, vp: int, point: NDArray[np.float64], *, T_plan: NDArray[np.float64],
-                     top_mask: NDArray[np.bool_], T_cam_top: NDArray[np.float64], height_m: float,
-                     travel0: float | None, speed: float | None) -> _SideView:  # fmt: skip
-    """Viewpoint ``vp`` (2 or 3) planned at ``point`` (:func:`plan_viewpoints`), visited, and
-    the region of its image where the object found in the top view (``top_mask`` seen from
-    ``T_cam_top``) can be (:func:`backend.inspection.roi.side_roi`, up to ``height_m``; with
+async def _look_with_region(ctx: _Ctx, q: NDArray[np.float64], *, top_mask: NDArray[np.bool_],
+                            T_cam_top: NDArray[np.float64], height_m: float,
+                            travel0: float | None, speed: float | None,
+                            **roi_options: Any) -> tuple[Any, NDArray[np.float64], SideRoi, float]:  # fmt: skip
+    """Visit joints ``q``; the frame, its camera pose, the region of its image where the
+    object found in the top view (``top_mask`` seen from ``T_cam_top``) can be
+    (:func:`backend.inspection.roi.side_roi`, up to ``height_m``, with ``roi_options``; with
     ``travel0`` -- the belt's travel at the top view's exposure, constant speed -- moved by
-    the belt's travel since).  A region that cannot be made is the whole frame, noted."""
-    t = time.monotonic()
-    plan = await asyncio.to_thread(plan_viewpoints, point, T_ee_cam=T_plan, views=(VIEW_NAMES[vp - 1],),
-                                   object_height_m=AIM_HEIGHT_M)  # fmt: skip
-    plan_s = time.monotonic() - t
-    notes = [f"viewpoint {vp}: {plan.views[0].reason}"] if plan.views[0].reason else []
-    f = await ctx.rt.cell.look(plan.views[0].q, speed=speed)
+    the belt's travel since) and the seconds the region took."""
+    f = await ctx.rt.cell.look(q, speed=speed)
     T_cam = _T_cam(f.robot_state.q, ctx.T_ee_cam)
     moved = None if travel0 is None else np.array([0.0, _travel_of(f, ctx.rt) - travel0, 0.0])
     t = time.monotonic()
     roi = await asyncio.to_thread(
         side_roi, top_mask, camera=ctx.camera, T_base_cam_top=T_cam_top, T_base_cam_side=T_cam,
         surface_z_m=ctx.surface_z, height_m=height_m, image_shape=f.rgb.shape[:2], moved_m=moved,
+        **roi_options,
+    )  # fmt: skip
+    return f, T_cam, roi, time.monotonic() - t
+
+
+async def _side_view(ctx: _Ctx, vp: int, point: NDArray[np.float64], *, T_plan: NDArray[np.float64],
+                     top_mask: NDArray[np.bool_], T_cam_top: NDArray[np.float64], height_m: float,
+                     travel0: float | None, speed: float | None) -> _SideView:  # fmt: skip
+    """Viewpoint ``vp`` (2 or 3) planned at ``point`` (:func:`plan_viewpoints`), visited, and
+    the region of its image where the object can be (:func:`_look_with_region`).  A region
+    that cannot be made is the whole frame, noted."""
+    t = time.monotonic()
+    plan = await asyncio.to_thread(plan_viewpoints, point, T_ee_cam=T_plan, views=(VIEW_NAMES[vp - 1],),
+                                   object_height_m=AIM_HEIGHT_M)  # fmt: skip
+    plan_s = time.monotonic() - t
+    notes = [f"viewpoint {vp}: {plan.views[0].reason}"] if plan.views[0].reason else []
+    f, T_cam, roi, roi_s = await _look_with_region(
+        ctx, plan.views[0].q, top_mask=top_mask, T_cam_top=T_cam_top, height_m=height_m,
+        travel0=travel0, speed=speed,
     )  # fmt: skip
     if roi.mask is None:
         notes.append(f"viewpoint {vp}: {roi.reason}")
-    return _SideView(f, T_cam, roi, plan_s, time.monotonic() - t, tuple(notes))
+    return _SideView(f, T_cam, roi, plan_s, roi_s, tuple(notes))
+
+
+def _carried(rt: Any, found: NDArray[np.float64], travel0: float, speed_m_s: float,
+             vp: int) -> NDArray[np.float64]:  # fmt: skip
+    """Where to plan viewpoint ``vp`` of the object found at ``found`` in the top view (belt
+    travel ``travel0`` then) at constant speed: where the belt will have carried it 1.5 s
+    from now (:func:`carried_point`)."""
+    ahead = _belt(rt)[2] - travel0 + 1.5 * speed_m_s
+    return carried_point(found, ahead, rt.sim.config.layout.conveyor.end_y_m, vp)
 
 
 async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
@@ -714,10 +740,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
             return feats
         state["stage"] = f"viewpoint {vp}"
         report(0.3 + 0.2 * len(frames), f"viewpoint {vp}")
-        point = found.copy()
-        if mode == "continuous":
-            ahead = _belt(rt)[2] - travel0 + 1.5 * speed_m_s
-            point = carried_point(found, ahead, rt.sim.config.layout.conveyor.end_y_m, vp)
+        point = _carried(rt, found, travel0, speed_m_s, vp) if mode == "continuous" else found
         side = await _side_view(
             ctx, vp, point, T_plan=T_plan, top_mask=region.mask, T_cam_top=T_cam_top,
             height_m=roi_height, travel0=travel0 if mode == "continuous" else None,
@@ -888,18 +911,6 @@ WEAK_AGREE_M = 0.0015
 WEAK_AGREE_YAW_RAD = math.radians(0.75)
 
 
-def rests_on_too_little(pose: ObjectPose | None) -> bool:
-    """Whether a pose is too weakly supported to pick by: none, the plane answer (one
-    trained view with fewer than ``MIN_PARALLAX_POINTS`` correspondences, or a joint fit
-    that failed) or a fit to one trained view's correspondences alone.
-
-    Over 483 recorded fits (``benchmarks.pose_replay``, pipe flange seeds 6, 7, 8 and
-    every part seed 11) the plane answers were exactly the five poses off by more than
-    2 mm or 1 deg.  In the thirteenth part's runs (718 poses) three rested on one view
-    (9, 12 and 16 correspondences): 0.2, 3.0 and 0.1 mm off."""
-    return pose is None or pose.method == "plane" or pose.views < 2
-
-
 @dataclass(frozen=True, eq=False)
 class _SecondTop:
     """What the second top view gave: the pose to use (None: ``error``), the frame with its
@@ -925,12 +936,6 @@ def _pose_brief(pose: ObjectPose | None, err: str) -> dict[str, Any]:
     return {"method": pose.method, "n_points": pose.n_points, "views": pose.views,
             "position_m": [round(float(v), 5) for v in pose.T_base_obj[:3, 3]],
             "yaw_rad": round(float(pose.yaw_rad), 5)}  # fmt: skip
-
-
-def _apart(a: ObjectPose, b: ObjectPose) -> tuple[float, float]:
-    """Distance on the belt plane (m) and yaw difference (rad) of two poses."""
-    d = float(np.linalg.norm(a.T_base_obj[:2, 3] - b.T_base_obj[:2, 3]))
-    return d, abs(math.remainder(a.yaw_rad - b.yaw_rad, 2 * math.pi))
 
 
 async def _second_top_view(
@@ -959,11 +964,10 @@ async def _second_top_view(
         return _SecondTop(None, f"{first_txt}; the second top view: {why}", shot,
                           summary=summary)  # fmt: skip
 
-    point = found.copy()
+    point = found
     if mode == "continuous":
-        ahead = _belt(rt)[2] - travel0 + 1.5 * speed_m_s
         try:
-            point = carried_point(found, ahead, rt.sim.config.layout.conveyor.end_y_m, 1)
+            point = _carried(rt, found, travel0, speed_m_s, 1)
         except Unreachable as exc:
             return none(str(exc))
     try:
@@ -973,12 +977,9 @@ async def _second_top_view(
         )  # fmt: skip
     except (Unreachable, ValueError) as exc:
         return none(f"cannot be reached: {exc}")
-    f = await rt.cell.look(plan.views[0].q, speed=opts.speed)
-    T_cam = _T_cam(f.robot_state.q, ctx.T_ee_cam)
-    moved = None if mode != "continuous" else np.array([0.0, _travel_of(f, rt) - travel0, 0.0])
-    roi = await asyncio.to_thread(
-        side_roi, top_mask, camera=ctx.camera, T_base_cam_top=T_cam_top, T_base_cam_side=T_cam,
-        surface_z_m=ctx.surface_z, height_m=height, image_shape=f.rgb.shape[:2], moved_m=moved,
+    f, T_cam, roi, _roi_s = await _look_with_region(
+        ctx, plan.views[0].q, top_mask=top_mask, T_cam_top=T_cam_top, height_m=height,
+        travel0=travel0 if mode == "continuous" else None, speed=opts.speed,
         margin_m=0.0, margin_px=SECOND_TOP_MARGIN_PX,
     )  # fmt: skip
     second: ObjectPose | None = None
@@ -1006,8 +1007,10 @@ async def _second_top_view(
         return _SecondTop(second, "", shot, used=True, summary=summary)
     apart = ""
     if first is not None:
-        carried = first if moved is None else predict_along_belt(first, float(moved[1]))
-        d, dyaw = _apart(carried, second)
+        carried = first
+        if mode == "continuous":  # the first carried by the belt's travel since the top view
+            carried = predict_along_belt(first, _travel_of(f, rt) - travel0)
+        d, dyaw = pose_apart(carried, second)
         if d <= WEAK_AGREE_M and dyaw <= WEAK_AGREE_YAW_RAD:
             summary["chosen"] = "first"
             return _SecondTop(first, "", shot, summary=summary)

@@ -145,12 +145,6 @@ class FeatureHeights:
 _Rays = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
 
 
-def _object_rays(v: TaughtTopView, camera: PinholeCamera) -> _Rays:
-    """The view's camera centre, unit viewing rays of its keypoints and camera rotation, in
-    its object frame."""
-    return object_rays(v.features.keypoints.xy, camera, v.T_base_cam, v.T_base_obj)
-
-
 def triangulate_heights(
     views: Sequence[TaughtTopView],
     *,
@@ -187,7 +181,7 @@ def triangulate_heights(
         )
     views = list(views)[:MAX_VIEWS]
     f = float(camera.K[0, 0])
-    rays = [_object_rays(v, camera) for v in views]
+    rays = [object_rays(v.features.keypoints.xy, camera, v.T_base_cam, v.T_base_obj) for v in views]
     lo, hi = z_floor_m - HEIGHT_SLACK_M, z_top_m + HEIGHT_SLACK_M
     descs = [_descriptors(v.features) for v in views]
     # votes[i]: (keypoint index, height, other view) of every accepted triangulation
