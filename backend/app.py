@@ -18,6 +18,7 @@ from backend.api.errors import install_error_handlers
 from backend.api.fastpath import FastReads
 from backend.api.headers import SecurityHeaders, install_cors
 from backend.api.limits import UrlLengthLimit
+from backend.api.proxies import TrustedProxies
 from backend.api.replay import install_replay
 from backend.resources import resource_dir
 from backend.runtime import CellRuntime, StartupError
@@ -67,6 +68,8 @@ def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None 
     app.add_middleware(UrlLengthLimit)
     install_cors(app, settings)
     app.add_middleware(SecurityHeaders, viser_port=settings.viser_port)
+    # outermost: every layer, the sign-in throttle included, sees the client it resolves
+    app.add_middleware(TrustedProxies, trusted=settings.trusted_proxy_networks())
     app.include_router(api_router)
 
     @app.get("/", include_in_schema=False)

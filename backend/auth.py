@@ -20,6 +20,7 @@ from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import selectinload
 
 from backend.authcache import AUTH_USERS_OPTION
+from backend.knowntokens import KnownTokens
 from backend.db.models import ApiToken, Role, User
 from backend.db.types import utcnow
 from vision.errors import Conflict, InvalidInput
@@ -35,6 +36,7 @@ __all__ = [
     "hash_token",
     "issue_token",
     "live_token_clause",
+    "load_known_tokens",
     "parse_role",
     "revoke_tokens",
     "token_expiry",
@@ -222,3 +224,21 @@ async def token_is_live(session: AsyncSession, token: str, secret: str) -> bool:
         .where(ApiToken.token_hash == hash_token(token, secret), live_token_clause())
     )
     return row is not None and not row.user.disabled
+
+
+async def load_known_tokens(session: AsyncSession, known: KnownTokens) -> int:
+    """Note every live token of an enabled user in ``known`` (the most recently used
+    first, at most ``known.max_entries``), so that the emergency stop accepts a valid
+    token from memory from the start; returns how many were noted."""
+    rows = await session.execute(
+        select(ApiToken.token_hash, User.id, User.name, User.role)
+        .join(User, ApiToken.user_id == User.id)
+        .where(live_token_clause(), User.disabled.is_(False))
+        .order_by(ApiToken.last_used_at.desc().nulls_last(), ApiToken.id.desc())
+        .limit(known.max_entries)
+    )
+    n = 0
+    for token_hash, user_id, name, role in reversed(rows.all()):  # the newest noted last
+        known.note(str(token_hash), user_id=int(user_id), user=str(name), role=str(role))
+        n += 1
+    return n

@@ -52,6 +52,7 @@ from sqlalchemy.orm import ORMExecuteState, Session
 
 from backend.db.models import ApiToken, User
 from backend.db.types import utcnow
+from backend.knowntokens import KnownTokens
 from backend.taskutil import BackgroundTasks, work_for_waiters
 
 __all__ = [
@@ -84,6 +85,8 @@ _WATCHED = frozenset({"users", "api_tokens"})
 _FLAG = "visioncell_auth_change"
 #: Users whose sign-ins a transaction changed (a set of ids, or None: any user).
 _USERS = "visioncell_auth_users"
+#: The same users, kept from ``before_commit`` to ``after_commit`` (for the known tokens).
+_FORGET = "visioncell_auth_forget"
 #: The notification channel of sign-in changes (a PostgreSQL identifier).
 AUTH_CHANNEL = "visioncell_auth"
 #: Execution option of a bulk ``update``/``delete`` of users or tokens naming the user ids
@@ -176,6 +179,8 @@ class AuthCache:
         self.shared = 0
         self.refreshes = 0
         self.refresh_failures = 0
+        #: Where every successful sign-in is also noted for the emergency stop (None: not).
+        self.known: KnownTokens | None = None
         _caches.add(self)
 
     def _fresh(self, token_hash: str, refresh: Lookup | None = None) -> _Entry | None:
@@ -352,7 +357,11 @@ class AuthCache:
         was ``generation`` (a user or token change committed since: not remembered), its
         lookup started at ``started`` (``time.monotonic()``; default now): the entry
         lasts :attr:`ttl_s` from then."""
-        if self.ttl_s <= 0 or user.disabled:
+        if user.disabled:
+            return
+        if self.known is not None and generation == self.generation:
+            self.known.note(token_hash, user_id=int(user.id), user=user.name, role=user.role)
+        if self.ttl_s <= 0:
             return
         at = time.monotonic() if started is None else started
         entry = _Entry(at + self.ttl_s, _aware(expires_at), _row(user))
@@ -369,7 +378,10 @@ class AuthCache:
 
     def forget_users(self, user_ids: frozenset[int] | None) -> int:
         """Drop the entries of ``user_ids`` (None: every entry); returns how many.  A
-        sign-in read from the database before this call is not remembered after it."""
+        sign-in read from the database before this call is not remembered after it;
+        :attr:`known` forgets them too."""
+        if self.known is not None:
+            self.known.forget_users(user_ids)
         with self._lock:
             self.generation += 1
             if user_ids is None:
@@ -471,6 +483,7 @@ def _before_commit(session: Session) -> None:
     if _USERS not in session.info:
         return
     ids = session.info.pop(_USERS)
+    session.info[_FORGET] = ids  # for the known tokens, once the commit succeeded
     bind = session.get_bind()
     if bind.dialect.name == "postgresql":
         # delivered to the plant's listeners when (and only if) this transaction commits
@@ -484,9 +497,15 @@ def _before_commit(session: Session) -> None:
 def _after_commit(session: Session) -> None:
     if session.info.pop(_FLAG, False):
         clear_all()
+    if _FORGET in session.info:
+        ids = session.info.pop(_FORGET)
+        for cache in list(_caches):
+            if cache.known is not None:
+                cache.known.forget_users(ids)
 
 
 @event.listens_for(Session, "after_rollback")
 def _after_rollback(session: Session) -> None:
     session.info.pop(_FLAG, None)
     session.info.pop(_USERS, None)
+    session.info.pop(_FORGET, None)

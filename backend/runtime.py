@@ -31,14 +31,17 @@ from typing import TYPE_CHECKING, Any
 from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 
+from backend.auth import load_known_tokens
 from backend.authcache import AuthCache
 from backend.cell import Cell, EventBus
 from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Cell as CellRow
 from backend.db.session import Database
+from backend.estoplog import EStopLog
 from backend.hardware import Hardware, make_hardware
 from backend.inspection import recovery
 from backend.jobs import JobManager
+from backend.knowntokens import KnownTokens
 from backend.readcache import ReadCache
 from backend.recognition.index import LiveIndex, load_live_index
 from backend.recognition.teach import BackgroundStore
@@ -156,6 +159,12 @@ class CellRuntime:
         #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).
         #: Successful sign-ins reused for 2 s (``backend.authcache``).
         self.auth_cache = AuthCache(refresh_ahead=settings.refresh_ahead)
+        #: Tokens seen valid in the last hour: the emergency stop's sign-in, from memory
+        #: (``backend.knowntokens``); every successful sign-in of the cache feeds it.
+        self.known_tokens = KnownTokens()
+        self.auth_cache.known = self.known_tokens
+        #: Writes every E-STOP press and reset to the audit trail (after entering).
+        self.estop_log: EStopLog | None = None
         #: Hot list and status reads reused for ``read_cache_ttl_s`` (``backend.readcache``).
         self.read_cache = ReadCache(
             ttl_s=settings.read_cache_ttl_s, refresh_ahead=settings.refresh_ahead
@@ -251,6 +260,12 @@ class CellRuntime:
         await check_database(db)
         self._database = db
         self.cell_id = await ensure_cell_row(db, s.cell_name)
+        async with db.session() as session:  # the emergency stop knows every live token
+            await load_known_tokens(session, self.known_tokens)
+        # Every E-STOP press and reset goes to the audit trail after the stop itself.
+        self.estop_log = EStopLog(db, s.cell_name)
+        self.estop_log.start(self.bus)
+        stack.push_async_callback(self.estop_log.stop)
         self._live_index = await load_live_index(db, s)
         from backend.recognition.sync import IndexSync
 
@@ -316,6 +331,7 @@ class CellRuntime:
                 secret=s.secret_key.get_secret_value(),
                 auth_enabled=s.auth_enabled,
                 throttle=self.signin_throttle,
+                known=self.known_tokens,
             )
             view = View3D(
                 cell, host=s.viser_host, port=s.viser_port, sim=hardware.sim, access=access

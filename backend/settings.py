@@ -15,7 +15,7 @@ from typing import Literal
 from pydantic import Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-__all__ = ["DEV_SECRET", "Settings"]
+__all__ = ["DEV_SECRET", "MAX_TRUSTED_PROXIES", "Settings", "parse_trusted_proxies"]
 
 #: The secret used when none is configured.  Accepted only in the development
 #: environment and only while every listener is bound to the loopback interface.
@@ -29,6 +29,43 @@ CELL_NAME_PATTERN = re.compile(r"^[a-z0-9](?:[a-z0-9_-]{0,38}[a-z0-9])?$")
 _ORIGIN = re.compile(
     r"^https?://[A-Za-z0-9.-]{1,253}(?::[0-9]{1,5})?$|^https?://\[[0-9A-Fa-f:.]{2,45}\](?::[0-9]{1,5})?$"
 )
+
+
+#: Most entries of ``VISIONCELL_TRUSTED_PROXIES``.
+MAX_TRUSTED_PROXIES = 32
+
+Network = ipaddress.IPv4Network | ipaddress.IPv6Network
+
+
+def parse_trusted_proxies(value: str) -> tuple[Network, ...]:
+    """The networks of a comma-separated list of IP addresses and CIDR networks.
+
+    ``ValueError`` naming ``VISIONCELL_TRUSTED_PROXIES`` and the bad entry for anything else
+    (a host name, a wildcard, more than :data:`MAX_TRUSTED_PROXIES` entries).
+    """
+    if not isinstance(value, str):
+        raise ValueError(f"VISIONCELL_TRUSTED_PROXIES must be text, got {value!r}")
+    if len(value) > 64 * MAX_TRUSTED_PROXIES:
+        raise ValueError(
+            f"VISIONCELL_TRUSTED_PROXIES is too long ({len(value)} characters): list at most "
+            f"{MAX_TRUSTED_PROXIES} addresses or networks"
+        )
+    entries = [e.strip() for e in value.split(",") if e.strip()]
+    if len(entries) > MAX_TRUSTED_PROXIES:
+        raise ValueError(
+            f"VISIONCELL_TRUSTED_PROXIES lists {len(entries)} entries; at most "
+            f"{MAX_TRUSTED_PROXIES} are accepted"
+        )
+    networks = []
+    for entry in entries:
+        try:
+            networks.append(ipaddress.ip_network(entry, strict=False))
+        except ValueError:
+            raise ValueError(
+                "VISIONCELL_TRUSTED_PROXIES must be a comma-separated list of IP addresses "
+                f"or networks (e.g. '10.0.0.5, 192.168.1.0/24'), got {entry[:80]!r}"
+            ) from None
+    return tuple(networks)
 
 
 def _is_loopback(host: str) -> bool:
@@ -125,6 +162,13 @@ class Settings(BaseSettings):
     )
     signin_max_clients: int = Field(
         10_000, ge=1, le=1_000_000, description="Most client addresses the throttle tracks."
+    )
+    trusted_proxies: str = Field(
+        "",
+        description="Reverse proxies whose X-Forwarded-For names the client (the sign-in "
+        "throttle's key): a comma-separated list of at most 32 IP addresses or networks, e.g. "
+        "'10.0.0.5, 192.168.1.0/24'; empty (the default): the header is ignored and the "
+        "peer's address is the client.",
     )
     cors_origins: list[str] = Field(
         default_factory=list,
@@ -234,6 +278,12 @@ class Settings(BaseSettings):
                 raise ValueError(f"host must be an IP address or 'localhost', got {v!r}") from exc
         return v
 
+    @field_validator("trusted_proxies")
+    @classmethod
+    def _valid_proxies(cls, v: str) -> str:
+        parse_trusted_proxies(v)  # raises naming the setting and the bad entry
+        return ",".join(e.strip() for e in v.split(",") if e.strip())
+
     @field_validator("cors_origins")
     @classmethod
     def _valid_origins(cls, v: list[str]) -> list[str]:
@@ -306,6 +356,10 @@ class Settings(BaseSettings):
         if self.http_port == self.viser_port and self.http_host == self.viser_host:
             raise ValueError(f"http_port and viser_port must differ, both are {self.http_port}")
         return self
+
+    def trusted_proxy_networks(self) -> tuple[Network, ...]:
+        """``trusted_proxies`` as networks (an address is a network of one)."""
+        return parse_trusted_proxies(self.trusted_proxies)
 
     # -- derived paths ---------------------------------------------------------------------
     @property

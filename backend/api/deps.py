@@ -42,6 +42,7 @@ __all__ = [
     "PURE_DEPENDENCIES",
     "CellDep",
     "DatabaseDep",
+    "EStopUser",
     "EngineerUser",
     "OperatorUser",
     "RoleCheck",
@@ -53,6 +54,7 @@ __all__ = [
     "ViewerUser",
     "cached_role",
     "client_address",
+    "estop_user",
     "get_cell",
     "get_database",
     "get_runtime",
@@ -60,6 +62,7 @@ __all__ = [
     "install_runtime",
     "require_role",
     "runtime_of",
+    "signed_in",
     "signin_throttle",
 ]
 
@@ -233,6 +236,12 @@ async def _signed_in(
     return await cache.sign_in(hash_token(token, secret), _lookup(db, token, secret))
 
 
+async def signed_in(conn: HTTPConnection, token: str) -> User | None:
+    """The user ``token`` signs in, as :class:`RoleCheck` finds it (the sign-in cache,
+    else the database; no throttle): for the console's WebSocket."""
+    return await _signed_in(conn, get_runtime(conn).database, token, get_settings(conn))
+
+
 class RoleCheck:
     """Dependency: the token's user, who must hold at least :attr:`role`
     (``Depends(require_role(Role.operator))``).
@@ -328,6 +337,54 @@ async def cached_role(conn: HTTPConnection) -> Role | None:
     return None if role is None else Role[role]
 
 
+async def estop_user(
+    conn: HTTPConnection,
+    settings: SettingsDep,
+    creds: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
+) -> User:
+    """Dependency of the emergency stop: the token's user, from memory only.
+
+    Any signed-in role may stop the cell.  The token is accepted when the sign-in cache
+    holds it or this process saw it valid in the last hour (:mod:`backend.knowntokens`):
+    no database read, and no throttle for such a token, so a database outage or a flood of
+    bad tokens from the same address cannot delay or refuse the stop.  A token not known
+    so gets the usual refusals: 429 while the address is blocked, else 401 (counted as a
+    failure), so this route is no way to test tokens faster than any other."""
+    if not settings.auth_enabled:
+        return User(id=0, name="anonymous", role=Role.engineer.name)
+    rt = get_runtime(conn)
+    token = creds.credentials if creds is not None and creds.scheme.lower() == "bearer" else None
+    if token is not None and well_formed(token):
+        key = hash_token(token, settings.secret_key.get_secret_value())
+        user = rt.auth_cache.get(key)  # no refresh: nothing on this path reads the database
+        if user is not None:
+            return user
+        known = rt.known_tokens.get(key)
+        if known is not None:
+            return User(id=known.user_id, name=known.user, role=known.role)
+    client = client_address(conn)
+    try:
+        rt.signin_throttle.check(client)
+    except TooManyAttempts as exc:
+        raise too_many_attempts(exc) from None
+    if token is None:
+        raise ApiError(
+            401,
+            "unauthorized",
+            "missing bearer token (Authorization: Bearer TOKEN)",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+    rt.signin_throttle.failure(client)
+    raise ApiError(
+        401,
+        "unauthorized",
+        "invalid, expired or revoked token (or one this cell has not seen signed in for an "
+        "hour: sign in once, e.g. open the console)",
+        headers={"WWW-Authenticate": "Bearer"},
+    )
+
+
 ViewerUser = Annotated[User, Depends(require_role(Role.viewer))]
+EStopUser = Annotated[User, Depends(estop_user)]
 OperatorUser = Annotated[User, Depends(require_role(Role.operator))]
 EngineerUser = Annotated[User, Depends(require_role(Role.engineer))]

@@ -151,11 +151,15 @@ class JsonErrorHttpProtocol(H11Protocol):
 
 
 def uvicorn_options(*, ws_compression: bool = False) -> dict[str, Any]:
-    """Keyword arguments for ``uvicorn.run`` / ``uvicorn.Config`` that give JSON errors;
+    """Keyword arguments for ``uvicorn.run`` / ``uvicorn.Config`` that give JSON errors and
+    leave proxy headers to the app;
     ``ws_compression`` offers per-message deflate on WebSockets (``Settings.ws_compression``)."""
     if not isinstance(ws_compression, bool):
         raise TypeError(f"ws_compression must be a bool, got {ws_compression!r}")
     return {
+        # X-Forwarded-For is believed only from VISIONCELL_TRUSTED_PROXIES, by the app
+        # (backend.api.proxies); uvicorn's own handling would trust any loopback peer.
+        "proxy_headers": False,
         "http": JsonErrorHttpProtocol,
         "h11_max_incomplete_event_size": MAX_REQUEST_HEAD_BYTES,
         "ws_per_message_deflate": ws_compression,

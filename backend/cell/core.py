@@ -1,8 +1,10 @@
 """The cell: one robot driver, one camera, conveyors, the jobs that use them, one event bus.
 
-REST handlers, the 3D view's buttons, the CLI and jobs all call these methods, so that an
-E-STOP pressed anywhere takes the same path: the arm halts first, then every conveyor, then
-motion jobs are cancelled; everything stays stopped until :meth:`Cell.reset`.
+REST handlers, the console's WebSocket, the 3D view's buttons, the CLI and jobs all call
+these methods, so that an E-STOP pressed anywhere takes the same path: the arm's stop goes
+out first and every conveyor's with it, motion jobs are told to cancel, the cell-wide event
+goes out, and the caller has its answer; the jobs wind down afterwards.  Everything stays
+stopped until :meth:`Cell.reset`.
 """
 
 from __future__ import annotations
@@ -36,6 +38,23 @@ log = logging.getLogger(__name__)
 
 #: Largest rate of :class:`ArmState` events, Hz (changes of the flags go out at once).
 ARM_EVENT_HZ = 20.0
+#: Longest an E-STOP's answer waits for the arm and the conveyors to confirm, seconds (a
+#: confirmation later than this is logged; the serial driver's own limit is 0.5 s).
+LATCH_WAIT_S = 1.0
+
+
+def _report_late(what: str) -> Any:
+    """A done callback logging the outcome of an E-STOP step that outlived the answer."""
+
+    def done(task: asyncio.Future[Any]) -> None:
+        if task.cancelled():
+            log.error("E-STOP: %s was cancelled", what)
+        elif task.exception() is not None:
+            log.error("E-STOP: %s failed late: %r", what, task.exception())
+        else:
+            log.warning("E-STOP: %s confirmed late", what)
+
+    return done
 
 
 class Cell(CellMotion):
@@ -91,6 +110,8 @@ class Cell(CellMotion):
         self.db_id: int | None = None
         """Id of the cell's database row (set by :class:`~backend.runtime.CellRuntime`)."""
         self._state_task: asyncio.Task[None] | None = None
+        #: What an E-STOP left running (the cancelled jobs winding down); ended by :meth:`stop`.
+        self._background: set[asyncio.Future[None]] = set()
 
     # -- life cycle ----------------------------------------------------------------------
     async def start(self) -> None:
@@ -102,6 +123,9 @@ class Cell(CellMotion):
     async def stop(self) -> None:
         """Cancel jobs, stop the events and acquisition, close camera and driver."""
         await self.jobs.shutdown()
+        for task in list(self._background):
+            task.cancel()
+        self._background.clear()
         if self._state_task is not None:
             self._state_task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -185,31 +209,94 @@ class Cell(CellMotion):
         """Controlled stop of the current move."""
         await self.driver.stop()
 
-    async def estop(self) -> None:
-        """Cell-wide emergency stop: the arm halts first, then every conveyor; then motion
-        jobs are cancelled.  Latched until :meth:`reset`."""
-        halted: list[str] = []
-        try:
-            await self.driver.estop()
-        finally:  # the belts stop even when the arm's driver cannot be reached
-            for conveyor in self.conveyors:
-                try:
-                    await conveyor.halt()
-                    halted.append(conveyor.name)
-                except Exception:  # one failing conveyor must not keep the others running
-                    log.exception("E-STOP: conveyor %s did not halt", conveyor.name)
-            for job in self.jobs.running(motion=True):
-                await self.jobs.cancel(job)
-            self.bus.publish(CellStopped(active=True, conveyors=tuple(halted)))
+    async def estop(self, *, by: str = "system", role: str = "system", source: str = "cell") -> None:
+        """Cell-wide emergency stop, latched until :meth:`reset`.
 
-    async def reset(self) -> None:
+        The arm's stop is sent first and every conveyor's at once after it (a slow
+        acknowledgement of the arm does not hold the belts), and the running motion jobs are
+        told to cancel (they wake after the stops); the answer waits for the arm and the
+        conveyors at most :data:`LATCH_WAIT_S`.  Then the :class:`CellStopped` event goes out (its listeners record the stop: the runtime's
+        audit writer) and this returns.  Nothing here waits for the database or for a job
+        to end: the jobs wind down (an inspection storing its failed row, perhaps through
+        a database outage) in the background.
+
+        ``by``, ``role`` and ``source`` say who pressed it and where (``rest``, ``ws``,
+        ``view3d``, ``cli``, ...), for the event and the audit record.  Raises the arm
+        driver's error (e.g. the serial link is down) after the conveyors have been halted
+        and the event published.
+        """
+        latch = self._hold(asyncio.ensure_future(self._latch(by=by, role=role, source=source)))
+        # Shielded: a caller that goes away (a client disconnecting) never interrupts a latch.
+        await asyncio.shield(latch)
+
+    async def _latch(self, *, by: str, role: str, source: str) -> None:
+        """The work of :meth:`estop` (see there)."""
+        arm = asyncio.ensure_future(self.driver.estop())  # scheduled first: runs first
+        belts = {asyncio.ensure_future(c.halt()): c.name for c in self.conveyors}
+        # The motion jobs are told now, to wake after the stops (scheduled before them): a
+        # job never sees its move end by the stop and goes on to a next step.
+        jobs = [j for j in self.jobs.running(motion=True) if j.task is not None]
+        for job in jobs:  # awaited in the background
+            assert job.task is not None
+            job.task.cancel()
+        await asyncio.wait([arm, *belts], timeout=LATCH_WAIT_S)
+        halted: list[str] = []
+        for task, name in belts.items():
+            if not task.done():
+                log.error("E-STOP: conveyor %s has not confirmed its halt yet", name)
+                task.add_done_callback(_report_late(f"conveyor {name} halt"))
+            elif task.cancelled() or task.exception() is not None:
+                log.error("E-STOP: conveyor %s did not halt: %r", name,
+                          None if task.cancelled() else task.exception())  # fmt: skip
+            else:
+                halted.append(name)
+        arm_error: BaseException | None = None
+        if not arm.done():
+            arm.add_done_callback(_report_late("arm E-STOP"))
+            arm_error = TimeoutError(f"the arm did not confirm its stop within {LATCH_WAIT_S} s")
+        elif arm.cancelled():
+            arm_error = RuntimeError("the arm's stop was cancelled")
+        else:
+            arm_error = arm.exception()
+        self.bus.publish(
+            CellStopped(
+                active=True, conveyors=tuple(halted), by=by, role=role, source=source,
+                arm_latched=arm_error is None, jobs=tuple(j.id for j in jobs),
+            )
+        )  # fmt: skip
+        log.warning(
+            "E-STOP pressed by %s (%s) via %s: arm %s, conveyors halted: %s, jobs cancelled: %s",
+            by, role, source, "latched" if arm_error is None else f"NOT latched ({arm_error!r})",
+            ", ".join(halted) or "none", ", ".join(j.id for j in jobs) or "none",
+        )  # fmt: skip
+        if jobs:
+            self._hold(asyncio.ensure_future(self._wind_down(jobs)))
+        if arm_error is not None:
+            raise arm_error
+
+    def _hold(self, task: asyncio.Future[None]) -> asyncio.Future[None]:
+        """Keep a reference to ``task`` until it ends (:meth:`stop` cancels it)."""
+        self._background.add(task)
+        task.add_done_callback(self._background.discard)
+        return task
+
+    async def _wind_down(self, jobs: list[Job]) -> None:
+        """Wait for the end of the jobs an E-STOP cancelled (once: a second cancellation
+        would interrupt what a job does on its way out, e.g. storing its failed row)."""
+        for job in jobs:
+            await self.jobs.wait(job)
+            log.info("E-STOP: job %s (%s) ended %s", job.id, job.kind, job.state.value)
+
+    async def reset(self, *, by: str = "system", role: str = "system", source: str = "cell") -> None:
         """Clear an emergency stop: the arm first, then the conveyors resume."""
         await self.driver.reset()
         resumed = []
         for conveyor in self.conveyors:
             await conveyor.resume()
             resumed.append(conveyor.name)
-        self.bus.publish(CellStopped(active=False, conveyors=tuple(resumed)))
+        self.bus.publish(
+            CellStopped(active=False, conveyors=tuple(resumed), by=by, role=role, source=source)
+        )
 
     @property
     def estopped(self) -> bool:

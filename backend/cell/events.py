@@ -151,6 +151,16 @@ class CellStopped(CellEvent):
     """True after E-STOP, False after reset."""
     conveyors: tuple[str, ...] = ()
     """Names of the conveyors halted or resumed with the arm."""
+    by: str = "system"
+    """Who pressed it: a user's name, or ``system``."""
+    role: str = "system"
+    """That user's role name (``system`` for the cell itself)."""
+    source: str = "cell"
+    """Where it was pressed: ``rest``, ``ws``, ``view3d``, ``cli`` (through REST), ``cell``."""
+    arm_latched: bool = True
+    """Whether the arm's driver confirmed the stop (or the reset)."""
+    jobs: tuple[str, ...] = ()
+    """Ids of the motion jobs the stop cancelled."""
 
 
 @dataclass(frozen=True, eq=False)  # holds an array: compared by identity

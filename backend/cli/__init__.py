@@ -1,7 +1,8 @@
 """The ``visioncell`` command line, one module per command group: ``serve``
 (:mod:`backend.cli.serve`), ``db`` (:mod:`backend.cli.db`), ``user``
 (:mod:`backend.cli.users`), ``calibrate`` (:mod:`backend.cli.calibrate`), ``train-pca``
-(:mod:`backend.cli.features`), ``emulator`` (:mod:`backend.cli.emulator`) ``models``
+(:mod:`backend.cli.features`), ``emulator`` (:mod:`backend.cli.emulator`), ``estop``
+(:mod:`backend.cli.estop`), ``models``
 (:mod:`backend.cli.models`) ``inspect`` (:mod:`backend.cli.inspect`) and ``report`` (:mod:`backend.cli.report`)."""
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from backend.cli.calibrate import calibrate_app
 from backend.cli.common import err, load_settings, out
 from backend.cli.db import db_app
 from backend.cli.emulator import emulator
+from backend.cli.estop import estop
 from backend.cli.features import train_pca
 from backend.cli.inspect import register as register_inspect
 from backend.cli.models import register as register_models
@@ -46,6 +48,7 @@ def version() -> None:
 
 app.command()(serve)
 app.command()(emulator)
+app.command()(estop)
 
 
 def main() -> None:

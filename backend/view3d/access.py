@@ -32,6 +32,7 @@ from backend.auth import authenticate, hash_token
 from backend.db.models import ApiToken, Role
 from backend.db.session import Database
 from backend.db.types import utcnow
+from backend.knowntokens import KnownTokens
 from backend.throttle import SignInThrottle
 
 __all__ = [
@@ -196,11 +197,14 @@ class ViewAccess:
         secret: str,
         auth_enabled: bool = True,
         throttle: SignInThrottle | None = None,
+        known: KnownTokens | None = None,
     ) -> None:
         self.db = db
         self._secret = secret
         self.auth_enabled = auth_enabled
         self.throttle = throttle
+        #: Where a token signed in here is noted for the emergency stop (None: nowhere).
+        self.known = known
 
     def open_grant(self) -> ViewGrant | None:
         """The grant every client gets without signing in (only when auth is disabled)."""
@@ -232,6 +236,11 @@ class ViewAccess:
             )
         if row is None:
             return None
+        if self.known is not None:
+            self.known.note(
+                hash_token(token, self._secret), user_id=int(user.id), user=user.name,
+                role=user.role,
+            )  # fmt: skip
         return ViewGrant(user=user.name, role=Role[user.role], token_id=int(row), via="token")
 
     async def from_link(self, link: str, *, now: float | None = None) -> ViewGrant | None:

@@ -148,7 +148,7 @@ class ClientPanel:
         self._handles.append(ctl)
         with ctl:
             self._add("estop", gui.add_button("E-STOP", color="red")).on_click(
-                self._guarded(Role.viewer, self.cell.estop)
+                self._guarded(Role.viewer, self._estop)
             )
             if grant.allows(Role.operator):
                 speed = self._add(
@@ -165,7 +165,7 @@ class ClientPanel:
                     self._guarded(Role.operator, self.cell.stop_motion)
                 )
                 self._add("reset", gui.add_button("Reset E-STOP")).on_click(
-                    self._guarded(Role.operator, self.cell.reset)
+                    self._guarded(Role.operator, self._reset)
                 )
         if grant.allows(Role.engineer) and self.sim is not None:
             belt = gui.add_folder("Conveyor (engineer)", order=_ORDER + 3)
@@ -179,6 +179,19 @@ class ClientPanel:
                 self._add("conveyor_release", gui.add_button("Release")).on_click(
                     self._guarded(Role.engineer, self._release)
                 )
+
+    def _who(self) -> tuple[str, str]:
+        """The signed-in user's name and role name (for the E-STOP's record)."""
+        grant = self._grant
+        return ("system", "system") if grant is None else (grant.user, grant.role.name)
+
+    async def _estop(self) -> None:
+        by, role = self._who()
+        await self.cell.estop(by=by, role=role, source="view3d")
+
+    async def _reset(self) -> None:
+        by, role = self._who()
+        await self.cell.reset(by=by, role=role, source="view3d")
 
     def _add(self, name: str, handle: Any) -> Any:
         # Only top-level elements are removed on a rebuild; a folder takes its children.

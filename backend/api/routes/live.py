@@ -21,8 +21,14 @@ Messages from the server (JSON objects, ``type`` first):
   camera's health changed.
 - ``{"type": "inspection", "inspection": {...}}``: an inspection ended (id, decision, model,
   reason, score, viewpoints, T_base_obj, the cameras of the views, pick);
-- ``{"type": "estop", "active": bool, "conveyors": [names]}``: the cell-wide emergency stop
-  was pressed or reset.
+- ``{"type": "estop", "active": bool, "conveyors": [names], "arm_latched": bool, "by": name,
+  "source": where}``: the cell-wide emergency stop was pressed or reset (``source``:
+  ``rest``, ``ws``, ``view3d``, ``cell``).
+
+Messages from the client after its token: ``{"type": "estop"}`` presses the emergency stop
+at once (any signed-in role; its answer is the ``estop`` message every socket gets); other
+messages are ignored.  A socket stays open through a database outage (its token cannot be
+revoked meanwhile), and a token this cell saw valid within the hour may open one then.
 
 Every message but ``hello`` also carries ``"at"``: when its event was made, wall-clock
 seconds since the epoch (``benchmarks/load.py`` measures the message lag with it).
@@ -33,16 +39,18 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import time
 from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
-from backend.api.deps import client_address, get_runtime, get_settings
+from backend.api.deps import client_address, get_runtime, get_settings, signed_in
 from backend.api.errors import ApiError
-from backend.auth import authenticate, token_is_live
+from backend.auth import hash_token, token_is_live, well_formed
 from backend.cell.events import ArmState, CameraStatus, CellStopped, JobProgress, JobState
-from backend.db.models import Role
+from backend.db.models import Role, User
+from backend.inspection.recovery import is_database_error
 from backend.inspection.service import InspectionDone
 from backend.throttle import TooManyAttempts
 
@@ -52,6 +60,22 @@ router = APIRouter(tags=["live"])
 JOB_PROGRESS_HZ = 4.0
 #: How often an open socket's token is checked again (expiry, revocation), seconds.
 RECHECK_S = 5.0
+#: Longest message a client may send after its token, characters (longer ones are ignored).
+MAX_CLIENT_MESSAGE = 1024
+
+log = logging.getLogger(__name__)
+
+
+def asks_estop(text: str) -> bool:
+    """Whether a client's message is ``{"type": "estop"}`` (at most
+    :data:`MAX_CLIENT_MESSAGE` characters; anything else is ignored)."""
+    if not isinstance(text, str) or len(text) > MAX_CLIENT_MESSAGE:
+        return False
+    try:
+        msg = json.loads(text)
+    except ValueError:
+        return False
+    return isinstance(msg, dict) and msg.get("type") == "estop"
 
 
 def _message(event: Any) -> dict[str, Any] | None:
@@ -70,7 +94,8 @@ def _body(event: Any) -> dict[str, Any] | None:
     if isinstance(event, CameraStatus):
         return {"type": "camera", "camera": event.as_dict()}
     if isinstance(event, CellStopped):
-        return {"type": "estop", "active": event.active, "conveyors": list(event.conveyors)}
+        return {"type": "estop", "active": event.active, "conveyors": list(event.conveyors),
+                "arm_latched": event.arm_latched, "by": event.by, "source": event.source}  # fmt: skip
     if isinstance(event, InspectionDone):
         return {"type": "inspection", "inspection": event.as_dict()}
     return None
@@ -107,8 +132,18 @@ async def live(ws: WebSocket) -> None:
             token = str(json.loads(first).get("token", ""))
         except (ValueError, AttributeError):
             token = ""
-        async with rt.database.session() as session:
-            user = await authenticate(session, token, secret)
+        try:
+            user = await signed_in(ws, token)
+        except Exception as exc:
+            if not is_database_error(exc):
+                raise
+            # The database is unavailable: a token this cell saw valid within the hour
+            # still gets its live view (and its E-STOP); any other must try again later.
+            known = rt.known_tokens.get(hash_token(token, secret)) if well_formed(token) else None
+            if known is None:
+                await ws.close(code=1013, reason="the database is unavailable: try again later")
+                return
+            user = User(id=known.user_id, name=known.user, role=known.role)
         if user is None:
             rt.signin_throttle.failure(client)
             await ws.close(code=4401, reason="invalid, expired or revoked token")
@@ -121,7 +156,12 @@ async def live(ws: WebSocket) -> None:
 
     async def drain_incoming() -> None:
         while True:
-            await ws.receive_text()  # the client has nothing else to say; detect closing
+            text = await ws.receive_text()  # also detects the client closing
+            if asks_estop(text):  # at once, on this task: the send loop may be waiting
+                try:
+                    await cell.estop(by=user_name, role=role, source="ws")
+                except Exception as exc:  # the estop message says the arm was not latched
+                    log.error("E-STOP from the WebSocket of %s: %r", user_name, exc)
 
     rx_task = asyncio.create_task(drain_incoming())
     try:
@@ -143,8 +183,13 @@ async def live(ws: WebSocket) -> None:
             now = time.monotonic()
             if settings.auth_enabled and now - checked_at >= RECHECK_S:
                 checked_at = now
-                async with rt.database.session() as session:
-                    live = await token_is_live(session, token, secret)
+                try:
+                    async with rt.database.session() as session:
+                        live = await token_is_live(session, token, secret)
+                except Exception as exc:
+                    if not is_database_error(exc):
+                        raise
+                    live = True  # no revocation commits while the database is down either
                 if not live:
                     await ws.close(code=4401, reason="the token expired or was revoked")
                     break

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query, status
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field, model_validator
 
-from backend.api.deps import CellDep, OperatorUser, ViewerUser
+from backend.api.deps import CellDep, EStopUser, OperatorUser, ViewerUser
 from backend.api.fastpath import FastRequest, Fresh
 from backend.api.schemas import JobOut, PoseIn, RobotStateOut
 from backend.api.types import JointList, RollRad, Speed
@@ -129,16 +129,20 @@ async def create_stop(_: OperatorUser, cell: CellDep) -> dict[str, Any]:
 @router.post(
     "/estop",
     summary="Emergency stop (any signed-in user may press it)",
+    description="Latches the arm and the conveyors and answers at once: the token is "
+    "checked from memory (one this cell has seen signed in within the hour), never "
+    "throttled when valid, and nothing waits for the database (the audit record is "
+    "written afterwards).",
     response_model=StateOnlyOut,
 )
-async def create_estop(_: ViewerUser, cell: CellDep) -> dict[str, Any]:
-    await cell.estop()
+async def create_estop(user: EStopUser, cell: CellDep) -> dict[str, Any]:
+    await cell.estop(by=user.name, role=user.role, source="rest")
     return {"state": cell.driver.state.as_dict()}
 
 
 @router.post("/reset", summary="Clear an emergency stop", response_model=StateOnlyOut)
-async def create_reset(_: OperatorUser, cell: CellDep) -> dict[str, Any]:
-    await cell.reset()
+async def create_reset(user: OperatorUser, cell: CellDep) -> dict[str, Any]:
+    await cell.reset(by=user.name, role=user.role, source="rest")
     return {"state": cell.driver.state.as_dict()}
 
 

@@ -4,7 +4,7 @@
 
 import { $, el, isoUtc, setText } from "../dom.js";
 
-const KINDS = ["threshold", "model", "view", "calibration", "user", "token"];
+const KINDS = ["threshold", "model", "view", "calibration", "user", "token", "estop"];
 const PAGE_SIZE = 50;
 
 let root = null;
@@ -93,7 +93,7 @@ function build() {
     el("div", { className: "card" },
       el("h2", {}, "Audit trail"),
       el("p", { className: "small" },
-        "Every change of a threshold, model, trained view, active calibration, user or token, newest first. "
+        "Every change of a threshold, model, trained view, active calibration, user or token, and every emergency stop, newest first. "
         + "The trail cannot be edited."),
       form, table, pager,
       el("p", { id: "audit-message", className: "error", role: "status" })));
