@@ -20,9 +20,9 @@ from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import selectinload
 
 from backend.authcache import AUTH_USERS_OPTION
-from backend.knowntokens import KnownTokens
 from backend.db.models import ApiToken, Role, User
 from backend.db.types import utcnow
+from backend.knowntokens import KnownTokens
 from vision.errors import Conflict, InvalidInput
 
 __all__ = [

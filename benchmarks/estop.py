@@ -91,6 +91,7 @@ def _summary(ms: list[float], statuses: list[int], latched: list[bool]) -> dict[
     counts: dict[str, int] = {}
     for code in statuses:
         counts[str(code)] = counts.get(str(code), 0) + 1
+
     def r(v: float | None) -> float | None:
         return None if v is None else round(v, 2)
 

@@ -30,6 +30,7 @@ MAX_HOPS = 16
 #: Longest ``X-Forwarded-For`` value read, bytes (anything beyond is ignored).
 _MAX_HEADER = 2048
 
+
 def _address(text: str) -> ipaddress.IPv4Address | ipaddress.IPv6Address | None:
     try:
         return ipaddress.ip_address(text.strip())

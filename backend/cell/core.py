@@ -209,7 +209,9 @@ class Cell(CellMotion):
         """Controlled stop of the current move."""
         await self.driver.stop()
 
-    async def estop(self, *, by: str = "system", role: str = "system", source: str = "cell") -> None:
+    async def estop(
+        self, *, by: str = "system", role: str = "system", source: str = "cell"
+    ) -> None:
         """Cell-wide emergency stop, latched until :meth:`reset`.
 
         The arm's stop is sent first and every conveyor's at once after it (a slow
@@ -287,7 +289,9 @@ class Cell(CellMotion):
             await self.jobs.wait(job)
             log.info("E-STOP: job %s (%s) ended %s", job.id, job.kind, job.state.value)
 
-    async def reset(self, *, by: str = "system", role: str = "system", source: str = "cell") -> None:
+    async def reset(
+        self, *, by: str = "system", role: str = "system", source: str = "cell"
+    ) -> None:
         """Clear an emergency stop: the arm first, then the conveyors resume."""
         await self.driver.reset()
         resumed = []

@@ -51,7 +51,9 @@ def estop(
 ) -> None:
     """Press the cell's emergency stop (arm and conveyors), latched until a reset."""
     if not (math.isfinite(timeout) and 0.0 < timeout <= MAX_TIMEOUT_S):
-        err.print(f"[red]error:[/red] --timeout must be in (0, {MAX_TIMEOUT_S:g}] s, got {timeout!r}")
+        err.print(
+            f"[red]error:[/red] --timeout must be in (0, {MAX_TIMEOUT_S:g}] s, got {timeout!r}"
+        )
         raise typer.Exit(2)
     if url is None:
         s = load_settings()

@@ -64,7 +64,8 @@ def test_cli_estop_during_a_hanging_database(settings, tokens):
         rt = runtime_of(srv.app)
         with DatabaseOutage(rt.database, mode="block"):
             res = runner.invoke(
-                cli_app, ["estop", "--url", srv.base, "--token", tokens["viewer"], "--timeout", "30"]
+                cli_app,
+                ["estop", "--url", srv.base, "--token", tokens["viewer"], "--timeout", "30"],
             )
             assert res.exit_code == 0, res.output
             assert "E-STOP latched: estopped=True" in res.output

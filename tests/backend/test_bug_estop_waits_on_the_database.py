@@ -14,6 +14,9 @@ from backend.api.deps import runtime_of
 from backend.app import create_app
 from backend.cell import CellStopped
 from benchmarks.outage import DatabaseOutage
+from robot.model import ASEA
+from tests.utils.factories import make_settings, make_tokens, migrate
+from tests.utils.serial import emulated_controller
 
 #: Bounds a hang only: what is waited for normally happens within a second.
 HANG_S = 120.0
@@ -87,3 +90,32 @@ def test_an_unwritten_record_is_logged_when_the_cell_stops(settings, headers, ca
     outage.end()
     lost = [r for r in caplog.records if "audit record NOT written" in r.getMessage()]
     assert len(lost) == 1 and "E-STOP by test-viewer (viewer) via rest" in lost[0].getMessage()
+
+
+def test_estop_of_a_serial_controller_while_the_database_hangs(tmp_path):
+    """The serial controller's path: the ESTOP line goes out and is acknowledged, the move
+    in progress is cancelled, while every database session hangs."""
+    with emulated_controller(tmp_path, time_scale=1.0) as port:
+        s = make_settings(tmp_path, driver="serial", serial_port=port)
+        migrate(s)
+        tokens = make_tokens(s)
+        with TestClient(create_app(s)) as c:
+            rt = runtime_of(c.app)
+            op = {"Authorization": f"Bearer {tokens['operator']}"}
+            ready = [float(v) for v in ASEA.q_ready]
+            r = c.post("/api/robot/move", json={"joints": ready, "speed": 0.05}, headers=op)
+            assert r.status_code == 202, r.text
+            job_id = r.json()["job"]["id"]
+            until(lambda: rt.cell.driver.state.moving, "the move to start")
+            with DatabaseOutage(rt.database, mode="block"):
+                r = c.post(
+                    "/api/robot/estop", headers={"Authorization": f"Bearer {tokens['viewer']}"}
+                )
+                assert r.status_code == 200, r.text
+                assert r.json()["state"]["estopped"] is True
+                until(lambda: rt.cell.jobs.get(job_id).state.value != "running", "the move's end")
+                assert rt.cell.jobs.get(job_id).state.value in ("cancelled", "failed")
+            # latched: the controller refuses to move until a reset
+            r = c.post("/api/robot/move", json={"joints": ready}, headers=op)
+            assert r.status_code == 409, r.text
+            assert rt.cell.driver.state.estopped
