@@ -19,6 +19,11 @@ the token).  What keeps it safe:
   seconds, when the entry expires;
 - failed sign-ins are never cached (each one still reaches the database and the throttle).
 
+Every successful sign-in read from the database is also noted in :attr:`AuthCache.known`
+(:class:`backend.knowntokens.KnownTokens`, for an hour: the emergency stop's sign-in from
+memory); a commit of this process that changes a user's sign-ins drops that user's tokens
+from it, as does :meth:`AuthCache.forget_users` (another process's notification).
+
 **One lookup per token at a time, refreshed ahead** (:meth:`AuthCache.sign_in`).  Under
 load (the console's clients often share one token) every request that arrived when an
 entry had expired did its own database sign-in.  Now requests whose token has no entry

@@ -28,6 +28,7 @@ from backend.settings import Settings
 from robot.collision import CollisionWorld
 from robot.drivers.base import RobotDriver, RobotState
 from robot.drivers.conveyor import ConveyorDriver
+from robot.errors import DriverError
 from robot.model import ASEA, ArmModel
 from robot.trajectory import JointTrajectory
 from vision.sources import Camera, Frame
@@ -235,8 +236,8 @@ class Cell(CellMotion):
         """The work of :meth:`estop` (see there)."""
         arm = asyncio.ensure_future(self.driver.estop())  # scheduled first: runs first
         belts = {asyncio.ensure_future(c.halt()): c.name for c in self.conveyors}
-        # The motion jobs are told now, to wake after the stops (scheduled before them): a
-        # job never sees its move end by the stop and goes on to a next step.
+        # The motion jobs are told now and wake after the stops, scheduled first: a job
+        # never sees its move end by the stop and goes on to a next step.
         jobs = [j for j in self.jobs.running(motion=True) if j.task is not None]
         for job in jobs:  # awaited in the background
             assert job.task is not None
@@ -255,9 +256,9 @@ class Cell(CellMotion):
         arm_error: BaseException | None = None
         if not arm.done():
             arm.add_done_callback(_report_late("arm E-STOP"))
-            arm_error = TimeoutError(f"the arm did not confirm its stop within {LATCH_WAIT_S} s")
+            arm_error = DriverError(f"the arm did not confirm its stop within {LATCH_WAIT_S} s")
         elif arm.cancelled():
-            arm_error = RuntimeError("the arm's stop was cancelled")
+            arm_error = DriverError("the arm's stop was cancelled")
         else:
             arm_error = arm.exception()
         self.bus.publish(

@@ -7,11 +7,13 @@ from __future__ import annotations
 
 import asyncio
 
+import pytest
 from sqlalchemy.exc import OperationalError
 
 from backend.cell import CellStopped
 from backend.inspection.recovery import retry_database
 from backend.jobs import JobState
+from robot.errors import LinkDown
 from robot.model import ASEA
 from tests.utils.cells import ideal_cell
 from tests.utils.factories import make_settings
@@ -107,4 +109,29 @@ async def test_estop_does_not_wait_for_a_slow_conveyor(settings):
                 await asyncio.sleep(0.01)
     finally:
         release.set()
+        await cell.stop()
+
+
+async def test_an_arm_that_cannot_be_reached_still_halts_the_belts(settings):
+    """The arm's driver failing (a serial link down) halts the belts all the same and
+    announces the stop with ``arm_latched`` false; the caller gets the driver's error."""
+    belt = Belt()
+    cell, driver, _ = ideal_cell(settings, conveyors=[belt])
+    await cell.start()
+
+    async def unreachable() -> None:
+        raise LinkDown("the serial link is down")
+
+    events: list[CellStopped] = []
+    cell.bus.add_listener(events.append, CellStopped)
+    driver.estop = unreachable
+    try:
+        with pytest.raises(LinkDown):
+            async with asyncio.timeout(HANG_S):
+                await cell.estop(by="bob", role="operator", source="test")
+        assert belt.halted and cell.estopped
+        assert [(e.active, e.arm_latched, e.conveyors) for e in events] == [
+            (True, False, ("belt",))
+        ]
+    finally:
         await cell.stop()
