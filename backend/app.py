@@ -15,6 +15,7 @@ from backend.api import FAST_READS, api_router
 from backend.api.deps import install_runtime
 from backend.api.docs import install_docs
 from backend.api.errors import install_error_handlers
+from backend.api.estopfast import EStopFastPath
 from backend.api.fastpath import FastReads
 from backend.api.headers import SecurityHeaders, install_cors
 from backend.api.limits import UrlLengthLimit
@@ -65,6 +66,7 @@ def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None 
     install_docs(app)
     if settings.fast_reads:  # innermost: the layers below apply to its answers too
         app.add_middleware(FastReads, routes=app.routes, reads=FAST_READS)
+    app.add_middleware(EStopFastPath)  # the E-STOP of a known token, before any framework work
     app.add_middleware(UrlLengthLimit)
     install_cors(app, settings)
     app.add_middleware(SecurityHeaders, viser_port=settings.viser_port)

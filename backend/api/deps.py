@@ -60,6 +60,7 @@ __all__ = [
     "get_runtime",
     "get_settings",
     "install_runtime",
+    "known_user",
     "require_role",
     "runtime_of",
     "signed_in",
@@ -337,6 +338,25 @@ async def cached_role(conn: HTTPConnection) -> Role | None:
     return None if role is None else Role[role]
 
 
+def known_user(conn: HTTPConnection, token: str | None) -> User | None:
+    """The user of a bearer ``token`` known from memory alone: the sign-in cache's entry
+    (not refreshed: no database work), else a token this process saw valid within the hour
+    (:mod:`backend.knowntokens`); the anonymous engineer with ``auth_enabled`` off.  None
+    for anything else (no token, a malformed or unknown one, the cell not running)."""
+    settings = get_settings(conn)
+    if not settings.auth_enabled:
+        return User(id=0, name="anonymous", role=Role.engineer.name)
+    rt = runtime_of(conn.app)
+    if rt is None or not rt.running or token is None or not well_formed(token):
+        return None
+    key = hash_token(token, settings.secret_key.get_secret_value())
+    user = rt.auth_cache.get(key)
+    if user is not None:
+        return user
+    known = rt.known_tokens.get(key)
+    return None if known is None else User(id=known.user_id, name=known.user, role=known.role)
+
+
 async def estop_user(
     conn: HTTPConnection,
     settings: SettingsDep,
@@ -350,18 +370,11 @@ async def estop_user(
     bad tokens from the same address cannot delay or refuse the stop.  A token not known
     so gets the usual refusals: 429 while the address is blocked, else 401 (counted as a
     failure), so this route is no way to test tokens faster than any other."""
-    if not settings.auth_enabled:
-        return User(id=0, name="anonymous", role=Role.engineer.name)
     rt = get_runtime(conn)
     token = creds.credentials if creds is not None and creds.scheme.lower() == "bearer" else None
-    if token is not None and well_formed(token):
-        key = hash_token(token, settings.secret_key.get_secret_value())
-        user = rt.auth_cache.get(key)  # no refresh: nothing on this path reads the database
-        if user is not None:
-            return user
-        known = rt.known_tokens.get(key)
-        if known is not None:
-            return User(id=known.user_id, name=known.user, role=known.role)
+    user = known_user(conn, token)
+    if user is not None:
+        return user
     client = client_address(conn)
     try:
         rt.signin_throttle.check(client)
