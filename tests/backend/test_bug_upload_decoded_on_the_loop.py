@@ -182,7 +182,7 @@ def test_a_client_that_disconnects_cancels_its_queued_work(served, model_id, mon
                 headers=headers,
                 chunks=[body],
                 disconnect=gone,
-            )  # fmt: skip
+            )
         )
         assert await asyncio.to_thread(held.started.wait, HANG_S)
         gone.set()  # the client leaves while its first image is decoded
