@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import itertools
 import os
+import socket
 
+import httpx
 import pytest
 from fastapi.testclient import TestClient
 
@@ -18,6 +20,7 @@ from backend.app import create_app
 from backend.settings import Settings
 from tests.utils.asgi import exchange
 from tests.utils.factories import make_settings, make_tokens, migrate
+from tests.utils.servers import run_uvicorn
 
 CHUNK = 64 * 1024
 MOVE = "/api/robot/move"
@@ -196,3 +199,28 @@ def test_every_body_route_is_planned(served):
 def test_the_edge_settings_are_bounded(name, value):
     with pytest.raises(ValueError, match=name):
         Settings(**{name: value})
+
+
+def test_a_real_server_answers_401_before_the_body_arrives(tmp_path):
+    """Over a socket to uvicorn: the head of a 100 MB POST without a token is answered at
+    once, while the client has sent none of its body; the rest is then dropped unparsed
+    and the connection closes (a bounded linger), and the server keeps answering."""
+    settings = make_settings(tmp_path)
+    migrate(settings)
+    with run_uvicorn(create_app(settings)) as srv:
+        port = int(srv.base.rsplit(":", 1)[1])
+        with socket.create_connection(("127.0.0.1", port), timeout=60) as sock:
+            sock.sendall(
+                b"POST /api/robot/move HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+                b"Content-Length: 100000000\r\n\r\n" + b'{"joints": [' + b"0," * 1000
+            )
+            answer = b""
+            while b"\r\n\r\n" not in answer:
+                piece = sock.recv(65536)
+                assert piece, "closed before answering"
+                answer += piece
+            assert answer.startswith(b"HTTP/1.1 401 ")
+            # the server drops what follows and ends the connection: recv sees the FIN
+            while piece:
+                piece = sock.recv(65536)
+        assert httpx.get(f"{srv.base}/api/health", timeout=60).status_code == 200
