@@ -14,7 +14,7 @@ from backend import __version__
 from backend.api import FAST_READS, api_router
 from backend.api.deps import install_runtime
 from backend.api.docs import install_docs
-from backend.api.edge import BodyGuard
+from backend.api.edge import BodyGuard, document_body_limits
 from backend.api.errors import install_error_handlers
 from backend.api.fastpath import FastReads
 from backend.api.headers import SecurityHeaders, install_cors
@@ -87,5 +87,10 @@ def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None 
         return RedirectResponse("/")
 
     install_replay(app)
+    document_body_limits(
+        app.routes,
+        json_limit=settings.max_json_body_bytes,
+        upload_limit=settings.max_upload_body_bytes,
+    )
     app.mount("/static", StaticFiles(directory=WEB_DIR), name="static")
     return app

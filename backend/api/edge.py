@@ -48,6 +48,7 @@ __all__ = [
     "DEFAULT_UPLOAD_BODY_BYTES",
     "BodyGuard",
     "RoutePlan",
+    "document_body_limits",
     "role_check_of",
 ]
 
@@ -55,6 +56,8 @@ __all__ = [
 DEFAULT_JSON_BODY_BYTES = 1 << 20
 #: Largest upload body by default, bytes (``Settings.max_upload_body_bytes``).
 DEFAULT_UPLOAD_BODY_BYTES = 64 << 20
+#: The OpenAPI schema of the JSON error body (``backend.api.schemas.ErrorOut``).
+_ERROR_REF = "#/components/schemas/ErrorOut"
 #: Methods that carry no body unless they declare one.
 _BODYLESS = frozenset({"GET", "HEAD", "OPTIONS"})
 
@@ -304,3 +307,24 @@ class BodyGuard:
                 raise
             return refusal.status, refusal.code, refusal.detail, refusal.headers
         return None
+
+
+def document_body_limits(routes: Sequence[BaseRoute], *, json_limit: int, upload_limit: int) -> int:
+    """Add the 413 answer, with its limit, to the OpenAPI of every route that takes a body
+    (call before the schema is first built); returns how many routes were documented."""
+    n = 0
+    for ctx in iter_route_contexts(routes):
+        dependant: Dependant | None = getattr(ctx, "dependant", None)
+        if dependant is None or not dependant.body_params:
+            continue
+        upload = any(isinstance(p.field_info, params.Form) for p in dependant.body_params)
+        limit = upload_limit if upload else json_limit
+        ctx.responses[413] = {
+            # added after the routes were built: the schema by reference (ErrorOut is among
+            # the components, every route's other errors use it)
+            "content": {"application/json": {"schema": {"$ref": _ERROR_REF}}},
+            "description": f"The body has more than {limit} bytes ({'upload' if upload else 'JSON'} "
+            "routes' limit), declared or counted as it streams in; refused before it is read",
+        }
+        n += 1
+    return n

@@ -224,3 +224,20 @@ def test_a_real_server_answers_401_before_the_body_arrives(tmp_path):
             while piece:
                 piece = sock.recv(65536)
         assert httpx.get(f"{srv.base}/api/health", timeout=60).status_code == 200
+
+
+def test_the_413_is_documented_on_every_route_that_takes_a_body(served):
+    spec = served[0].openapi()
+    ops = [(p, m, op) for p, item in spec["paths"].items() for m, op in item.items()]
+    with_body = [(p, m, op) for p, m, op in ops if "requestBody" in op]
+    assert len(with_body) >= 20
+    for path, method, op in with_body:
+        assert "413" in op["responses"] and "401" in op["responses"], (method, path)
+    assert "413" in spec["paths"]["/api/models/{model_id}/views"]["post"]["responses"]
+    assert (
+        "67108864 bytes"
+        in (
+            spec["paths"]["/api/models/{model_id}/views"]["post"]["responses"]["413"]["description"]
+        )
+    )
+    assert "413" not in spec["paths"]["/api/robot/estop"]["post"]["responses"]
