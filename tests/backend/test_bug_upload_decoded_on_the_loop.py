@@ -201,3 +201,26 @@ def test_a_client_that_disconnects_cancels_its_queued_work(served, model_id, mon
     assert ex.status == 499 and ex.json()["error"] == "client_closed_request"
     assert held.calls == 1 and extracted == []  # nothing after the client left
     assert view_count(client, h, model_id) == 0
+
+
+def test_the_threshold_choice_runs_in_the_pool(served, monkeypatch):
+    from backend.recognition import thresholds
+
+    app, client, h = served
+    for seed in (21, 31):
+        mid = client.post("/api/models", json={"name": f"thr-{seed}", "kind": "2d"},
+                          headers=h["engineer"]).json()["id"]  # fmt: skip
+        files = views_files(*(png_bytes(textured_rgb(seed + k)) for k in range(3)))
+        r = client.post(f"/api/models/{mid}/views", files=files, headers=h["engineer"])
+        assert r.status_code == 201, r.text
+    rt = app.state.runtime
+    ran = []
+    real = rt.heavy._submit
+    monkeypatch.setattr(
+        rt.heavy, "_submit", lambda fn, *a, **kw: ran.append(fn) or real(fn, *a, **kw)
+    )
+    outcome = client.portal.call(
+        lambda: thresholds.recompute(rt.database, rt.live_index, heavy=rt.heavy)
+    )
+    assert outcome.threshold is not None, outcome.reason
+    assert thresholds._choose in ran

@@ -369,6 +369,7 @@ async def teach_model(
     db: DatabaseDep,
     live: LiveIndexDep,
     cell: CellDep,
+    rt: RuntimeDep,
     model_id: ModelId,
     body: TeachIn,
     store: Annotated[teach_svc.BackgroundStore, Depends(get_backgrounds)],
@@ -394,6 +395,7 @@ async def teach_model(
         store=store,
         point=None if body.point is None else np.asarray(body.point, dtype=np.float64),
         by=_by(user, body.reason),
+        heavy=rt.heavy,
     )
     return {"job": job.public()}
 
