@@ -244,6 +244,13 @@ class Settings(BaseSettings):
         description="Decoded pixels one request's images and masks may take in all (413 "
         "beyond, read from each file's header before it is decoded; backend/heavy.py).",
     )
+    max_feature_pixels: int = Field(
+        4_194_304,
+        ge=100_000,
+        le=100_000_000,
+        description="Largest uploaded image features are extracted from (trained views), "
+        "pixels (413 beyond, from its header; SIFT takes about 230 bytes per pixel).",
+    )
     heavy_workers: int = Field(
         2, ge=1, le=64, description="Threads decoding and analysing uploads."
     )

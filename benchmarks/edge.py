@@ -9,9 +9,12 @@ for the same time while
 * the *unsigned* client sends ``POST /api/robot/move`` with a 100 MB JSON body and no
   token, over and over (a new connection each time, the whole body sent as fast as the
   socket takes it; the answer is read as it comes), and
-* the *uploader* sends ``POST /api/models/{id}/views`` with ``--images`` PNGs of 4000 x
-  3000 px (a few tens of KB each, 12 MP decoded), and every third request a truncated
-  JPEG, one request after the other.
+* the *uploader* sends, one request after the other and in turn, ``--images`` PNGs of
+  4000 x 3000 px (44 KB each, 12 MP decoded) as trained views (``POST
+  /api/models/{id}/views``: refused from their headers, features are extracted from 4 MP
+  at most) and as calibration samples (``POST /api/calibration/sessions/{id}/samples``:
+  decoded, the board searched), ``--images`` 1600 x 1200 PNGs as trained views (decoded,
+  SIFT), and a truncated JPEG.
 
 Reported: the prober's p50/p99/max per phase, what the abusive clients got (status counts,
 time to the 401), and the server's peak RSS (``VmHWM``) after each phase.  Target:
@@ -199,32 +202,46 @@ async def _unsigned(port: int, stop: asyncio.Event, log: dict[str, Any]) -> None
 
 
 async def _uploader(
-    port: int, stop: asyncio.Event, log: dict[str, Any], token: str, model_id: int, n_images: int
+    port: int, stop: asyncio.Event, log: dict[str, Any], token: str, target: dict, images: int
 ) -> None:
-    png, bad = _big_png(), _truncated_jpeg()
+    """Round robin: 12-MP PNGs as trained views (refused from their headers: features are
+    extracted from 4 MP at most), the same as calibration samples (decoded, board
+    detection), 2-MP PNGs as trained views (decoded, SIFT), a truncated JPEG."""
+    import cv2
+    import numpy as np
+
+    png = _big_png()
+    small = cv2.imencode(".png", cv2.resize(cv2.imdecode(np.frombuffer(png, np.uint8), 1),
+                                            (1600, 1200)))[1].tobytes()  # fmt: skip
     log["png_bytes"] = len(png)
     boundary = "edge-bench-boundary"
-    good = _multipart([(f"v{k}.png", png) for k in range(n_images)], boundary)
-    cut = _multipart([("cut.jpg", bad)], boundary)
+    views = f"/api/models/{target['model']}/views"
+    samples = f"/api/calibration/sessions/{target['session']}/samples"
+    kinds = [
+        ("views 12 MP", views, _multipart([(f"v{k}.png", png) for k in range(images)], boundary)),
+        ("samples 12 MP", samples, _multipart([(f"s{k}.png", png) for k in range(images)], boundary)),
+        ("views 2 MP", views, _multipart([(f"w{k}.png", small) for k in range(images)], boundary)),
+        ("truncated", views, _multipart([("cut.jpg", _truncated_jpeg())], boundary)),
+    ]  # fmt: skip
     head = {
         "Authorization": f"Bearer {token}",
         "Content-Type": f"multipart/form-data; boundary={boundary}",
     }
     k = 0
     while not stop.is_set():
-        body = cut if k % 3 == 2 else good
+        kind, path, body = kinds[k % len(kinds)]
         k += 1
         try:
-            status, dt = await _post(port, f"/api/models/{model_id}/views", head, body, len(body))
+            status, dt = await _post(port, path, head, body, len(body))
         except (OSError, asyncio.IncompleteReadError, TimeoutError) as exc:
-            log["codes"][type(exc).__name__] += 1
+            log["codes"][f"{kind}: {type(exc).__name__}"] += 1
             continue
-        log["codes"][str(status)] += 1
+        log["codes"][f"{kind}: {status}"] += 1
         log["answer_s"].append(dt)
 
 
 async def _abuse(
-    port: int, seconds: float, token: str, model: int, images: int, clients: list[str]
+    port: int, seconds: float, token: str, target: dict, images: int, clients: list[str]
 ) -> dict:
     """The abusive ``clients`` for ``seconds`` (in a child process: their CPU is not the
     prober's); what they got."""
@@ -235,7 +252,7 @@ async def _abuse(
         tasks.append(asyncio.create_task(_unsigned(port, stop, logs["unsigned"])))
     if "uploads" in logs:
         tasks.append(
-            asyncio.create_task(_uploader(port, stop, logs["uploads"], token, model, images))
+            asyncio.create_task(_uploader(port, stop, logs["uploads"], token, target, images))
         )
     await asyncio.sleep(seconds)
     stop.set()
@@ -359,7 +376,13 @@ def run(
         r = httpx.post(f"{base}/api/models", json={"name": "bench-part", "kind": "2d"},
                        headers={"Authorization": f"Bearer {token}"}, timeout=TIMEOUT_S)  # fmt: skip
         r.raise_for_status()
-        load = {"token": token, "model": r.json()["id"], "images": images, "clients": clients}
+        auth = {"Authorization": f"Bearer {token}"}
+        board = {"type": "chessboard", "cols": 9, "rows": 6, "square_mm": 30}
+        c = httpx.post(f"{base}/api/calibration/sessions", headers=auth, timeout=TIMEOUT_S,
+                       json={"kind": "intrinsic", "board": board})  # fmt: skip
+        c.raise_for_status()
+        load = {"token": token, "model": r.json()["id"], "session": c.json()["session"]["id"],
+                "images": images, "clients": clients}  # fmt: skip
         err.print("[edge] baseline ...")
         base_res = asyncio.run(_phase(base, port, seconds, interval_s, None))
         base_res["peak_rss_mb"] = _peak_rss_mb(proc.pid)
@@ -423,7 +446,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.abuse:
         spec = json.loads(args.abuse)
         got = asyncio.run(_abuse(int(spec["port"]), float(spec["seconds"]), str(spec["token"]),
-                                 int(spec["model"]), int(spec["images"]),
+                                 {"model": int(spec["model"]), "session": int(spec["session"])},
+                                 int(spec["images"]),
                                  [c for c in spec["clients"] if c in CLIENTS]))  # fmt: skip
         print(json.dumps(got))
         return

@@ -107,6 +107,23 @@ def test_an_image_bomb_is_refused_from_its_header(served, model_id, monkeypatch)
     assert held.calls == 0
 
 
+def test_a_12_megapixel_png_of_a_few_kb_is_refused_before_it_is_decoded(
+    served, model_id, monkeypatch
+):
+    app, client, h = served
+    held = HeldDecode()
+    held.release.set()
+    monkeypatch.setattr(im, "decode_image", held)
+    monkeypatch.setattr(app.state.runtime.heavy, "max_pixels", 64_000_000)  # the default
+    bomb = png_bomb(4000, 3000)  # within the 12-MP limit per image; SIFT would take GBs
+    assert len(bomb) < 50_000
+    r = client.post(f"/api/models/{model_id}/views", files=views_files(bomb),
+                    headers=h["engineer"])  # fmt: skip
+    assert r.status_code == 413, r.text
+    assert "4000 x 3000" in r.json()["detail"] and "features are extracted" in r.json()["detail"]
+    assert held.calls == 0
+
+
 def test_a_request_over_its_pixel_budget_is_refused_before_the_decode_that_passes_it(
     served, model_id, monkeypatch
 ):
