@@ -14,6 +14,7 @@ from backend import __version__
 from backend.api import FAST_READS, api_router
 from backend.api.deps import install_runtime
 from backend.api.docs import install_docs
+from backend.api.edge import BodyGuard, document_body_limits
 from backend.api.errors import install_error_handlers
 from backend.api.estopfast import EStopFastPath
 from backend.api.fastpath import FastReads
@@ -66,7 +67,16 @@ def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None 
     install_docs(app)
     if settings.fast_reads:  # innermost: the layers below apply to its answers too
         app.add_middleware(FastReads, routes=app.routes, reads=FAST_READS)
+    # Outside the fast path: every request's body is guarded (and its sign-in checked
+    # before it is read), the hot reads included.
+    app.add_middleware(
+        BodyGuard,
+        routes=app.routes,
+        json_limit=settings.max_json_body_bytes,
+        upload_limit=settings.max_upload_body_bytes,
+    )
     app.add_middleware(EStopFastPath)  # the E-STOP of a known token, before any framework work
+    # (outside the body guard: its sign-in never stands before an E-STOP)
     app.add_middleware(UrlLengthLimit)
     install_cors(app, settings)
     app.add_middleware(SecurityHeaders, viser_port=settings.viser_port)
@@ -83,5 +93,10 @@ def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None 
         return RedirectResponse("/")
 
     install_replay(app)
+    document_body_limits(
+        app.routes,
+        json_limit=settings.max_json_body_bytes,
+        upload_limit=settings.max_upload_body_bytes,
+    )
     app.mount("/static", StaticFiles(directory=WEB_DIR), name="static")
     return app

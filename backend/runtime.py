@@ -39,6 +39,7 @@ from backend.db.models import Cell as CellRow
 from backend.db.session import Database
 from backend.estoplog import EStopLog
 from backend.hardware import Hardware, make_hardware
+from backend.heavy import HeavyPool
 from backend.inspection import recovery
 from backend.jobs import JobManager
 from backend.knowntokens import KnownTokens
@@ -177,7 +178,21 @@ class CellRuntime:
             block_s=settings.signin_block_s,
             max_clients=settings.signin_max_clients,
         )
+        #: Threads and job slots of the requests' heavy work: decoding uploads, features,
+        #: report plots (``backend.heavy``).
+        #: A fresh pool each time the runtime is entered; closed at exit.
+        self.heavy = self._new_heavy_pool()
         self._stack: contextlib.AsyncExitStack | None = None
+
+    def _new_heavy_pool(self) -> HeavyPool:
+        s = self.settings
+        return HeavyPool(
+            workers=s.heavy_workers,
+            max_jobs=s.heavy_jobs,
+            admit_wait_s=s.heavy_admit_wait_s,
+            max_pixels=s.max_request_pixels,
+            max_feature_pixels=s.max_feature_pixels,
+        )
 
     # -- accessors (raise a clear error before start) -----------------------------------------
     @property
@@ -251,6 +266,8 @@ class CellRuntime:
         s = self.settings
         db = Database(s.database_url, busy_timeout_s=s.database_busy_timeout_s)
         stack.push_async_callback(db.dispose)
+        self.heavy = self._new_heavy_pool()
+        stack.callback(self.heavy.close)
         # The caches' background reads use the database: cancelled and awaited just before
         # it is disposed (the exit stack runs last in, first out).
         self.read_cache.open()

@@ -268,6 +268,51 @@ class Settings(BaseSettings):
         "disabled user) at once through LISTEN/NOTIFY (after the 2 s sign-in cache otherwise).",
     )
 
+    max_json_body_bytes: int = Field(
+        1 << 20,
+        ge=4096,
+        le=64 << 20,
+        description="Largest request body of a JSON route, bytes (413 beyond; checked on the "
+        "Content-Length and while the body streams in, backend/api/edge.py).",
+    )
+    max_upload_body_bytes: int = Field(
+        64 << 20,
+        ge=1 << 20,
+        le=1 << 30,
+        description="Largest request body of an upload route (multipart images), bytes.",
+    )
+    max_request_pixels: int = Field(
+        64_000_000,
+        ge=1_000_000,
+        le=1_000_000_000,
+        description="Decoded pixels one request's images and masks may take in all (413 "
+        "beyond, read from each file's header before it is decoded; backend/heavy.py).",
+    )
+    max_feature_pixels: int = Field(
+        4_194_304,
+        ge=100_000,
+        le=100_000_000,
+        description="Largest uploaded image features are extracted from (trained views), "
+        "pixels (413 beyond, from its header; SIFT takes about 230 bytes per pixel).",
+    )
+    heavy_workers: int = Field(
+        2, ge=1, le=64, description="Threads decoding and analysing uploads."
+    )
+    heavy_jobs: int = Field(
+        2,
+        ge=1,
+        le=256,
+        description="Requests decoding images or rendering plots at once (each holds its "
+        "decoded images in memory).",
+    )
+    heavy_admit_wait_s: float = Field(
+        10.0,
+        ge=0.0,
+        le=600.0,
+        allow_inf_nan=False,
+        description="Longest wait of such a request for its turn before a 503 busy, s.",
+    )
+
     @field_validator("http_host", "viser_host")
     @classmethod
     def _valid_host(cls, v: str) -> str:

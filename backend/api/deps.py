@@ -40,6 +40,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "PURE_DEPENDENCIES",
+    "SIGNED_IN_BEFORE_BODY",
     "CellDep",
     "DatabaseDep",
     "EStopUser",
@@ -66,6 +67,9 @@ __all__ = [
     "signed_in",
     "signin_throttle",
 ]
+
+#: Scope key under which the edge leaves the user it signed in before the body was read.
+SIGNED_IN_BEFORE_BODY = "visioncell.signed_in_before_body"
 
 _bearer = HTTPBearer(
     auto_error=False, description="API token from `visioncell user add` or the start-up banner"
@@ -270,6 +274,40 @@ class RoleCheck:
         db: DatabaseDep,
         creds: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
     ) -> User:
+        early = conn.scope.get(SIGNED_IN_BEFORE_BODY)
+        if isinstance(early, User):  # the edge signed this request in before its body
+            return self._allowed(early)
+        return await self.sign_in(conn, settings=settings, db=db, creds=creds)
+
+    async def check_before_body(self, conn: HTTPConnection) -> User:
+        """This check for a request whose body has not been read yet (the edge,
+        :mod:`backend.api.edge`): the same sign-in and refusals as the dependency, from
+        the request's headers alone; the user is kept in the request's scope so that the
+        dependency does not sign in a second time."""
+        settings = get_settings(conn)
+        db = get_runtime(conn).database
+        user = await self.sign_in(conn, settings=settings, db=db, creds=await _bearer(conn))
+        conn.scope[SIGNED_IN_BEFORE_BODY] = user
+        return user
+
+    def _allowed(self, user: User) -> User:
+        if not self.allows(Role[user.role]):
+            raise ApiError(
+                403,
+                "forbidden",
+                f"this needs the {self.role.name} role; user {user.name!r} is {user.role}",
+            )
+        return user
+
+    async def sign_in(
+        self,
+        conn: HTTPConnection,
+        *,
+        settings: Settings,
+        db: Database,
+        creds: HTTPAuthorizationCredentials | None,
+    ) -> User:
+        """The refusals of the class docstring, in order; the user when none applies."""
         if not settings.auth_enabled:
             return User(id=0, name="anonymous", role=Role.engineer.name)
         throttle, client = signin_throttle(conn), client_address(conn)
@@ -293,13 +331,7 @@ class RoleCheck:
                 "invalid, expired or revoked token",
                 headers={"WWW-Authenticate": "Bearer"},
             )
-        if not self.allows(Role[user.role]):
-            raise ApiError(
-                403,
-                "forbidden",
-                f"this needs the {self.role.name} role; user {user.name!r} is {user.role}",
-            )
-        return user
+        return self._allowed(user)
 
     def __repr__(self) -> str:
         return f"RoleCheck({self.role.name})"

@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+import h11
 from starlette.types import ASGIApp, Receive, Scope, Send
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
@@ -90,20 +91,27 @@ class UrlLengthLimit:
 #: data makes the kernel send a reset, which can destroy the answer before the client reads it.
 LINGER_S = 2.0
 LINGER_BYTES = 16 << 20
+#: The same bound after an answer given before the request's body was read (a refusal by
+#: the edge, :mod:`backend.api.edge`): as much as the largest upload, so a client that
+#: sends its whole body before reading still gets the answer, within ``LINGER_S``.
+REFUSED_LINGER_BYTES = 64 << 20
 
 
 class JsonErrorHttpProtocol(H11Protocol):
     """Uvicorn's h11 protocol whose parse-error answer is the JSON error body, followed by a
-    bounded lingering close (:data:`LINGER_S`, :data:`LINGER_BYTES`)."""
+    bounded lingering close (:data:`LINGER_S`, :data:`LINGER_BYTES`); an answer sent before
+    the request's body was read ends the same way (:data:`REFUSED_LINGER_BYTES`), its
+    unread body dropped unparsed."""
 
     _lingering = False
     _dropped = 0
+    _linger_limit = LINGER_BYTES
     _linger_timer: Any = None
 
     def data_received(self, data: bytes) -> None:
         if self._lingering:
             self._dropped += len(data)
-            if self._dropped > LINGER_BYTES:
+            if self._dropped > self._linger_limit:
                 self._end_linger()
             return
         super().data_received(data)
@@ -127,6 +135,28 @@ class JsonErrorHttpProtocol(H11Protocol):
             self._linger_timer = None
         self.transport.close()
 
+    def on_response_complete(self) -> None:
+        if self.conn.their_state is h11.SEND_BODY and not self.transport.is_closing():
+            # Answered before the body was read (the edge refused it, or a 404): the rest
+            # is dropped without parsing it, and the connection closes after a bounded
+            # linger instead of h11 reading every remaining byte on the event loop.
+            self.server_state.total_requests += 1
+            self._start_linger(REFUSED_LINGER_BYTES)
+            self.flow.resume_reading()
+            return
+        super().on_response_complete()
+
+    def _start_linger(self, limit: int) -> None:
+        """Half-close (the answer and a FIN are out) and drop what the client still sends
+        until it stops, ``limit`` bytes have come, or :data:`LINGER_S` have passed."""
+        if not self.transport.can_write_eof():
+            self.transport.close()
+            return
+        self.transport.write_eof()
+        self._lingering = True
+        self._linger_limit = limit
+        self._linger_timer = self.loop.call_later(LINGER_S, self._end_linger)
+
     def send_400_response(self, msg: str) -> None:
         body, headers = _json_error(
             400,
@@ -140,14 +170,7 @@ class JsonErrorHttpProtocol(H11Protocol):
             content.extend([name, b": ", value, b"\r\n"])
         content.extend([b"connection: close\r\n", b"\r\n", body])
         self.transport.write(b"".join(content))
-        if not self.transport.can_write_eof():
-            self.transport.close()
-            return
-        # Half-close: the answer and a FIN go out now; what the client still sends is read
-        # and dropped until it stops, LINGER_BYTES have come, or LINGER_S have passed.
-        self.transport.write_eof()
-        self._lingering = True
-        self._linger_timer = self.loop.call_later(LINGER_S, self._end_linger)
+        self._start_linger(LINGER_BYTES)
 
 
 def uvicorn_options(*, ws_compression: bool = False) -> dict[str, Any]:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import struct
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -188,10 +188,13 @@ async def add_samples(
     samples: Sequence[SampleIn],
     *,
     progress: ProgressFn | None = None,
+    run: Callable[..., Awaitable[Any]] | None = None,
 ) -> list[CalibrationSample]:
     """Detect the board in each image and store every sample, accepted or rejected with the
     reason.  Hand-eye sessions need ``T_base_ee`` on every sample (else ``InvalidInput``,
-    nothing stored)."""
+    nothing stored).  ``run`` runs each image's detection (a request's heavy-work job,
+    :meth:`backend.heavy.HeavyJob.run`; None: ``asyncio.to_thread``)."""
+    run = run or asyncio.to_thread
     if not samples:
         raise InvalidInput("samples must not be empty")
     board = board_from_dict(cal_session.board)
@@ -238,7 +241,7 @@ async def add_samples(
         raise RuntimeError("the sample-index query returned no value")
     rows = []
     for k, s in enumerate(samples):
-        det, png = await asyncio.to_thread(_detect_and_png, s.image, board)
+        det, png = await run(_detect_and_png, s.image, board)
         reason = f"{det.n_points} corners ({det.method} detector)" if det.found else det.reason
         row = CalibrationSample(
             session_id=cal_session.id,

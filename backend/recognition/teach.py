@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 from backend import audit
 from backend.db.session import Database
+from backend.heavy import HeavyPool
 from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
 from backend.recognition import thresholds
 from backend.recognition.index import LiveIndex
@@ -275,6 +276,7 @@ async def run_teach(
     store: BackgroundStore,
     world: CollisionWorld | None = None,
     by: audit.By | None = None,
+    heavy: HeavyPool | None = None,
 ) -> dict[str, Any]:
     """The teach job's body (module docstring); runs holding the arm.
 
@@ -376,7 +378,7 @@ async def run_teach(
     rows = await add_views(db, live, model_id, inputs, replace=options.replace, by=by)
     if options.threshold:
         job.report(1.0, "choosing the threshold")
-        outcome = await thresholds.recompute(db, live)
+        outcome = await thresholds.recompute(db, live, heavy=heavy)
     else:
         outcome = await thresholds.deferred(db)
     return {
@@ -398,9 +400,11 @@ async def start_teach(
     store: BackgroundStore,
     point: NDArray[np.float64] | None = None,
     by: audit.By | None = None,
+    heavy: HeavyPool | None = None,
 ) -> Any:
     """Check what can be checked at once (the model exists, the arm is free), then start
-    the teach as a motion job; returns the job.
+    the teach as a motion job; returns the job.  ``heavy`` (the runtime's heavy-work pool)
+    runs the threshold choice at its end.
 
     ``point`` defaults to the station point of the cell's conveyor; the camera mounting is
     the active hand-eye calibration of the cell, else the nominal one.
@@ -434,6 +438,7 @@ async def start_teach(
             T_ee_cam=T,
             store=store,
             by=by,
+            heavy=heavy,
         )
 
     params = {

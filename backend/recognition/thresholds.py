@@ -26,6 +26,7 @@ from sqlalchemy.ext.asyncio import AsyncSession
 from backend import audit
 from backend.db.models import ObjectModel, RecognitionSettings
 from backend.db.session import Database
+from backend.heavy import HeavyPool
 from backend.recognition.index import LiveIndex
 from vision.recognition import ThresholdChoice, ViewIndex, choose_threshold
 
@@ -261,13 +262,25 @@ async def deferred(db: Database) -> ThresholdOutcome:
 
 
 async def recompute(
-    db: Database, live: LiveIndex, *, target_far: float = DEFAULT_TARGET_FAR
+    db: Database,
+    live: LiveIndex,
+    *,
+    target_far: float = DEFAULT_TARGET_FAR,
+    heavy: HeavyPool | None = None,
 ) -> ThresholdOutcome:
-    """Choose the automatic threshold from the live index and store it (module docstring)."""
+    """Choose the automatic threshold from the live index and store it (module docstring).
+
+    The choice runs in ``heavy``, the runtime's heavy-work pool, taking one of its job
+    slots for as long as it waits (a background job: no admission limit); without one, in
+    ``asyncio.to_thread``."""
     with live.reading() as index:
         snapshot = index.to_bytes()  # a copy: the choice runs without the lock
     try:
-        choice, n_views = await asyncio.to_thread(_choose, snapshot, target_far)
+        if heavy is None:
+            choice, n_views = await asyncio.to_thread(_choose, snapshot, target_far)
+        else:
+            async with heavy.job(wait_s=None) as work:
+                choice, n_views = await work.run(_choose, snapshot, target_far)
     except ValueError as exc:
         async with db.session() as session:
             row = await latest_settings(session)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import math
-from collections.abc import Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -209,27 +209,27 @@ def _audit_value(row: TrainedView, model_name: str) -> dict[str, Any]:
     }
 
 
+def _prepare_one(live: LiveIndex, v: ViewInput) -> tuple[Features, bytes, bytes | None, bytes]:
+    """Extract the features of one view and encode its images (CPU work, in a thread)."""
+    feats = live.extract(v.image, v.mask)
+    if len(feats) < MIN_FEATURES:
+        raise InvalidInput(
+            f"{v.name}: only {len(feats)} {live.method} features inside the object's "
+            f"region (need {MIN_FEATURES}); use a sharper, larger or more textured view"
+        )
+    return (
+        feats,
+        im.encode_png(v.image),
+        None if v.mask is None else im.encode_mask_png(v.mask),
+        im.thumbnail(v.image, v.mask),
+    )
+
+
 def _prepare(
     live: LiveIndex, views: Sequence[ViewInput]
 ) -> list[tuple[Features, bytes, bytes | None, bytes]]:
-    """Extract features and encode the images (CPU work, run in a thread)."""
-    out = []
-    for v in views:
-        feats = live.extract(v.image, v.mask)
-        if len(feats) < MIN_FEATURES:
-            raise InvalidInput(
-                f"{v.name}: only {len(feats)} {live.method} features inside the object's "
-                f"region (need {MIN_FEATURES}); use a sharper, larger or more textured view"
-            )
-        out.append(
-            (
-                feats,
-                im.encode_png(v.image),
-                None if v.mask is None else im.encode_mask_png(v.mask),
-                im.thumbnail(v.image, v.mask),
-            )
-        )
-    return out
+    """:func:`_prepare_one` of every view (CPU work, run in a thread)."""
+    return [_prepare_one(live, v) for v in views]
 
 
 async def add_views(
@@ -240,9 +240,14 @@ async def add_views(
     *,
     replace: bool = False,
     by: audit.By | None = None,
+    run: Callable[..., Awaitable[Any]] | None = None,
 ) -> list[TrainedView]:
     """Store ``views`` of a model (all or none) and add them to the live index; with
-    ``replace``, the model's earlier views are deleted in the same transaction."""
+    ``replace``, the model's earlier views are deleted in the same transaction.
+
+    ``run`` runs the feature extraction of each view (a request's heavy-work job,
+    :meth:`backend.heavy.HeavyJob.run`: one view per unit, so a client that leaves stops
+    it between views); None: all views in one ``asyncio.to_thread`` call."""
     if not views:
         raise InvalidInput("no views given")
     if len(views) > MAX_VIEWS_PER_REQUEST:
@@ -255,7 +260,10 @@ async def add_views(
             f"model {model.name!r} has {have} views; {len(views)} more would pass the limit "
             f"of {MAX_VIEWS_PER_MODEL}: delete some first"
         )
-    prepared = await asyncio.to_thread(_prepare, live, views)
+    if run is None:
+        prepared = await asyncio.to_thread(_prepare, live, views)
+    else:
+        prepared = [await run(_prepare_one, live, v) for v in views]
     added: list[int] = []
     try:
         async with db.session() as session:

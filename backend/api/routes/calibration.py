@@ -35,7 +35,9 @@ from backend.api.types import (
     bounded_int,
 )
 from backend.api.uploads import check_image_size, read_capped
+from backend.api.work import HeavyWorkDep
 from backend.db.models import CalibrationKind
+from backend.heavy import HeavyJob
 from backend.jobs import Job, JobState
 from backend.recognition.images import MAX_IMAGE_BYTES
 from robot.collision import CollisionWorld
@@ -59,6 +61,8 @@ router = APIRouter(prefix="/calibration", tags=["calibration"])
 #: File types an upload may contain (by suffix; the content must decode as an image too).
 IMAGE_TYPES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 MAX_IMAGES_PER_UPLOAD = 200
+#: Largest poses file, bytes (200 poses of 16 numbers take about 80 KB).
+MAX_POSES_BYTES = 1 << 20
 PlotName = Annotated[str, Path(max_length=64, description="residuals, coverage or consistency")]
 
 
@@ -192,7 +196,9 @@ class SolveIn(BaseModel):
         )
 
 
-def _decode(name: str, data: bytes) -> np.ndarray:
+def _check_upload(name: str, data: bytes) -> tuple[int, int]:
+    """(width, height) of an uploaded image from its header: 415 for a file that is not
+    an image, 413 for one too large; nothing is decoded."""
     suffix = PurePath(name).suffix.lower()
     if suffix not in IMAGE_TYPES:
         raise ApiError(
@@ -203,13 +209,17 @@ def _decode(name: str, data: bytes) -> np.ndarray:
     if not data:
         raise ApiError(415, "unsupported_media_type", f"file {name!r} is empty")
     try:
-        check_image_size(data, name=name)  # bytes and declared pixels, before decoding
+        return check_image_size(data, name=name)  # bytes and declared pixels, before decoding
     except InvalidInput as exc:
         if exc.http_status == 413:
             raise
         raise ApiError(
             415, "unsupported_media_type", f"file {name!r} does not decode as an image"
         ) from None
+
+
+def _decode(name: str, data: bytes) -> np.ndarray:
+    """An uploaded image checked by :func:`_check_upload`, decoded (CPU work, in a thread)."""
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise ApiError(415, "unsupported_media_type", f"file {name!r} does not decode as an image")
@@ -340,6 +350,7 @@ async def create_calibration_samples(
     _: EngineerUser,
     session: SessionDep,
     cell: CellDep,
+    work: HeavyWorkDep,
     session_id: DbId,
     images: Annotated[list[UploadFile], File(description="PNG, JPEG, BMP or TIFF images")],
     poses: Annotated[
@@ -361,13 +372,36 @@ async def create_calibration_samples(
             "too_large",
             f"at most {MAX_IMAGES_PER_UPLOAD} images per upload, got {len(images)}",
         )
-    decoded = []
-    for f in images:
-        name = PurePath(f.filename or "image").name
-        decoded.append((name, _decode(name, await read_capped(f, MAX_IMAGE_BYTES))))
+    # Decoding and board detection run in the heavy-work pool within the request's pixel
+    # budget; a client that leaves drops what is still queued (the unit of work rolls back).
+    async with work.job() as job:
+        decoded = []
+        for f in images:
+            name = PurePath(f.filename or "image").name
+            data = await read_capped(f, MAX_IMAGE_BYTES)
+            w, h = _check_upload(name, data)
+            job.take_pixels(w, h, name=name)
+            decoded.append((name, await job.run(_decode, name, data)))
+        return await _store_samples(session, cal, decoded, poses, poses_unit, joints, job)
+
+
+async def _store_samples(
+    session: Any,
+    cal: Any,
+    decoded: list[tuple[str, np.ndarray]],
+    poses: UploadFile | None,
+    poses_unit: str,
+    joints: str | None,
+    job: HeavyJob,
+) -> dict[str, Any]:
     T: list[np.ndarray | None] = [None] * len(decoded)
     if poses is not None:
-        text = (await poses.read()).decode("utf-8", errors="replace")
+        raw = await poses.read(MAX_POSES_BYTES + 1)
+        if len(raw) > MAX_POSES_BYTES:
+            raise ApiError(
+                413, "too_large", f"the poses file has more than {MAX_POSES_BYTES} bytes"
+            )
+        text = raw.decode("utf-8", errors="replace")
         try:
             P = parse_poses(
                 text, unit_m=1e-3 if poses_unit == "mm" else 1.0, source=poses.filename or "poses"
@@ -388,6 +422,7 @@ async def create_calibration_samples(
             svc.SampleIn(name=n, image=img, joints=q[k], T_base_ee=T[k])
             for k, (n, img) in enumerate(decoded)
         ],
+        run=job.run,
     )
     data = [_sample_public(r) for r in rows]
     accepted = sum(1 for r in rows if r.accepted)
@@ -533,10 +568,11 @@ async def read_calibration_report(_: ViewerUser, cal: CalibrationDep) -> dict[st
     response_class=Response,
     responses={200: {"content": {"image/png": {}}, "description": "The plot"}},
 )
-async def read_calibration_plot(_: ViewerUser, cal: CalibrationDep, plot: PlotName) -> Response:
-    import asyncio
-
-    png = await asyncio.to_thread(svc.report_png, cal, plot)
+async def read_calibration_plot(
+    _: ViewerUser, cal: CalibrationDep, work: HeavyWorkDep, plot: PlotName
+) -> Response:
+    async with work.job() as job:  # rendered in the heavy-work pool
+        png = await job.run(svc.report_png, cal, plot)
     return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 

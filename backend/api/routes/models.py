@@ -32,6 +32,7 @@ from backend.api.deps import (
 )
 from backend.api.fastpath import FastRequest, Fresh
 from backend.api.uploads import read_capped
+from backend.api.work import HeavyWorkDep
 from backend.recognition import images as im
 from backend.recognition import models as svc
 from backend.recognition import teach as teach_svc
@@ -368,6 +369,7 @@ async def teach_model(
     db: DatabaseDep,
     live: LiveIndexDep,
     cell: CellDep,
+    rt: RuntimeDep,
     model_id: ModelId,
     body: TeachIn,
     store: Annotated[teach_svc.BackgroundStore, Depends(get_backgrounds)],
@@ -393,6 +395,7 @@ async def teach_model(
         store=store,
         point=None if body.point is None else np.asarray(body.point, dtype=np.float64),
         by=_by(user, body.reason),
+        heavy=rt.heavy,
     )
     return {"job": job.public()}
 
@@ -487,6 +490,7 @@ async def create_views(
     user: EngineerUser,
     db: DatabaseDep,
     live: LiveIndexDep,
+    work: HeavyWorkDep,
     model_id: ModelId,
     images: Annotated[list[UploadFile], File(description="PNG or JPEG images")],
     viewpoints: Annotated[
@@ -512,20 +516,30 @@ async def create_views(
     masks = masks or []
     if masks and len(masks) != n:
         raise InvalidInput(f"give one mask per image ({n}) or none, got {len(masks)}")
-    inputs = []
-    for k, f in enumerate(images):
-        name = f.filename or f"image {k}"
-        rgb = im.decode_image(await read_capped(f, im.MAX_IMAGE_BYTES), name=name)
-        mask = None
-        if masks:
-            mname = masks[k].filename or f"mask {k}"
-            mask = im.decode_mask(
-                await read_capped(masks[k], im.MAX_IMAGE_BYTES), shape=rgb.shape[:2], name=mname
+    # Decoding and feature extraction run in the heavy-work pool, within the request's
+    # pixel budget (each file's size read from its header first); a client that leaves
+    # drops what is still queued, and nothing is stored.
+    async with work.job() as job:
+        inputs = []
+        for k, f in enumerate(images):
+            name = f.filename or f"image {k}"
+            data = await read_capped(f, im.MAX_IMAGE_BYTES)
+            head = im.check_header(data, name=name)
+            job.take_pixels(head.width, head.height, name=name, features=True)
+            rgb = await job.run(im.decode_image, data, name=name)
+            mask = None
+            if masks:
+                mname = masks[k].filename or f"mask {k}"
+                mdata = await read_capped(masks[k], im.MAX_IMAGE_BYTES)
+                mhead = im.check_header(mdata, name=mname)
+                job.take_pixels(mhead.width, mhead.height, name=mname)
+                mask = await job.run(im.decode_mask, mdata, shape=rgb.shape[:2], name=mname)
+            inputs.append(
+                views_svc.ViewInput(
+                    rgb, int(vps[k]), mask, yaw_rad=float(yaw[k]), source="upload", name=name
+                )
             )
-        inputs.append(
-            views_svc.ViewInput(
-                rgb, int(vps[k]), mask, yaw_rad=float(yaw[k]), source="upload", name=name
-            )
+        rows = await views_svc.add_views(
+            db, live, model_id, inputs, by=_by(user, reason), run=job.run
         )
-    rows = await views_svc.add_views(db, live, model_id, inputs, by=_by(user, reason))
     return {"data": [_view_out(r, live) for r in rows], "count": len(rows)}
