@@ -77,9 +77,7 @@ class JobJournal:
     def start(self) -> None:
         """Start the writer task (on the running loop)."""
         if self._task is None:
-            self._task = asyncio.get_running_loop().create_task(
-                self._writer(), name="job-journal"
-            )
+            self._task = asyncio.get_running_loop().create_task(self._writer(), name="job-journal")
 
     async def close(self) -> None:
         """Write what is queued (at most :data:`DRAIN_S`), then stop the writer."""

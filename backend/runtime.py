@@ -268,9 +268,7 @@ class CellRuntime:
         # Inspections a previous process left unfinished (killed mid-inspection) become
         # complete failed rows before this one inspects; the stored backgrounds come back.
         owners: dict[int, str] = {}
-        self.interrupted_at_start = await recovery.mark_interrupted(
-            db, self.cell_id, owners=owners
-        )
+        self.interrupted_at_start = await recovery.mark_interrupted(db, self.cell_id, owners=owners)
         from backend.jobjournal import JobJournal, interrupted_jobs
 
         interrupted = await interrupted_jobs(db, self.cell_id, inspections=owners)

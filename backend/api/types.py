@@ -89,7 +89,6 @@ NameStr = Annotated[
 ]
 
 
-
 def _instant(value: object) -> datetime:
     # Query values arrive as text; the validator refuses anything but a zoned ISO 8601
     # instant, and bounds it after the offset is applied (:mod:`backend.instants`).

@@ -125,7 +125,9 @@ class SceneRecorder:
         await self.finish()
 
 
-async def read_scene(session: AsyncSession, inspection_id: int, cell_id: int | None = None) -> bytes:
+async def read_scene(
+    session: AsyncSession, inspection_id: int, cell_id: int | None = None
+) -> bytes:
     """The recording of one inspection, or :class:`NotFound`.
 
     With ``cell_id`` only an inspection of that cell is found: a plant's cells share one

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import httpx
+import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import select
 
@@ -35,10 +36,15 @@ async def _markers(db: Database) -> list[JobInProgress]:
         return list((await s.scalars(select(JobInProgress))).all())
 
 
-async def test_the_journal_keeps_one_marker_per_running_job(tmp_path) -> None:
+@pytest.fixture
+def url(tmp_path) -> str:
     settings = make_settings(tmp_path)
     migrate(settings)
-    db = Database(settings.database_url)
+    return settings.database_url
+
+
+async def test_the_journal_keeps_one_marker_per_running_job(url) -> None:
+    db = Database(url)
     try:
         cell = await ensure_cell_row(db, "cell-1")
         jobs = JobManager()
@@ -71,10 +77,8 @@ async def test_the_journal_keeps_one_marker_per_running_job(tmp_path) -> None:
         await db.dispose()
 
 
-async def test_markers_left_behind_become_interrupted_jobs_once(tmp_path) -> None:
-    settings = make_settings(tmp_path)
-    migrate(settings)
-    db = Database(settings.database_url)
+async def test_markers_left_behind_become_interrupted_jobs_once(url) -> None:
+    db = Database(url)
     try:
         cell = await ensure_cell_row(db, "cell-1")
         other = await ensure_cell_row(db, "cell-2")

@@ -7,7 +7,6 @@ The work is in :mod:`backend.inspection`; handlers only parse, call it and shape
 from __future__ import annotations
 
 from collections.abc import Hashable, Mapping
-from datetime import datetime
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Path, Query, status
