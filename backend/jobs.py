@@ -44,6 +44,8 @@ class JobState(enum.StrEnum):
     done = "done"
     failed = "failed"
     cancelled = "cancelled"
+    #: The process ended while the job ran (listed by the next process's start-up).
+    interrupted = "interrupted"
 
 
 @dataclass
@@ -269,6 +271,16 @@ class JobManager:
             if oldest.state is JobState.running:
                 break
             del self._jobs[oldest_id]
+
+    def remember(self, jobs: builtins.list[Job]) -> None:
+        """Add jobs that ended elsewhere (an earlier process's, found interrupted at
+        start-up) to the history, oldest first: they are listed and read like any other,
+        never run."""
+        for job in sorted(jobs, key=lambda j: j.created_at):
+            if job.state is JobState.running or job.task is not None:
+                raise ValueError(f"job {job.id} is not an ended record: {job.state.value}")
+            self._jobs[job.id] = job
+        self._trim()
 
     def get(self, job_id: str) -> Job | None:
         """The job with this id, if still remembered."""

@@ -18,7 +18,10 @@ __all__ = ["REDACTED", "RedactSecrets", "install_redaction", "redact"]
 REDACTED = "[redacted]"
 _PATTERNS = (
     re.compile(r"vc_[A-Za-z0-9_-]{8,}"),
-    re.compile(r"v1\.[0-9]+\.[0-9]+\.(?:viewer|operator|engineer)\.[0-9]+\.[A-Za-z0-9_-]{20,}"),
+    re.compile(
+        r"v1\.[0-9]+\.[0-9]+\.(?:viewer|operator|engineer)\.[0-9]+(?:\.[0-9a-f]+)?"
+        r"\.[A-Za-z0-9_-]{20,}"
+    ),
     re.compile(r"(?i)(bearer\s+)[^\s'\",]+"),
     re.compile(r"(?i)((?:token|secret|secret_key|password)=)[^\s&'\",]+"),
 )

@@ -299,7 +299,11 @@ class CellRuntime:
             stack.push_async_callback(self.auth_sync.stop)
         # Inspections a previous process left unfinished (killed mid-inspection) become
         # complete failed rows before this one inspects; the stored backgrounds come back.
-        self.interrupted_at_start = await recovery.mark_interrupted(db, self.cell_id)
+        owners: dict[int, str] = {}
+        self.interrupted_at_start = await recovery.mark_interrupted(db, self.cell_id, owners=owners)
+        from backend.jobjournal import JobJournal, interrupted_jobs
+
+        interrupted = await interrupted_jobs(db, self.cell_id, inspections=owners)
         self.teach_backgrounds.images.update(await recovery.load_backgrounds(db, self.cell_id))
         self.teach_backgrounds.on_put = recovery.background_saver(db, self.cell_id)
         if s.image_max_age_days is not None or s.image_max_bytes is not None:
@@ -335,6 +339,14 @@ class CellRuntime:
         if logged is not None:
             logged.holder = lambda: _arm_owner(cell)
         cell.db_id = self.cell_id
+        # Jobs the last process left running are listed as interrupted; this process's
+        # jobs are journalled so that the next one can do the same (the journal drains
+        # after the cell has stopped its jobs, before the database goes).
+        cell.jobs.remember(interrupted)
+        journal = JobJournal(db, self.cell_id)
+        journal.start()
+        stack.push_async_callback(journal.close)
+        cell.jobs.add_listener(journal)
         await cell.start()
         stack.push_async_callback(cell.stop)
         self.sim = hardware.sim

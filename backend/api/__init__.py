@@ -1,6 +1,7 @@
 """REST API under ``/api``: one router per resource."""
 
 from fastapi import APIRouter
+from fastapi.routing import APIRoute
 
 from backend.api.fastpath import FastRead
 from backend.api.routes import (
@@ -21,7 +22,7 @@ from backend.api.routes import (
     users,
     view3d,
 )
-from backend.api.schemas import ERROR_RESPONSES
+from backend.api.schemas import BODY_ERROR_RESPONSES, ERROR_RESPONSES
 
 __all__ = ["FAST_READS", "api_router"]
 
@@ -44,6 +45,10 @@ for _r in (
     audit,
     reports,
 ):
+    for _route in _r.router.routes:
+        # Operations with a body also answer 415 (a media type or file format not accepted).
+        if isinstance(_route, APIRoute) and _route.body_field is not None:
+            _route.responses = {**BODY_ERROR_RESPONSES, **_route.responses}
     api_router.include_router(_r.router)
 
 #: The hot reads the fast path answers from memory (``backend.api.fastpath``): what the

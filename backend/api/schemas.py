@@ -15,6 +15,7 @@ from backend.api.types import ApproachComponent, JointList, Metres
 from robot.kinematics.analytic import UNIT_TOL
 
 __all__ = [
+    "BODY_ERROR_RESPONSES",
     "ERROR_RESPONSES",
     "ErrorOut",
     "JobOut",
@@ -41,6 +42,7 @@ class ErrorOut(BaseModel):
 ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
     code: {"model": ErrorOut, "description": text}
     for code, text in (
+        (400, "The request itself is malformed (an unreadable line, header or body)"),
         (401, "Missing, invalid or revoked token"),
         (403, "The token's role is too low"),
         (404, "No such resource"),
@@ -49,6 +51,15 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
         (500, "A bug in VisionCell (logged)"),
         (503, "The cell, driver or camera is not available"),
     )
+}
+
+
+#: The documented error answers of every operation that takes a body (added per route).
+BODY_ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
+    415: {
+        "model": ErrorOut,
+        "description": "The body's media type or an uploaded file's format is not accepted",
+    },
 }
 
 
@@ -109,7 +120,10 @@ class JobPublic(BaseModel):
 
     id: str
     kind: str
-    state: str = Field(description="running, done, failed or cancelled")
+    state: str = Field(
+        description="running, done, failed, cancelled, or interrupted (the process ended "
+        "while it ran)"
+    )
     progress: float = Field(description="0 .. 1")
     message: str
     params: dict[str, Any]

@@ -10,11 +10,13 @@ overflow inside the database driver.
 from __future__ import annotations
 
 import math
+from datetime import datetime
 from typing import Annotated, Any
 
 from fastapi import Path, Query
 from pydantic import BeforeValidator, Field
 
+from backend.instants import EXAMPLE, MAX_INSTANT_LENGTH, MAX_YEAR, MIN_YEAR, instant
 from robot.kinematics.analytic import MAX_ABS_POSITION_M
 from robot.trajectory import MIN_SPEED
 
@@ -26,6 +28,7 @@ __all__ = [
     "DbId",
     "DbIdQuery",
     "DbIndex",
+    "InstantQuery",
     "JointList",
     "JointRad",
     "Limit",
@@ -38,6 +41,7 @@ __all__ = [
     "StrictBool",
     "bounded_float",
     "bounded_int",
+    "instant_query",
 ]
 
 #: Largest id a row can have: SQLite's INTEGER and PostgreSQL's BIGINT are signed 64-bit.
@@ -83,6 +87,33 @@ Offset = Annotated[
 NameStr = Annotated[
     str, Path(min_length=1, max_length=MAX_NAME_LENGTH, description="A name, 1..128 characters")
 ]
+
+
+def _instant(value: object) -> datetime:
+    # Query values arrive as text; the validator refuses anything but a zoned ISO 8601
+    # instant, and bounds it after the offset is applied (:mod:`backend.instants`).
+    return instant(value, zone_required=True)
+
+
+def instant_query(description: str, *, alias: str | None = None) -> Any:
+    """An optional query parameter holding an instant: ISO 8601 with a zone, as aware UTC
+    within the years the database holds (422 quoting the value otherwise)."""
+    return Annotated[
+        datetime | None,
+        BeforeValidator(_instant),
+        Query(
+            alias=alias,
+            # Checked by the validator (a constraint here would apply to the datetime).
+            json_schema_extra={"maxLength": MAX_INSTANT_LENGTH},
+            description=f"{description}: ISO 8601 with a zone, e.g. {EXAMPLE} "
+            f"(years {MIN_YEAR}..{MAX_YEAR} in UTC)",
+            examples=[EXAMPLE],
+        ),
+    ]
+
+
+#: An optional instant in a query string (see :func:`instant_query`).
+InstantQuery = instant_query("An instant")
 
 StrictBool = Annotated[bool, Field(strict=True)]
 JointRad = Annotated[

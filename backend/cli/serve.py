@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import faulthandler
 import logging
 import signal
 import sys
@@ -40,6 +41,11 @@ def serve(
     from backend.logredact import install_redaction
 
     install_redaction()
+    # A fatal signal in a native thread (a SIGBUS from a database file changed under the
+    # driver's memory map, see backend.db.sqlitefiles) ends the process at once: say so,
+    # with every thread's stack, on stderr beside the log instead of vanishing silently.
+    if not faulthandler.is_enabled():
+        faulthandler.enable(file=sys.stderr, all_threads=True)
     if settings.sqlite_path() is not None:
         settings.var_dir.mkdir(parents=True, exist_ok=True)
     if not no_migrate:

@@ -47,6 +47,7 @@ __all__ = [
     "InspectionInProgress",
     "InspectionScene",
     "InspectionStage",
+    "JobInProgress",
     "ObjectKind",
     "ObjectModel",
     "RecognitionSettings",
@@ -488,6 +489,28 @@ class InspectionInProgress(Base):
     started_at: Mapped[datetime] = mapped_column(default=utcnow)
     policy: Mapped[str] = mapped_column(String(16))
     #: Process that started it (host:pid), for the interruption's reason.
+    owner: Mapped[str] = mapped_column(String(128), default="")
+
+
+class JobInProgress(Base):
+    """The durable marker of a job (a move, a teach, an inspection or a run, a calibration)
+    that has started and not yet ended.
+
+    Written when the job starts and deleted when it ends (:mod:`backend.jobjournal`), so a
+    marker still there at start-up names a job cut short by the process ending; the
+    start-up lists it in the jobs as ``interrupted`` and deletes the marker.
+    """
+
+    __tablename__ = "jobs_in_progress"
+
+    #: The job's id (as ``/api/jobs`` shows it).
+    id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    cell_id: Mapped[int] = mapped_column(ForeignKey("cells.id", ondelete="CASCADE"), index=True)
+    kind: Mapped[str] = mapped_column(String(64))
+    started_at: Mapped[datetime] = mapped_column(default=utcnow)
+    #: The job's parameters (small: what the request asked for).
+    params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    #: Process that ran it (host:pid).
     owner: Mapped[str] = mapped_column(String(128), default="")
 
 

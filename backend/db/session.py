@@ -65,8 +65,13 @@ class Database:
         #: How long a session waits for a connection (and a request for an API slot), s.
         self.pool_timeout_s = wait_s
         kwargs: dict[str, object] = {"echo": echo, "pool_pre_ping": True}
-        if make_url(url).database not in (None, "", ":memory:"):  # a pool of connections
+        path = make_url(url).database
+        if path not in (None, "", ":memory:"):  # a pool of connections
             kwargs.update(pool_size=POOL_SIZE, max_overflow=POOL_OVERFLOW, pool_timeout=wait_s)
+            if url.startswith("sqlite"):  # the WAL's side files checked at every checkout
+                from backend.db.sqlitefiles import guarded_pool_for
+
+                kwargs["poolclass"] = guarded_pool_for(str(path))
         if url.startswith("sqlite"):
             kwargs["connect_args"] = {"timeout": float(busy_timeout_s)}
         self.engine: AsyncEngine = create_async_engine(url, **kwargs)

@@ -34,7 +34,7 @@ from backend.db.models import Decision, Inspection, InspectionInProgress, Statio
 from backend.db.session import Database
 from robot.backoff import Backoff
 
-__all__ = ["begin", "is_database_error", "load_backgrounds", "mark_interrupted", "owner_tag",
+__all__ = ["alive_elsewhere", "begin", "is_database_error", "load_backgrounds", "mark_interrupted", "owner_tag",
            "retry_database", "save_background"]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -122,7 +122,7 @@ async def begin(db: Database, cell_id: int, policy: str) -> int:
         return int(row.id)
 
 
-def _alive_elsewhere(owner: str) -> bool:
+def alive_elsewhere(owner: str) -> bool:
     """Whether ``owner`` (``host:pid``) is another process of this host that still runs
     (a CLI run beside ``serve``): its inspection is not interrupted."""
     host, _, pid = owner.rpartition(":")
@@ -137,11 +137,14 @@ def _alive_elsewhere(owner: str) -> bool:
     return True
 
 
-async def mark_interrupted(db: Database, cell_id: int) -> list[int]:
+async def mark_interrupted(
+    db: Database, cell_id: int, *, owners: dict[int, str] | None = None
+) -> list[int]:
     """Turn every marker of ``cell_id`` left by an earlier process into a complete ``failed``
     row (reason ``interrupted: ...``) with its report record, removing the markers in the
     same transaction.
-    Returns the new inspection ids.  Run at start-up, before this process inspects."""
+    Returns the new inspection ids (and fills ``owners``, if given, with the process that
+    left each: new id -> ``host:pid``).  Run at start-up, before this process inspects."""
     from backend.reports.blocks import append as append_records
 
     async with db.session() as session:
@@ -152,7 +155,7 @@ async def mark_interrupted(db: Database, cell_id: int) -> list[int]:
                 .order_by(InspectionInProgress.id)
             )
         ).all()
-        markers = [m for m in markers if not _alive_elsewhere(m.owner)]
+        markers = [m for m in markers if not alive_elsewhere(m.owner)]
         rows = []
         now = utcnow()
         for m in markers:
@@ -175,6 +178,8 @@ async def mark_interrupted(db: Database, cell_id: int) -> list[int]:
             )
         await session.flush()
         ids = [int(r.id) for r in rows]
+        if owners is not None:
+            owners.update({i: m.owner for i, m in zip(ids, markers, strict=True)})
         await append_records(session, [{
             "cell_id": cell_id, "started_at": r.started_at, "decision": r.decision,
             "model_name": None, "policy": r.policy, "duration_s": None, "score": None,

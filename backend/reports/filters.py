@@ -78,7 +78,10 @@ def parse_time(value: str | datetime, name: str) -> datetime:
             t = datetime.fromisoformat(value.strip().replace("Z", "+00:00"))
         except ValueError:
             raise InvalidInput(f"{name} must be an ISO-8601 date-time, got {value!r}") from None
-    t = t.replace(tzinfo=UTC) if t.tzinfo is None else t.astimezone(UTC)
+    try:
+        t = t.replace(tzinfo=UTC) if t.tzinfo is None else t.astimezone(UTC)
+    except OverflowError:  # the offset took it past year 1 or 9999: out of range too
+        t = datetime.min.replace(tzinfo=UTC)
     if not _YEARS[0] <= t.year < _YEARS[1]:
         raise InvalidInput(
             f"{name} must be within the years {_YEARS[0]}..{_YEARS[1] - 1}, got {value!r}"

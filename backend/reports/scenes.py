@@ -23,7 +23,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.ext.asyncio import AsyncSession
 
-from backend.db.models import InspectionScene
+from backend.db.models import Inspection, InspectionScene
 from vision.errors import NotFound
 
 __all__ = [
@@ -125,11 +125,20 @@ class SceneRecorder:
         await self.finish()
 
 
-async def read_scene(session: AsyncSession, inspection_id: int) -> bytes:
-    """The recording of one inspection, or :class:`NotFound`."""
-    data = await session.scalar(
-        select(InspectionScene.scene).where(InspectionScene.inspection_id == inspection_id)
-    )
+async def read_scene(
+    session: AsyncSession, inspection_id: int, cell_id: int | None = None
+) -> bytes:
+    """The recording of one inspection, or :class:`NotFound`.
+
+    With ``cell_id`` only an inspection of that cell is found: a plant's cells share one
+    database, and another cell's scene is as unreadable here as its row.
+    """
+    q = select(InspectionScene.scene).where(InspectionScene.inspection_id == inspection_id)
+    if cell_id is not None:
+        q = q.join(Inspection, Inspection.id == InspectionScene.inspection_id).where(
+            Inspection.cell_id == cell_id
+        )
+    data = await session.scalar(q)
     if data is None:
         raise NotFound(f"inspection {inspection_id} has no recorded 3D scene")
     return bytes(data)

@@ -7,8 +7,9 @@ client starts anonymous (scene only).  It gets a :class:`ViewGrant` in one of tw
 * the API token typed into that client's panel, checked like a REST bearer token;
 * a signed view link that the console asks for (``POST /api/view3d/link``) and puts into
   the websocket URL of its embedded view.  The link is an HMAC-SHA256, under a key derived
-  from the settings' secret, of (token id, user id, role, expiry); it is only good for
-  opening a connection before it expires (:data:`LINK_TTL_S`).
+  from the settings' secret, of (token id, user id, role, expiry, a random nonce); it opens
+  one connection, once, before it expires (:data:`LINK_TTL_S`): a link copied out of the
+  console (a browser's history, a log, a shoulder) opens nothing once the view has used it.
 
 Either way the grant remembers the API token row it came from, and :meth:`ViewAccess.recheck`
 looks that row up again, so a revoked or expired token, a disabled user or a lowered role
@@ -22,6 +23,7 @@ import base64
 import hashlib
 import hmac
 import re
+import secrets
 import time
 from dataclasses import dataclass
 
@@ -38,6 +40,7 @@ from backend.throttle import SignInThrottle
 __all__ = [
     "LINK_PATH_PREFIX",
     "LINK_TTL_S",
+    "MAX_SPENT_LINKS",
     "LinkClaims",
     "ViewAccess",
     "ViewGrant",
@@ -54,8 +57,12 @@ MAX_LINK_TTL_S = 3600.0
 LINK_PATH_PREFIX = "/vc-link/"
 _LINK_VERSION = "v1"
 _LINK = re.compile(
-    r"^v1\.([0-9]{1,19})\.([0-9]{1,19})\.(viewer|operator|engineer)\.([0-9]{1,12})\.([A-Za-z0-9_-]{43})$"
+    r"^v1\.([0-9]{1,19})\.([0-9]{1,19})\.(viewer|operator|engineer)\.([0-9]{1,12})"
+    r"\.([0-9a-f]{16})\.([A-Za-z0-9_-]{43})$"
 )
+#: Most spent links remembered at once (each until it expires); past it, links are refused
+#: until some expire rather than forgotten early (a forgotten link would open again).
+MAX_SPENT_LINKS = 10_000
 _MAX_DB_ID = 2**63 - 1
 
 
@@ -71,6 +78,8 @@ class LinkClaims:
     """The user's role when the link was signed (the database has the last word)."""
     expires_at: float
     """Unix time after which the link opens no connection, seconds."""
+    nonce: str
+    """Random per link (16 hex digits): two links signed in the same second differ."""
 
 
 @dataclass(frozen=True)
@@ -109,6 +118,7 @@ def sign_view_link(
     secret: str,
     ttl_s: float = LINK_TTL_S,
     now: float | None = None,
+    nonce: str | None = None,
 ) -> str:
     """A view link for the holder of API token ``token_id``.
 
@@ -124,6 +134,8 @@ def sign_view_link(
         Lifetime of the link, 0 < ttl_s <= MAX_LINK_TTL_S seconds.
     now : float, optional
         Unix time to sign at (default: the clock).
+    nonce : str, optional
+        16 hex digits making the link unique (default: random).
     """
     for name, value in (("token_id", token_id), ("user_id", user_id)):
         if isinstance(value, bool) or not isinstance(value, int) or not 0 < value <= _MAX_DB_ID:
@@ -132,8 +144,11 @@ def sign_view_link(
         raise ValueError(f"role must be a Role, got {role!r}")
     if isinstance(ttl_s, bool) or not (0.0 < float(ttl_s) <= MAX_LINK_TTL_S):
         raise ValueError(f"ttl_s must be in (0, {MAX_LINK_TTL_S:g}] seconds, got {ttl_s!r}")
+    nonce = secrets.token_hex(8) if nonce is None else nonce
+    if not isinstance(nonce, str) or not re.fullmatch(r"[0-9a-f]{16}", nonce):
+        raise ValueError(f"nonce must be 16 hex digits, got {nonce!r}")
     expires = int((time.time() if now is None else now) + ttl_s)
-    payload = f"{_LINK_VERSION}.{token_id}.{user_id}.{role.name}.{expires}"
+    payload = f"{_LINK_VERSION}.{token_id}.{user_id}.{role.name}.{expires}.{nonce}"
     return f"{payload}.{_signature(payload, secret)}"
 
 
@@ -144,7 +159,7 @@ def verify_view_link(link: str, *, secret: str, now: float | None = None) -> Lin
     m = _LINK.match(link)
     if m is None:
         return None
-    token_id, user_id, role, expires, sig = m.groups()
+    token_id, user_id, role, expires, nonce, sig = m.groups()
     payload = link.rsplit(".", 1)[0]
     if not hmac.compare_digest(sig, _signature(payload, secret)):
         return None
@@ -154,7 +169,9 @@ def verify_view_link(link: str, *, secret: str, now: float | None = None) -> Lin
     tid, uid = int(token_id), int(user_id)
     if not (0 < tid <= _MAX_DB_ID and 0 < uid <= _MAX_DB_ID):
         return None
-    return LinkClaims(token_id=tid, user_id=uid, role=Role[role], expires_at=float(expires))
+    return LinkClaims(
+        token_id=tid, user_id=uid, role=Role[role], expires_at=float(expires), nonce=nonce
+    )
 
 
 def link_from_path(path: str | None) -> str | None:
@@ -205,6 +222,8 @@ class ViewAccess:
         self.throttle = throttle
         #: Where a token signed in here is noted for the emergency stop (None: nowhere).
         self.known = known
+        #: Links already used (their nonce) -> when they expire, unix seconds.
+        self._spent: dict[str, float] = {}
 
     def open_grant(self) -> ViewGrant | None:
         """The grant every client gets without signing in (only when auth is disabled)."""
@@ -243,10 +262,23 @@ class ViewAccess:
             )  # fmt: skip
         return ViewGrant(user=user.name, role=Role[user.role], token_id=int(row), via="token")
 
+    def _spend(self, claims: LinkClaims, now: float) -> bool:
+        """Mark the link of ``claims`` used; False if it was used before (or too many
+        unexpired links are remembered to take one more)."""
+        if len(self._spent) >= MAX_SPENT_LINKS:
+            self._spent = {n: t for n, t in self._spent.items() if t >= now}
+        if claims.nonce in self._spent or len(self._spent) >= MAX_SPENT_LINKS:
+            return False
+        self._spent[claims.nonce] = claims.expires_at
+        return True
+
     async def from_link(self, link: str, *, now: float | None = None) -> ViewGrant | None:
-        """The grant of a signed view link, or None if it is invalid, expired or revoked."""
-        claims = verify_view_link(link, secret=self._secret, now=now)
-        if claims is None:
+        """The grant of a signed view link, or None if it is invalid, expired, revoked or
+        was used before (a link opens one connection: it is spent here, before the
+        database is asked, so two connections racing with one link get one grant)."""
+        t = time.time() if now is None else now
+        claims = verify_view_link(link, secret=self._secret, now=t)
+        if claims is None or not self._spend(claims, t):
             return None
         grant = await self._lookup(claims.token_id, via="link", user_id=claims.user_id)
         if grant is None:

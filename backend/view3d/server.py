@@ -31,6 +31,7 @@ from backend.cell import Cell
 from backend.view3d.access import ViewAccess, link_from_path
 from backend.view3d.arm import arm_shapes, link_poses
 from backend.view3d.calibviews import CalibrationFrusta
+from backend.view3d.guard import MessageGuard
 from backend.view3d.panel import ClientPanel
 from backend.view3d.simscene import SimScene
 
@@ -136,6 +137,8 @@ class View3D:
         self._calib_frusta: CalibrationFrusta | None = None
         self.updates = 0
         self.image_updates = 0
+        #: Drops (and logs once per client) what clients send that viser cannot handle.
+        self._guard = MessageGuard()
         self._fov_rad = math.radians(50.0)
         self._aspect = 4 / 3
         self._T_ee_cam = T_EE_CAM_PLACEHOLDER
@@ -196,6 +199,7 @@ class View3D:
                 "stop the other process or set VISIONCELL_VISER_PORT"
             )
         self.server = server
+        self._guard.install(server)
         server.scene.set_up_direction("+z")
         server.initial_camera.position = (2.2, -1.9, 1.7)
         server.initial_camera.look_at = (0.45, 0.0, 0.75)
@@ -287,6 +291,7 @@ class View3D:
     def _on_connect(self, client: viser.ClientHandle) -> None:
         """A browser connected (viser's thread): anonymous until a grant arrives."""
         assert self._loop is not None
+        self._guard.attach(client)
         panel = ClientPanel(
             client, cell=self.cell, access=self.access, loop=self._loop, sim=self.sim
         )
@@ -309,6 +314,7 @@ class View3D:
             panel.submit(from_link(), clear=False)
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
+        self._guard.forget(client.client_id)
         panel = self.panels.pop(client.client_id, None)
         if panel is not None:
             panel.close()

@@ -11,9 +11,12 @@ from pydantic import BaseModel
 from backend import audit
 from backend.api.deps import EngineerUser, SessionDep
 from backend.api.schemas import Page
-from backend.api.types import Limit, Offset
+from backend.api.types import Limit, Offset, instant_query
 
 router = APIRouter(prefix="/audit", tags=["audit"])
+
+Since = instant_query("From this time on, inclusive")
+Until = instant_query("Before this time, exclusive")
 
 Kind = Literal["threshold", "model", "view", "calibration", "user", "token", "estop"]
 
@@ -44,12 +47,8 @@ async def read_audit(
     actor: Annotated[
         str | None, Query(min_length=1, max_length=64, description="User name, cli or system")
     ] = None,
-    since: Annotated[
-        datetime | None, Query(description="From this time on (ISO 8601 with zone), inclusive")
-    ] = None,
-    until: Annotated[
-        datetime | None, Query(description="Before this time (ISO 8601 with zone), exclusive")
-    ] = None,
+    since: Since = None,
+    until: Until = None,
     limit: Limit = 100,
     offset: Offset = 0,
 ) -> dict[str, Any]:

@@ -7,7 +7,6 @@ The work is in :mod:`backend.inspection`; handlers only parse, call it and shape
 from __future__ import annotations
 
 from collections.abc import Hashable, Mapping
-from datetime import datetime
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Path, Query, status
@@ -26,12 +25,15 @@ from backend.api.deps import (
     read_through,
 )
 from backend.api.fastpath import FastRequest, Fresh
-from backend.api.types import DbId, Limit, Offset
+from backend.api.types import DbId, Limit, Offset, instant_query
 from backend.inspection import results, service
 
 __all__ = ["router"]
 
 router = APIRouter(tags=["inspections"])
+
+Since = instant_query("Started at or after this time")
+Until = instant_query("Started at or before this time")
 
 Policy = Literal["naive", "top-only", "two-views", "best-next"]
 
@@ -142,8 +144,8 @@ async def read_inspections(
     decision: Literal["recognized", "unknown", "failed"] | None = None,
     model: Annotated[str | None, Query(min_length=1, max_length=64)] = None,
     policy: Policy | None = None,
-    since: datetime | None = None,
-    until: datetime | None = None,
+    since: Since = None,
+    until: Until = None,
 ) -> dict[str, Any]:
     async def read(session: AsyncSession) -> tuple[list[dict[str, Any]], int]:
         return await results.list_inspections(

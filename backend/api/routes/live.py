@@ -1,7 +1,8 @@
 """Live updates for the console over a WebSocket (``/api/ws``), fed by the cell's event bus.
 
-The client sends ``{"token": "..."}`` as its first message (browsers cannot set headers on
-WebSockets, and tokens in URLs end up in logs).  Close codes: 4401 bad or missing token,
+The client sends ``{"token": "..."}`` as its first message, a text frame (browsers cannot set
+headers on WebSockets, and tokens in URLs end up in logs).  Close codes: 1003 a binary first
+frame, 4401 bad or missing token,
 4408 no token within 5 s, 1013 the cell is not running, 4429 too many failed sign-ins from
 this address (the reason says when to retry).  A bad token counts against the client's
 address like a REST sign-in; the token is checked again every :data:`RECHECK_S` seconds
@@ -112,11 +113,17 @@ async def live(ws: WebSocket) -> None:
     settings, cell = get_settings(ws), rt.cell
     try:
         async with asyncio.timeout(5.0):
-            first = await ws.receive_text()
+            message = await ws.receive()
     except TimeoutError:
         await ws.close(code=4408, reason='send {"token": ...} first')
         return
     except WebSocketDisconnect:
+        return
+    if message.get("type") == "websocket.disconnect":
+        return
+    first = message.get("text")
+    if not isinstance(first, str):  # a binary frame: this socket speaks JSON text only
+        await ws.close(code=1003, reason='send {"token": ...} as a text frame')
         return
     user_name, role = "anonymous", Role.engineer.name
     secret = settings.secret_key.get_secret_value()
@@ -155,9 +162,14 @@ async def live(ws: WebSocket) -> None:
     )
 
     async def drain_incoming() -> None:
+        # The client says only E-STOP (a text frame); anything else, binary frames included,
+        # is ignored. This also notices the socket closing.
         while True:
-            text = await ws.receive_text()  # also detects the client closing
-            if asks_estop(text):  # at once, on this task: the send loop may be waiting
+            msg = await ws.receive()
+            if msg.get("type") == "websocket.disconnect":
+                return
+            text = msg.get("text")
+            if text is not None and asks_estop(text):  # at once: the send loop may wait
                 try:
                     await cell.estop(by=user_name, role=role, source="ws")
                 except Exception as exc:  # the estop message says the arm was not latched

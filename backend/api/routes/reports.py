@@ -14,8 +14,15 @@ from fastapi import APIRouter, Depends, Query
 from fastapi.responses import Response, StreamingResponse
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import DatabaseDep, EngineerUser, SessionDep, SettingsDep, ViewerUser
-from backend.api.types import DbId
+from backend.api.deps import (
+    DatabaseDep,
+    EngineerUser,
+    RuntimeDep,
+    SessionDep,
+    SettingsDep,
+    ViewerUser,
+)
+from backend.api.types import DbId, instant_query
 from backend.reports import (
     ReportFilters,
     check_export,
@@ -35,14 +42,16 @@ __all__ = ["router"]
 
 router = APIRouter(tags=["reports"])
 
+From = instant_query("Inspections started at or after this time", alias="from")
+To = instant_query("Inspections started at or before this time", alias="to")
+
 Decision = Literal["recognized", "unknown", "failed"]
 Policy = Literal["naive", "top-only", "two-views", "best-next"]
-_TIME = "ISO-8601 date-time (UTC when it has no offset)"
 
 
 def report_filters(
-    start: Annotated[str | None, Query(alias="from", max_length=40, description=_TIME)] = None,
-    end: Annotated[str | None, Query(alias="to", max_length=40, description=_TIME)] = None,
+    start: From = None,
+    end: To = None,
     cell: Annotated[str | None, Query(min_length=1, max_length=40, description="Cell name")] = None,
     model: Annotated[
         str | None, Query(min_length=1, max_length=64, description="Recognised model name")
@@ -240,7 +249,8 @@ async def prune_storage(
 @router.get("/inspections/{inspection_id}/scene", response_class=Response,
             summary="The 3D scene recorded during the inspection (viser scene serializer)")  # fmt: skip
 async def read_inspection_scene(
-    _: ViewerUser, session: SessionDep, inspection_id: DbId
+    _: ViewerUser, rt: RuntimeDep, session: SessionDep, inspection_id: DbId
 ) -> Response:
-    data = await read_scene(session, inspection_id)
+    """The recording of one of this cell's inspections (404 for another cell's, as its row)."""
+    data = await read_scene(session, inspection_id, rt.cell_id)
     return Response(data, media_type="application/octet-stream")
