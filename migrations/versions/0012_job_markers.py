@@ -1,7 +1,7 @@
 """in-progress job markers
 
-Revision ID: 0011
-Revises: 0010
+Revision ID: 0012
+Revises: 0011
 Create Date: 2026-12-06 22:00:00
 
 ``jobs_in_progress`` holds one row per job that has started and not yet ended (deleted when
@@ -15,8 +15,8 @@ from alembic import op
 
 from backend.db.types import UTCDateTime
 
-revision = "0011"
-down_revision = "0010"
+revision = "0012"
+down_revision = "0011"
 branch_labels = None
 depends_on = None
 
