@@ -217,6 +217,11 @@ class OpenCVCamera:
         """Whether the source is a recording (a video file), not a live camera."""
         return self.kind == "file"
 
+    @property
+    def replay_step(self) -> int:
+        """Step mode: the step number of the image the next look takes (0 first)."""
+        return self._steps
+
     def advance(self) -> int:
         """Step mode: move on to the next frame of the file; returns the step number its
         frames carry in ``meta["replay_step"]``."""

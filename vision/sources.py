@@ -223,6 +223,11 @@ class ImageFolderCamera:
         self._files = ()
         self._held = None
 
+    @property
+    def replay_step(self) -> int:
+        """Step mode: the step number of the image the next look takes (0 first)."""
+        return self._steps
+
     def advance(self) -> int:
         """Step mode: move on to the next image; returns the step number its frames carry
         in ``meta["replay_step"]``."""

@@ -298,12 +298,19 @@ class CellMotion:
 
     async def _look_frame(self, *, after: float, timeout_s: float) -> Frame:
         """The frame a look takes: the first exposed after ``after``; from a recorded cell
-        (a camera replaying in step mode) the next image of the recording, asked for by
-        ``advance()`` and recognised by its ``meta["replay_step"]``."""
+        (a camera replaying in step mode) the recording's image due now, recognised by its
+        ``meta["replay_step"]``, after which the camera moves on to the next image (the live
+        view shows the image the next look will take)."""
         cam = self.feed.camera
         if getattr(cam, "step", False) is not True or not callable(getattr(cam, "advance", None)):
             return await self.next_frame(after=after, timeout_s=timeout_s)
-        want = int(cam.advance())
+        want = int(cam.replay_step)
+        frame = await self._replay_frame(want, after=after, timeout_s=timeout_s)
+        cam.advance()
+        return frame
+
+    async def _replay_frame(self, want: int, *, after: float, timeout_s: float) -> Frame:
+        """The first frame of replay step ``want`` exposed after ``after``."""
         deadline = time.monotonic() + timeout_s
         frame = await self.next_frame(after=after, timeout_s=timeout_s)
         while int(frame.meta.get("replay_step", want)) < want:
