@@ -314,7 +314,7 @@ class OpenCVCamera:
                 wait = self._last_grab + 1.0 / self.fps - time.monotonic()
                 if wait > 0:
                     await asyncio.sleep(wait)
-            meta: dict[str, Any] = {"source": self.describe(), "reconnects": self.reconnects}
+            meta: dict[str, Any] = {"source": self.describe()}
             if self.step:
                 held = self._held
                 reads = 1 if held is None else self._steps - held[0]
@@ -326,6 +326,7 @@ class OpenCVCamera:
                 meta["replay_step"] = self._steps
             else:
                 img = await self._next_image()
+            meta["reconnects"] = self.reconnects
             self._last_grab = time.monotonic()
             frame = Frame(
                 rgb=_rgb_from_cv(img), stamp_s=self._last_grab, index=self._count, meta=meta
