@@ -352,17 +352,19 @@ class Settings(BaseSettings):
         """The transfer curve of ``(the colour descriptor, the colour tie-break)``.
 
         An explicit ``camera_transfer`` sets both.  ``auto``: the folder and OpenCV cameras
-        deliver 8-bit images as cameras encode them, sRGB (the descriptor's recall on the
-        real illumination sets, ``docs/readme/camera-transfer.md``, chose it); the simulated
-        camera renders linear values, which the descriptor reads as they are, while the
-        tie-break keeps the sRGB reading its thresholds were measured with in the simulated
-        cell's campaigns.
+        are read as linear by both, chosen by measurement on the real illumination sets
+        (``docs/readme/camera-transfer.md``: on 8-bit sRGB images the descriptor's recall
+        is the same either way and the tie-break's signature tells the scenes apart as well
+        or better read as linear; on linear images reading them as sRGB halves the
+        signature's separation); the simulated camera renders linear values, which the
+        descriptor reads as they are, while the tie-break keeps the sRGB reading its
+        thresholds were measured with in the simulated cell's campaigns.
         """
         if self.camera_transfer != "auto":
             return self.camera_transfer, self.camera_transfer
         if self.camera == "sim":
             return "linear", "srgb"
-        return "srgb", "srgb"
+        return "linear", "linear"
 
     def redacted_database_url(self) -> str:
         """The database URL with any password replaced by ``***``."""

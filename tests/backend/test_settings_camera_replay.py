@@ -14,7 +14,7 @@ def test_defaults_keep_a_streaming_camera_and_choose_the_curve_by_kind():
     assert (s.camera_replay, s.camera_order, s.camera_transfer) == ("stream", "name", "auto")
     assert s.resolved_camera_transfer() == ("linear", "srgb")  # the simulated camera
     for kind in ("folder", "opencv"):
-        assert Settings(camera=kind).resolved_camera_transfer() == ("srgb", "srgb")
+        assert Settings(camera=kind).resolved_camera_transfer() == ("linear", "linear")
     for curve in ("linear", "srgb"):
         assert Settings(camera_transfer=curve).resolved_camera_transfer() == (curve, curve)
 
