@@ -703,10 +703,11 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     top = (await asyncio.to_thread(plan_shots, ctx.station, (1,), T_ee_cam=T_plan,
                                    object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
     bg = rt.teach_backgrounds.get(top)
-    # A cell without the simulator whose models were imported or uploaded has no empty-belt
+    # A real or recorded camera whose models were imported or uploaded has no empty-belt
     # background (only a teach grabs one): its top view is the next frame at the station,
-    # recognised whole (a recorded cell's next image), said so in the result.
-    whole = bg is None and rt.sim is None
+    # recognised whole (a recorded cell's next image), said so in the result.  The
+    # simulated camera is always taught, so it keeps asking for a teach.
+    whole = bg is None and cell.camera_status().name != "sim"
     if bg is None and not whole:
         raise Conflict(
             "no empty-belt background of the top view at the station: teach a model first"
