@@ -917,8 +917,10 @@ async def _pick_stage(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], po
     """The pick (or the approach) of the inspected object, by what the model stores."""
     rt = ctx.rt
     if pose is None and ctx.uncalibrated:
-        state["pick"] = {"sorted": opts.sort, "ok": False,
-                         "reason": f"not picked: a pick {ctx.uncalibrated}"}  # fmt: skip
+        why = f"not picked: a pick {ctx.uncalibrated}"
+        if opts.sort and rt.sim is None:
+            why += f"; {NO_BINS}"
+        state["pick"] = {"sorted": opts.sort, "ok": False, "reason": why}
         return
     if pose is not None and (stored_h is not None or not opts.sort):
         # Sorting off, no stored height: the approach pose above the tallest admitted object.

@@ -72,6 +72,7 @@ def test_sorting_without_bins_says_so_and_a_run_inspects(cell):
     row = _inspect(client, headers, sort=True)
     assert row["decision"] == "recognized", row
     assert row["pick"]["sorted"] is True and row["pick"]["ok"] is False
+    assert "sorting is not available: this cell has no bins" in row["pick"]["reason"]
     r = client.post("/api/inspection/run", json={"count": 2, "policy": "top-only"},
                     headers=headers["operator"])  # fmt: skip
     assert r.status_code == 202, r.text
