@@ -76,7 +76,12 @@ def make_camera(
     if settings.camera == "folder":
         from vision.sources import ImageFolderCamera
 
-        return ImageFolderCamera(settings.resolved_camera_folder(), loop=True)
+        return ImageFolderCamera(
+            settings.resolved_camera_folder(),
+            loop=True,
+            order=settings.camera_order,
+            step=settings.camera_replay == "look",
+        )
     if settings.camera == "sim":
         from robot.sim import SimCamera
 
@@ -87,9 +92,17 @@ def make_camera(
         from vision.opencv_camera import OpenCVCamera, classify_source
 
         kind, _ = classify_source(settings.camera_device)
-        # A video file is replayed in a loop (a demo or a recorded run); devices and streams
-        # reconnect on their own, and the cell's camera supervisor re-opens them after that.
-        return OpenCVCamera(settings.camera_device, fps=settings.camera_fps, loop=kind == "file")
+        # A video file is replayed in a loop (a demo or a recorded run; with camera_replay
+        # "look" one frame per look of the cell); devices and streams reconnect on their own,
+        # and the cell's camera supervisor re-opens them after that.
+        step = settings.camera_replay == "look"
+        if step and kind != "file":
+            raise ValueError(
+                f"camera_replay='look' needs a video file, {settings.camera_device!r} is a {kind}"
+            )
+        return OpenCVCamera(
+            settings.camera_device, fps=settings.camera_fps, loop=kind == "file", step=step
+        )
     raise ValueError(f"camera {settings.camera!r} is not available in this build")
 
 

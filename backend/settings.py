@@ -122,6 +122,23 @@ class Settings(BaseSettings):
         None,
         description="Folder camera: images to replay (default: the OpenCV chessboard photos in the data directory).",
     )
+    camera_replay: Literal["stream", "look"] = Field(
+        "stream",
+        description="Folder camera and video files: 'stream' plays the images on by "
+        "themselves (looping); 'look': each look of the cell takes the next image, so a "
+        "session recorded from a real cell replays through the inspection loop.",
+    )
+    camera_order: Literal["name", "manifest"] = Field(
+        "name",
+        description="Folder camera: replay the images sorted by file name, or in the order "
+        "the folder's order.txt lists them (one file name per line).",
+    )
+    camera_transfer: Literal["auto", "linear", "srgb"] = Field(
+        "auto",
+        description="The camera's transfer curve, for the colour descriptor (color-sift) and "
+        "the colour tie-break: 'srgb' for 8-bit gamma-encoded cameras, 'linear' for raw or "
+        "16-bit linear ones; 'auto' chooses by camera kind (see resolved_camera_transfer).",
+    )
     camera_fps: float = Field(
         10.0, gt=0, le=120, description="Acquisition rate of the camera task, frames/s."
     )
@@ -398,6 +415,13 @@ class Settings(BaseSettings):
             raise ValueError(
                 "driver='serial' needs VISIONCELL_SERIAL_PORT (the controller's device path)"
             )
+        if self.camera_replay == "look" and self.camera == "sim":
+            raise ValueError(
+                "camera_replay='look' replays a recording: it needs the folder camera or an "
+                "opencv camera on a video file, not the simulated camera"
+            )
+        if self.camera_order == "manifest" and self.camera != "folder":
+            raise ValueError("camera_order='manifest' is an order of the folder camera's images")
         if self.http_port == self.viser_port and self.http_host == self.viser_host:
             raise ValueError(f"http_port and viser_port must differ, both are {self.http_port}")
         return self
@@ -422,6 +446,24 @@ class Settings(BaseSettings):
     def resolved_camera_folder(self) -> Path:
         """Folder replayed by the folder camera."""
         return self.camera_folder or self.data_dir / "calibration" / "opencv-left"
+
+    def resolved_camera_transfer(self) -> tuple[str, str]:
+        """The transfer curve of ``(the colour descriptor, the colour tie-break)``.
+
+        An explicit ``camera_transfer`` sets both.  ``auto``: the folder and OpenCV cameras
+        are read as linear by both, chosen by measurement on the real illumination sets
+        (``docs/readme/camera-transfer.md``: on 8-bit sRGB images the descriptor's recall
+        is the same either way and the tie-break's signature tells the scenes apart as well
+        or better read as linear; on linear images reading them as sRGB halves the
+        signature's separation); the simulated camera renders linear values, which the
+        descriptor reads as they are, while the tie-break keeps the sRGB reading its
+        thresholds were measured with in the simulated cell's campaigns.
+        """
+        if self.camera_transfer != "auto":
+            return self.camera_transfer, self.camera_transfer
+        if self.camera == "sim":
+            return "linear", "srgb"
+        return "linear", "linear"
 
     def redacted_database_url(self) -> str:
         """The database URL with any password replaced by ``***``."""

@@ -138,6 +138,12 @@ class OpenCVCamera:
     capture_factory : callable or None
         ``(source, api, params) -> VideoCapture``-like object; for tests.  Default
         ``cv2.VideoCapture``.
+    step : bool
+        Video files only, a recorded cell: ``grab()`` returns the current frame again
+        (with a new time stamp) until :meth:`advance` moves to the next one, so each look
+        of the cell takes the next frame of the recording (as
+        :class:`vision.sources.ImageFolderCamera` does with ``step=True``); frames carry
+        ``meta["replay_step"]``.
     """
 
     name = "opencv"
@@ -157,8 +163,16 @@ class OpenCVCamera:
         open_timeout_s: float = 10.0,
         api_preference: int | None = None,
         capture_factory: CaptureFactory | None = None,
+        step: bool = False,
     ) -> None:
         self.kind, self._target = classify_source(source)
+        if not isinstance(step, bool) or (step and self.kind != "file"):
+            raise ValueError(
+                f"step must be a bool and needs a video file, got {step!r} for {source!r}"
+            )
+        self.step = step
+        self._steps = 0
+        self._held: tuple[int, NDArray[np.uint8]] | None = None  # (step, BGR pixels)
         for pname, val in (("width", width), ("height", height)):
             if val is not None and (not isinstance(val, int) or val <= 0):
                 raise ValueError(f"{pname} must be a positive int or None, got {val!r}")
@@ -197,6 +211,24 @@ class OpenCVCamera:
         if self.kind == "device":
             return f"V4L2 device {self._target} (/dev/video{self._target})"
         return f"{'video file' if self.kind == 'file' else 'stream'} {str(self._target)!r}"
+
+    @property
+    def recorded(self) -> bool:
+        """Whether the source is a recording (a video file), not a live camera."""
+        return self.kind == "file"
+
+    @property
+    def replay_step(self) -> int:
+        """Step mode: the step number of the image the next look takes (0 first)."""
+        return self._steps
+
+    def advance(self) -> int:
+        """Step mode: move on to the next frame of the file; returns the step number its
+        frames carry in ``meta["replay_step"]``."""
+        if not self.step:
+            raise CameraError(f"advance() needs step mode ({self.describe()})")
+        self._steps += 1
+        return self._steps
 
     @property
     def is_open(self) -> bool:
@@ -282,22 +314,36 @@ class OpenCVCamera:
                 wait = self._last_grab + 1.0 / self.fps - time.monotonic()
                 if wait > 0:
                     await asyncio.sleep(wait)
-            img = await self._read()
-            if img is None and self.kind == "file" and Path(str(self._target)).is_file():
-                img = await self._end_of_file()
-            if img is None:
-                img = await self._reconnect()
+            meta: dict[str, Any] = {"source": self.describe()}
+            if self.step:
+                held = self._held
+                reads = 1 if held is None else self._steps - held[0]
+                img = held[1] if held is not None else None
+                for _ in range(reads):
+                    img = await self._next_image()
+                assert img is not None
+                self._held = (self._steps, img)
+                meta["replay_step"] = self._steps
+            else:
+                img = await self._next_image()
+            meta["reconnects"] = self.reconnects
             self._last_grab = time.monotonic()
-            if self.kind == "file":
-                self._file_pos += 1
             frame = Frame(
-                rgb=_rgb_from_cv(img),
-                stamp_s=self._last_grab,
-                index=self._count,
-                meta={"source": self.describe(), "reconnects": self.reconnects},
+                rgb=_rgb_from_cv(img), stamp_s=self._last_grab, index=self._count, meta=meta
             )
             self._count += 1
             return frame
+
+    async def _next_image(self) -> NDArray[np.uint8]:
+        """The next image of the source (lock held): rewound or reconnected as documented."""
+        img = await self._read()
+        if img is None and self.kind == "file" and Path(str(self._target)).is_file():
+            img = await self._end_of_file()
+        if img is None:
+            img = await self._reconnect()
+        if self.kind == "file":
+            self._file_pos += 1
+        return img
 
     async def _read(self) -> NDArray[np.uint8] | None:
         cap = self._cap

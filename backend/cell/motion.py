@@ -296,6 +296,31 @@ class CellMotion:
         """The first camera frame exposed strictly after ``after`` (``time.monotonic()``)."""
         return await self.feed.next_frame(after=after, timeout_s=timeout_s)
 
+    async def _look_frame(self, *, after: float, timeout_s: float) -> Frame:
+        """The frame a look takes: the first exposed after ``after``; from a recorded cell
+        (a camera replaying in step mode) the recording's image due now, recognised by its
+        ``meta["replay_step"]``, after which the camera moves on to the next image (the live
+        view shows the image the next look will take)."""
+        cam = self.feed.camera
+        if getattr(cam, "step", False) is not True or not callable(getattr(cam, "advance", None)):
+            return await self.next_frame(after=after, timeout_s=timeout_s)
+        want = int(cam.replay_step)
+        frame = await self._replay_frame(want, after=after, timeout_s=timeout_s)
+        cam.advance()
+        return frame
+
+    async def _replay_frame(self, want: int, *, after: float, timeout_s: float) -> Frame:
+        """The first frame of replay step ``want`` exposed after ``after``."""
+        deadline = time.monotonic() + timeout_s
+        frame = await self.next_frame(after=after, timeout_s=timeout_s)
+        while int(frame.meta.get("replay_step", want)) < want:
+            left = deadline - time.monotonic()
+            if left <= 0.0:
+                raise CameraError(f"the recorded camera did not move on to image {want} "
+                                  f"within {timeout_s:g} s")  # fmt: skip
+            frame = await self.next_frame(after=frame.stamp_s, timeout_s=left)
+        return frame
+
     async def look(
         self,
         target: Target | None = None,
@@ -324,7 +349,7 @@ class CellMotion:
             t1 = time.monotonic()
             still = await self.settle(wait_s=settle_s)
             t2 = time.monotonic()
-            frame = await self.next_frame(after=t2, timeout_s=timeout_s)
+            frame = await self._look_frame(after=t2, timeout_s=timeout_s)
         t3 = time.monotonic()
         meta = {
             **frame.meta,

@@ -280,7 +280,9 @@ def import_views(
                 )
             ).id
         live = LiveIndex(
-            method=settings.recognition_method, max_features=settings.recognition_max_features
+            method=settings.recognition_method,
+            max_features=settings.recognition_max_features,
+            transfer=settings.resolved_camera_transfer(),
         )
         rows = []
         for start in range(0, len(inputs), 72):  # MAX_VIEWS_PER_REQUEST per transaction
@@ -315,7 +317,9 @@ def reextract(
             async with db.session() as session:
                 model_id = (await svc.get_model_by_name(session, name)).id
         live = LiveIndex(
-            method=settings.recognition_method, max_features=settings.recognition_max_features
+            method=settings.recognition_method,
+            max_features=settings.recognition_max_features,
+            transfer=settings.resolved_camera_transfer(),
         )
         await live.load(db)
         return await reextract_views(

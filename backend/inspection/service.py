@@ -203,6 +203,9 @@ class _Ctx:
     source: str
     station: NDArray[np.float64]
     surface_z: float
+    #: Why a pose (and so a pick) cannot be trusted here: empty when the camera model and
+    #: its mounting are calibrated (or are the simulator's own, exact by construction).
+    uncalibrated: str = ""
 
 
 async def context(rt: Any) -> _Ctx:
@@ -220,7 +223,7 @@ async def context(rt: Any) -> _Ctx:
         if sim is not None:
             camera, s = sim.config.camera.pinhole, "simulator nominal intrinsics"
         else:
-            frame = rt.cell.latest_frame()
+            frame = rt.cell.latest_frame
             w, h = (640, 480) if frame is None else (frame.width, frame.height)
             camera, s = nominal_camera(w, h), "nominal intrinsics (uncalibrated)"
         src.append(s)
@@ -235,8 +238,12 @@ async def context(rt: Any) -> _Ctx:
     else:
         src.append("active hand-eye")
     spec = sim.config.layout.conveyor if sim is not None else ConveyorSpec()
+    missing = [s for s in src if "uncalibrated" in s]
+    why = ("needs an active camera calibration (intrinsics and hand-eye): this cell uses the "
+           + " and the ".join(missing)) if missing else ""  # fmt: skip
     return _Ctx(rt, camera, np.asarray(T, dtype=np.float64), ", ".join(src),
-                np.asarray(spec.station_point, dtype=np.float64), float(spec.surface_z_m))  # fmt: skip
+                np.asarray(spec.station_point, dtype=np.float64), float(spec.surface_z_m),
+                why)  # fmt: skip
 
 
 def _belt(rt: Any) -> tuple[str, float, float]:
@@ -696,19 +703,31 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     top = (await asyncio.to_thread(plan_shots, ctx.station, (1,), T_ee_cam=T_plan,
                                    object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
     bg = rt.teach_backgrounds.get(top)
-    if bg is None:
+    # A real or recorded camera whose models were imported or uploaded has no empty-belt
+    # background (only a teach grabs one): its top view is the next frame at the station,
+    # recognised whole (a recorded cell's next image), said so in the result.  The
+    # simulated camera is always taught, so it keeps asking for a teach.
+    whole = bg is None and cell.camera_status().name != "sim"
+    if bg is None and not whole:
         raise Conflict(
             "no empty-belt background of the top view at the station: teach a model first"
         )
     state["stage"] = "finding the object"
     report(0.05, "waiting for an object at the station")
-    frame, travel0, bg = await _find(ctx, opts, top.q, bg, durations, clear_first)
+    if whole:
+        frame = await cell.look(top.q, speed=opts.speed)
+        _look_times(frame, durations)
+        travel0 = _travel_of(frame, rt)
+        region: Any = _WholeImage(np.ones(frame.rgb.shape[:2], dtype=bool))
+    else:
+        frame, travel0, bg = await _find(ctx, opts, top.q, bg, durations, clear_first)
     mode, speed_m_s, _ = _belt(rt)
     T_cam_top = _T_cam(frame.robot_state.q, ctx.T_ee_cam)
     state["stage"] = "segmenting"
-    t = time.monotonic()
-    region = await asyncio.to_thread(segment_object, frame.rgb, bg)
-    _add(durations, "segment", time.monotonic() - t)
+    if not whole:
+        t = time.monotonic()
+        region = await asyncio.to_thread(segment_object, frame.rgb, bg)
+        _add(durations, "segment", time.monotonic() - t)
     ys, xs = np.nonzero(region.mask)
     z_mid = ctx.surface_z + AIM_HEIGHT_M / 2
     found = plane_points(np.array([[xs.mean(), ys.mean()]]), ctx.camera, T_cam_top, z_mid)[0]
@@ -718,7 +737,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     # The light: every view's channels scaled back to the light the views were taught
     # under, by the belt round the object now against the belt in the trained top views.
     gain = None
-    if opts.balance_light:
+    if opts.balance_light and not whole:
         gain = light_gain(live.light_reference(), surround_colour(frame.rgb, region.mask))
     state["light_gain"] = None if gain is None else [round(float(g), 4) for g in gain]
     frames: dict[int, tuple[Any, NDArray[np.bool_] | None, str]] = {
@@ -741,6 +760,14 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
         state["stage"] = f"viewpoint {vp}"
         report(0.3 + 0.2 * len(frames), f"viewpoint {vp}")
         point = _carried(rt, found, travel0, speed_m_s, vp) if mode == "continuous" else found
+        if whole:  # no top-view region to carry over: the side view is recognised whole
+            plan = await asyncio.to_thread(plan_viewpoints, point, T_ee_cam=T_plan,
+                                           views=(VIEW_NAMES[vp - 1],), object_height_m=AIM_HEIGHT_M)  # fmt: skip
+            f = await cell.look(plan.views[0].q, speed=opts.speed)
+            _look_times(f, durations)
+            cams.append(_T_cam(f.robot_state.q, ctx.T_ee_cam))
+            frames[vp] = (f, None, WHOLE_IMAGE_NOTE)
+            return apply_gain(f.rgb, gain)
         side = await _side_view(
             ctx, vp, point, T_plan=T_plan, top_mask=region.mask, T_cam_top=T_cam_top,
             height_m=roi_height, travel0=travel0 if mode == "continuous" else None,
@@ -800,6 +827,10 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
             state["reason"] = f"no model passed its threshold (best score {res.score:.2f})"
     if planning["notes"]:
         state["reason"] += "; " + "; ".join(planning["notes"])
+    if whole:
+        state["reason"] += f"; {WHOLE_IMAGE_NOTE}"
+    if ctx.uncalibrated:
+        state["reason"] += f"; camera: {ctx.source}"
     _add(durations, "decide", time.monotonic() - t)
     # -- pose --------------------------------------------------------------------------
     t = time.monotonic()
@@ -813,7 +844,9 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     state["_radius"] = radius
     travel_pose = travel0  # the belt's travel at the exposure the pose is of
     second: dict[str, Any] | None = None
-    if state["decision"] == "recognized":
+    if state["decision"] == "recognized" and ctx.uncalibrated:
+        pose_err = ctx.uncalibrated
+    elif state["decision"] == "recognized":
         try:
             pose = await _pose(ctx, _top_candidate(res, state["model"]), state["model"],
                                T_cam_top, height, top_features[0] if top_features else None,
@@ -883,6 +916,12 @@ async def _pick_stage(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], po
                       found: NDArray[np.float64], mode: str, travel0: float) -> None:  # fmt: skip
     """The pick (or the approach) of the inspected object, by what the model stores."""
     rt = ctx.rt
+    if pose is None and ctx.uncalibrated:
+        why = f"not picked: a pick {ctx.uncalibrated}"
+        if opts.sort and rt.sim is None:
+            why += f"; {NO_BINS}"
+        state["pick"] = {"sorted": opts.sort, "ok": False, "reason": why}
+        return
     if pose is not None and (stored_h is not None or not opts.sort):
         # Sorting off, no stored height: the approach pose above the tallest admitted object.
         h_pick = UNKNOWN_MAX_HEIGHT_M if stored_h is None else stored_h
@@ -1164,6 +1203,20 @@ async def warm_feature_heights(ctx: _Ctx) -> int:
     return done
 
 
+#: What a result says when the top view had no empty-belt background to segment against.
+WHOLE_IMAGE_NOTE = "recognised on the whole image (no empty-belt background: no teach on this cell)"
+#: What a result says when it should sort in a cell that has no bins.
+NO_BINS = "sorting is not available: this cell has no bins (only the simulated cell has them)"
+
+
+@dataclass(frozen=True, eq=False)
+class _WholeImage:
+    """The top view's region when there is no background to segment against: every pixel."""
+
+    mask: NDArray[np.bool_]
+    method: str = WHOLE_IMAGE_NOTE
+
+
 def _bin_for(rt: Any, part: str | None) -> Any:
     if rt.sim is None:
         return None
@@ -1188,7 +1241,8 @@ async def _pick_unknown(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any],
                 "reason": "not picked: no stored height for this object (sorting off)"}  # fmt: skip
     b = _bin_for(rt, None)
     if b is None:
-        return {"sorted": True, "ok": False, "reason": "no reject bin in this cell"}
+        return {"sorted": True, "ok": False,
+                "reason": NO_BINS if rt.sim is None else "no reject bin in this cell"}  # fmt: skip
     T = np.eye(4)
     if pose is not None:
         T[:3, :3] = pose.T_base_obj[:3, :3]
@@ -1236,7 +1290,8 @@ async def _pick(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: Ob
             "reason": "moved to the approach pose",
         }
     if b is None:
-        return {"sorted": True, "ok": False, "reason": "no bins in this cell"}
+        return {"sorted": True, "ok": False,
+                "reason": NO_BINS if rt.sim is None else "no bins in this cell"}  # fmt: skip
     with cell._arm("a pick"):  # the job holds the arm; this is its motion
         out = await execute_pick_place(cell.driver, plan)
     return {"sorted": True, "ok": out.ok, "bin": b.name, "stage": out.stage, "reason": out.reason}

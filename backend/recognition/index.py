@@ -124,6 +124,8 @@ def colour_of(
     features: Features,
     image: NDArray[np.uint8] | None,
     mask: NDArray[np.bool_] | None,
+    *,
+    transfer: str = "srgb",
 ) -> tuple[NDArray[np.float32] | None, NDArray[np.float32] | None]:
     """``(signature, outline)`` of a side view's object region in its RGB ``image``
     (:func:`vision.recognition.index.view_colour`), ``(None, None)`` for a top view, a grey
@@ -133,7 +135,7 @@ def colour_of(
         return None, None
     m = None if mask is None else mask.astype(np.uint8)
     outline = view_outline(features, m)
-    colour = view_colour(image, outline, mask=m)
+    colour = view_colour(image, outline, mask=m, transfer=transfer)
     return (None, None) if colour is None else (colour, outline)
 
 
@@ -195,11 +197,29 @@ class LiveIndex:
         Feature method of every view (:func:`vision.features.extract`).
     max_features : int
         Strongest keypoints kept per view.
+    transfer : (str, str)
+        The camera's transfer curve (``"linear"`` or ``"srgb"``) for the colour descriptor
+        of a colour method (an option of its extraction, so part of the descriptor version:
+        views extracted with another curve are stale) and for the colour tie-break
+        (``Settings.resolved_camera_transfer``).
     """
 
-    def __init__(self, *, method: str = "sift", max_features: int = 1000) -> None:
+    def __init__(
+        self,
+        *,
+        method: str = "sift",
+        max_features: int = 1000,
+        transfer: tuple[str, str] = ("linear", "srgb"),
+    ) -> None:
         options = dict(FEATURE_OPTIONS.get(method, {}))
-        self._index = ViewIndex(method, max_features=max_features, feature_options=options)
+        descriptor, tiebreak = transfer
+        if descriptor not in ("linear", "srgb"):
+            raise ValueError(f"transfer must be 'linear' or 'srgb', got {descriptor!r}")
+        if method.startswith("color-") and descriptor != "linear":
+            options["transfer"] = descriptor  # linear is the extraction's own default
+        self._index = ViewIndex(
+            method, max_features=max_features, feature_options=options, colour_transfer=tiebreak
+        )
         self._lock = threading.RLock()
         self._models: dict[int, IndexedModel] = {}
         self._view_model: dict[int, int] = {}
@@ -213,8 +233,14 @@ class LiveIndex:
         self._added_at: dict[int, float] = {}
         # The descriptor version this build extracts (changes with OpenCV, a PCA basis...),
         # with the extraction options that change what is extracted (stored per view).
-        self.feature_version = self._index.features(_probe_image()).version
-        tag = ",".join(f"{k}={v}" for k, v in sorted(options.items()))
+        probe = _probe_image()
+        if method.startswith("color-"):  # the colour methods describe RGB images only
+            probe = np.repeat(probe[..., None], 3, axis=2)
+        self.feature_version = self._index.features(probe).version
+        # (the transfer curve by its name alone: the column holds 32 characters)
+        tag = ",".join(
+            str(v) if k == "transfer" else f"{k}={v}" for k, v in sorted(options.items())
+        )
         self.version = self.feature_version + (f";{tag}" if tag else "")
         if len(self.version) > 32:  # the database column
             raise ValueError(f"descriptor version tag {self.version!r} is over 32 characters")
@@ -352,7 +378,9 @@ class LiveIndex:
         if view.viewpoint == 1:
             self._set_belt(view_id, rgb, mask)
             return
-        colour, outline = colour_of(view.viewpoint, view.features, rgb, mask)
+        colour, outline = colour_of(
+            view.viewpoint, view.features, rgb, mask, transfer=self._index.colour_transfer
+        )
         if colour is not None and outline is not None:
             self._index.set_colour(view_id, colour, outline)
 
@@ -521,7 +549,9 @@ class LiveIndex:
         a view already indexed under this id is replaced.  With the view's RGB ``image``
         (and ``mask``), a side view also gets its colour signature (:func:`colour_of`) and
         a top view its belt colour (:meth:`light_reference`)."""
-        colour, outline = colour_of(viewpoint, features, image, mask)
+        colour, outline = colour_of(
+            viewpoint, features, image, mask, transfer=self._index.colour_transfer
+        )
         if features.method != self.method or features.version != self.feature_version:
             self.check_features(features.method, features.version, what=f"view {view_id}")
         with self._lock:
@@ -571,6 +601,7 @@ async def load_live_index(db: Database, settings: Any) -> LiveIndex:
         LiveIndex,
         method=settings.recognition_method,
         max_features=settings.recognition_max_features,
+        transfer=settings.resolved_camera_transfer(),
     )
     report = await live.load(db)
     log.info(

@@ -45,7 +45,7 @@ from backend.recognition.models import get_model
 from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
 from backend.recognition.views import ViewInput, add_views, view_public
 from robot.collision import CollisionWorld
-from vision.errors import InvalidInput, VisionCellError
+from vision.errors import Conflict, InvalidInput, VisionCellError
 from vision.segmentation import iou
 
 __all__ = [
@@ -390,6 +390,21 @@ async def run_teach(
     }
 
 
+def check_live_camera(cell: Any) -> None:
+    """Refuse (409) a teach on a camera that replays a recording (the folder camera, a video
+    file): the arm cannot make it look at the object at the station, and a replay never
+    shows an object lying still on an empty belt.  Recorded images become trained views by
+    import instead."""
+    cam = getattr(getattr(cell, "feed", None), "camera", None)
+    if getattr(cam, "recorded", False) is True:
+        raise Conflict(
+            f"the {getattr(cam, 'name', 'recorded')} camera replays recorded images: a teach "
+            "needs a live camera the arm points at the object.  Import the images as trained "
+            "views instead: `visioncell models import NAME FOLDER` (or POST "
+            "/api/models/{id}/views)"
+        )
+
+
 async def start_teach(
     *,
     cell: Any,
@@ -425,6 +440,7 @@ async def start_teach(
             f"point must be 3 finite coordinates within 1.6 m of the column, got {p}"
         )
     cell.check_can_move()
+    check_live_camera(cell)
 
     async def body(job: Any) -> dict[str, Any]:
         return await run_teach(

@@ -10,7 +10,9 @@ to break a tie between contenders whose geometric scores are within the ambiguit
 (:func:`vision.recognition.recognise_views`).
 
 Signature
-    Pixels are linearised (sRGB curve, IEC 61966-2-1); pixels whose brightest channel is
+    Pixels are linearised (the sRGB curve, IEC 61966-2-1, inverted for a camera that
+    encodes with it, ``transfer="srgb"``; values taken as they are for a linear camera,
+    ``transfer="linear"``); pixels whose brightest channel is
     below :data:`DARK_LEVEL` (the ratios are noise there) or with a clipped channel (above
     :data:`CLIP_LEVEL`) are left out. Each remaining pixel gives the log ratios
     ``(log(R/G), log(B/G))`` (a floor :data:`FLOOR` is added to every channel before the
@@ -42,7 +44,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vision.features.colour_input import srgb_decode
+from vision.features.colour_input import TRANSFERS, srgb_decode
 
 __all__ = [
     "CHROMA_FLOOR",
@@ -83,15 +85,20 @@ def _check_rgb(image: object) -> NDArray[np.uint8]:
     return image
 
 
-def colour_signature(image: NDArray[np.uint8], region: ArrayLike) -> NDArray[np.float32] | None:
+def colour_signature(
+    image: NDArray[np.uint8], region: ArrayLike, *, transfer: str = "srgb"
+) -> NDArray[np.float32] | None:
     """The colour signature of ``region`` in ``image`` (module docstring).
 
     Parameters
     ----------
     image : ndarray of shape (H, W, 3), uint8
-        RGB image, sRGB-encoded (as cameras deliver it).
+        RGB image as the camera encodes it.
     region : ndarray of shape (H, W), bool or uint8
         Non-zero inside the object region.
+    transfer : {"srgb", "linear"}
+        The camera's transfer curve: ``"srgb"`` values are decoded to linear first,
+        ``"linear"`` ones are linear already.
 
     Returns
     -------
@@ -100,13 +107,17 @@ def colour_signature(image: NDArray[np.uint8], region: ArrayLike) -> NDArray[np.
         usable.
     """
     image = _check_rgb(image)
+    if transfer not in TRANSFERS:
+        raise ValueError(f"transfer must be one of {', '.join(TRANSFERS)}, got {transfer!r}")
     m = np.asarray(region)
     if m.shape != image.shape[:2]:
         raise ValueError(f"region shape {m.shape} differs from the image's {image.shape[:2]}")
     sel = m > 0
     if np.count_nonzero(sel) < MIN_PIXELS:
         return None
-    lin = srgb_decode(image[sel].astype(np.float32) / 255.0)  # (N, 3)
+    lin = image[sel].astype(np.float32) / 255.0  # (N, 3)
+    if transfer == "srgb":
+        lin = srgb_decode(lin)
     ok = (lin.max(axis=1) >= DARK_LEVEL) & (lin.max(axis=1) <= CLIP_LEVEL)
     n = int(np.count_nonzero(ok))
     if n < MIN_PIXELS:

@@ -183,6 +183,7 @@ def view_colour(
     *,
     mask: np.ndarray | None = None,
     H: np.ndarray | None = None,
+    transfer: str = "srgb",
 ) -> np.ndarray | None:
     """Colour signature (:func:`vision.recognition.colour.colour_signature`) of a view's region.
 
@@ -190,14 +191,15 @@ def view_colour(
     ``mask`` when given; for a query, pass the trained view's outline and the
     trained-view-to-query map ``H``: the outline is mapped into the query, so both
     signatures describe the same part of the object. ``None`` when the region has too few
-    usable pixels or the image is grey.
+    usable pixels or the image is grey.  ``transfer`` is the camera's transfer curve
+    (``"srgb"`` or ``"linear"``).
     """
     if image.ndim != 3:
         return None
     region = region_from_outline(outline, image.shape[:2], H)
     if mask is not None:
         region &= (np.asarray(mask) > 0).astype(np.uint8)
-    return colour_signature(image, region)
+    return colour_signature(image, region, transfer=transfer)
 
 
 def _viewpoints(viewpoint: int | tuple[int, ...]) -> tuple[int, ...]:
@@ -230,6 +232,10 @@ class ViewIndex:
         fewer features is described again with half the detector threshold, at most twice
         (:data:`DEFAULT_MIN_FEATURES`). Not applied when ``feature_options`` fixes
         ``threshold``. Trained views and queries go through the same rule.
+    colour_transfer : {"srgb", "linear"}
+        The cameras' transfer curve, for the views' and the queries' colour signatures
+        (:func:`view_colour`, the tie-break of :func:`vision.recognition.recognise_views`).
+        The colour descriptor's own (``color-sift``) is ``feature_options["transfer"]``.
 
     Examples
     --------
@@ -245,6 +251,7 @@ class ViewIndex:
         geometry: str = "affine",
         feature_options: dict | None = None,
         min_features: int = DEFAULT_MIN_FEATURES,
+        colour_transfer: str = "srgb",
     ) -> None:
         if method not in METHODS:
             raise ValueError(f"unknown feature method {method!r}; choose one of {METHODS}")
@@ -271,6 +278,10 @@ class ViewIndex:
             raise ValueError(
                 f"min_features must be an int in 0..{MAX_FEATURES_PER_VIEW}, got {min_features!r}"
             )
+        if colour_transfer not in ("srgb", "linear"):
+            raise ValueError(f"colour_transfer must be 'srgb' or 'linear', got {colour_transfer!r}")
+        #: The cameras' transfer curve for the views' colour signatures (the tie-break).
+        self.colour_transfer = colour_transfer
         self.min_features = min(min_features, max_features)
         self.method = method
         self.max_features = max_features
@@ -429,7 +440,7 @@ class ViewIndex:
             if outline is None:
                 outline = view_outline(feats)
         elif isinstance(image, np.ndarray) and image.ndim == 3 and outline is not None:
-            colour = view_colour(image, outline, mask=mask)
+            colour = view_colour(image, outline, mask=mask, transfer=self.colour_transfer)
         if colour is None:
             outline = None
         if len(feats) < 3:

@@ -35,7 +35,7 @@ from vision.features import Features
 if TYPE_CHECKING:
     from vision.recognition.index import TrainedView
 
-__all__ = ["DEFAULT_K", "DEFAULT_RATIO", "Searcher"]
+__all__ = ["DEFAULT_K", "DEFAULT_RATIO", "FOREST_SEED", "Searcher"]
 
 #: Neighbours looked up per query descriptor (covers the neighbouring trained views of the
 #: true model plus the nearest other model).
@@ -48,6 +48,13 @@ _LSH = {"algorithm": 6, "table_number": 12, "key_size": 20, "multi_probe_level":
 # Leaves visited per query: 32 gave the same COIL-20 accuracy as 64 at 30 % less time
 # (benchmarks/recognition.py, 180 views).
 _CHECKS = 32
+#: Seed of the random choices that build the forest (KD-trees' split dimensions, LSH's hash
+#: functions).  OpenCV's FLANN draws them from the calling thread's ``cv::theRNG()``, whose
+#: state depends on everything that thread drew before (a worker thread of a pool, an earlier
+#: index): the same views gave other trees, other neighbours and other scores in another
+#: process.  Seeding the thread's generator just before the build makes the forest a
+#: function of the descriptors alone; the search itself draws nothing.
+FOREST_SEED = 0x5EED
 
 
 class Searcher:
@@ -72,6 +79,9 @@ class Searcher:
         self.binary = first.binary
         desc = np.ascontiguousarray(np.concatenate([v.features.descriptors for v in views]))
         self.n_descriptors = len(desc)
+        # The build and the seeding run in one call on one thread (the generator is
+        # per thread), so no other draw can come between them.
+        cv2.setRNGSeed(FOREST_SEED)
         # cv2.flann_Index is missing from the OpenCV stubs.
         self._index = cv2.flann_Index(desc, _LSH if self.binary else _KDTREE)  # type: ignore[attr-defined]
 

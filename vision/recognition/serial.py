@@ -45,6 +45,7 @@ def dump(index: ViewIndex) -> bytes:
         "max_features": index.max_features,
         "geometry": index.geometry,
         "feature_options": index.feature_options,
+        "colour_transfer": index.colour_transfer,
         "min_features": index.min_features,
         "next_id": index.next_id,
         "views": [
@@ -118,6 +119,7 @@ def load(cls: type[ViewIndex], blob: bytes) -> ViewIndex:
             geometry=header["geometry"],
             feature_options=header["feature_options"],
             min_features=header["min_features"],
+            colour_transfer=header.get("colour_transfer", "srgb"),
         )
         start = 0
         colours = data.get("colour", np.zeros((0, SIGNATURE_SIZE), np.float32))

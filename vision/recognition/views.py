@@ -262,7 +262,7 @@ def colour_support(
             view = index.view(cand.view_id)
             if view.colour is None or view.outline is None:
                 continue
-            q = view_colour(image, view.outline, H=cand.H)
+            q = view_colour(image, view.outline, H=cand.H, transfer=index.colour_transfer)
             if q is not None:
                 pairs.setdefault(m, []).append((q, view.colour))
     # Only the hues some compared view holds tell the models apart (held_sectors).
