@@ -5,6 +5,7 @@ from fastapi import APIRouter
 from backend.api.fastpath import FastRead
 from backend.api.routes import (
     audit,
+    belt,
     calibration,
     camera,
     cells,
@@ -37,6 +38,7 @@ for _r in (
     recognition,
     models,
     inspections,
+    belt,
     calibration,
     sim,
     live,
