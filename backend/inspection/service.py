@@ -188,6 +188,11 @@ def carried_point(found: NDArray[np.float64], ahead_m: float, end_y_m: float,
     return point
 
 
+class NotReady(Conflict):
+    """A setup step is missing (nothing trained, no empty-belt background of the top view):
+    no inspection can start; a run ends with the reason."""
+
+
 class NoObject(VisionCellError):
     """No object came to the station in time."""
 
@@ -669,7 +674,10 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
     report = (lambda f, m: job.report(f, m)) if job is not None else (lambda f, m: None)
     if waiting is None:
         waiting = Waiting(report=lambda m: report(0.05, m))
-    plan = await _plan_top(ctx)
+    plan = await recovery.retry_database(
+        "reading the calibration", lambda: _plan_top(ctx), max_wait_s=db_wait_s,
+        on_wait=lambda m: report(0.0, "holding: " + m),
+    )  # fmt: skip
     durations: dict[str, float] = {}
     report(0.05, "looking for a part at the station")
     found = await _find(ctx, opts, plan.top.q, plan.bg, durations, tracker=tracker,
@@ -735,11 +743,11 @@ class _TopPlan:
 
 
 async def _plan_top(ctx: _Ctx) -> _TopPlan:
-    """:class:`_TopPlan`; :class:`Conflict` when nothing is trained or the top view has no
+    """:class:`_TopPlan`; :class:`NotReady` when nothing is trained or the top view has no
     empty-belt background (a setup step missing: no inspection, no row)."""
     rt = ctx.rt
     if len(rt.live_index) == 0:
-        raise Conflict("no trained views: teach a model first (POST /api/models/{id}/teach)")
+        raise NotReady("no trained views: teach a model first (POST /api/models/{id}/teach)")
     from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
 
     async with rt.database.session() as session:
@@ -750,7 +758,7 @@ async def _plan_top(ctx: _Ctx) -> _TopPlan:
                                    object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
     bg = rt.teach_backgrounds.get(top)
     if bg is None:
-        raise Conflict(
+        raise NotReady(
             "no empty-belt background of the top view at the station: teach a model first"
         )
     return _TopPlan(top, T_plan, choice, bg)
@@ -1565,7 +1573,16 @@ def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun
                 progress = 0.0 if count is None else run.done / count
                 waiting = Waiting(report=lambda m, p=progress: job.report(p, m),
                                   stopped=lambda: run.stop_requested, forever=True)  # fmt: skip
-                out = await inspect_object(ctx, opts, None, tracker=tracker, waiting=waiting)
+                try:
+                    out = await inspect_object(ctx, opts, None, tracker=tracker, waiting=waiting)
+                except NotReady:
+                    raise
+                except (VisionCellError, ValueError) as exc:  # looking for a part failed
+                    why = f"{getattr(exc, 'code', 'error')}: {getattr(exc, 'detail', exc)}"
+                    log.warning("looking for a part: %s", why)
+                    job.report(progress, f"looking for a part failed ({why}): trying again")
+                    await asyncio.sleep(1.0)
+                    continue
                 if out is None:  # stopped while waiting for a part
                     break
                 run.done += 1
