@@ -4,10 +4,12 @@ One inspection (:func:`inspect_object`):
 
 1. **find**: the top view (viewpoint 1) at the station, planned by
    :func:`backend.recognition.teach.plan_shots` as teaching plans it, so the empty-belt
-   background grabbed by a teach applies.  Index mode: frames until an object lies still
-   (its region stable between two frames).  Constant speed (chapter 4.1): of the frames where
-   the moving object's region lies whole along the belt, the one nearest the station
-   (:class:`Approach`) is the top view;
+   background grabbed by a teach applies.  Index mode: frames until a part lies still
+   (the region nearest the station, whole along the belt, stable between two frames; in a
+   run, not the part inspected last: :mod:`backend.inspection.waiting`).  Constant speed
+   (chapter 4.1): of the frames where the moving object's region lies whole along the
+   belt, the one nearest the station (:class:`Approach`) is the top view.  Waiting for a
+   part is no inspection: nothing is stored until one is found;
 2. **segment**: the active contour initialised from the background difference, as teaching
    does (:func:`backend.recognition.segment.segment_object`);
 3. **recognise**: :func:`vision.recognition.recognise_views` with the live index and the
@@ -15,7 +17,7 @@ One inspection (:func:`inspect_object`):
    to side viewpoints 2 / 3 planned (:func:`backend.inspection.viewpoints.plan_viewpoints`)
    from where the top view found the object (predicted along the belt when it moves);
 4. **decide**: ``recognized`` (a model), ``unknown`` (no model passes, or models too alike:
-   ambiguous) or ``failed`` (nothing found, segmentation, a move, e-stop, stop), with the reason;
+   ambiguous) or ``failed`` (segmentation, a move, e-stop, stop), with the reason;
 5. **pose** (:mod:`backend.inspection.pose`) from the trained top views that verify on the
    top view; when it rests on too little (:func:`rests_on_too_little`) a second top view,
    turned about the camera's axis, gives it, or the object has no pose
@@ -24,9 +26,10 @@ One inspection (:func:`inspect_object`):
 7. **store** one row (:mod:`backend.inspection.results`) and publish an
    :class:`InspectionDone` event.
 
-Durations per stage (seconds of wall time): ``wait`` (for the object), ``move``, ``settle``,
-``acquire``, ``segment``, ``features``+``match`` (recognition, per its timings), ``decide``,
-``pose``, ``pick``.
+Durations per stage (seconds of wall time): ``wait`` (for the part to lie still), ``move``,
+``settle``, ``acquire``, ``segment``, ``features``+``match`` (recognition, per its timings),
+``decide``, ``pose``, ``pick``.  The row's ``duration_s`` is the inspection's wall time, from
+its start (the search's, or the moment its part came after a wait) to its end.
 """
 
 from __future__ import annotations
@@ -130,7 +133,8 @@ class InspectOptions:
     max_views : int
         1..3.
     wait_s : float
-        Longest wait for an object at the station, seconds.
+        Longest wait for a part at the station, seconds, of one inspection (a run waits
+        until a part comes or it is stopped).
     speed : float, optional
         Arm speed fraction (default: the cell's).
     balance_light : bool
@@ -540,7 +544,9 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
         for k, v in looks.items():
             _add(durations, k, v)
         _add(durations, "wait", found_t - t0 - sum(looks.values()))
-    else:
+    else:  # the arm waited at the top view: no move of this part's own
+        for k in looks:
+            _add(durations, k, 0.0)
         _add(durations, "wait", found_t - start)
     travel = _travel_of(frame, ctx.rt)
     if mode == "continuous":
