@@ -424,14 +424,16 @@ async def _next_frame(cell: Any, prev: Any) -> Any:
 class Found:
     """A part at the station: its top-view frame, the belt's travel at its exposure, the
     background it was found against, its belt coordinate (:mod:`backend.inspection.waiting`;
-    NaN when not measured) and when its inspection began (``time.monotonic()``: the start of
-    the search, or the moment the part came when the search had to wait for it)."""
+    NaN when not measured), when its inspection began (``time.monotonic()``: the start of
+    the search, or the moment the part came when the search had to wait for it) and its
+    region in the frame as found."""
 
     frame: Any
     travel_m: float
     bg: NDArray[np.uint8]
     u_m: float
     t_start: float
+    mask: NDArray[np.bool_] | None = None
 
 
 @dataclass(frozen=True)
@@ -519,7 +521,7 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
             u = _belt_coordinate(ctx, mask, T_cam, z_mid, travel)
             # a neighbour cut by the image's edge along the belt is not at the station
             whole = along_belt(mask, ctx.camera, T_cam, ctx.station, z_mid)[0]
-            if whole and (tracker is None or tracker.is_new(u, travel)):
+            if whole and (tracker is None or tracker.is_new(u, mask)):
                 start = last_t if waited else t0
                 break
             idle, same = True, whole  # only a neighbour, or the part inspected last
@@ -551,7 +553,7 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
     travel = _travel_of(frame, ctx.rt)
     if mode == "continuous":
         u = math.nan
-    return Found(frame, travel, bg_now, u, start)
+    return Found(frame, travel, bg_now, u, start, mask)
 
 
 def _T_cam(q: Any, T_ee_cam: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -733,7 +735,7 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
             state["reason"] = f"internal_error: {type(exc).__name__}: {str(exc)[:300]}"
     out = await _store(ctx, opts, started, durations, views, cams, state, marker, t_start)
     if tracker is not None and out["decision"] != "failed":
-        tracker.inspected(found.u_m, found.travel_m)
+        tracker.inspected(found.u_m, found.mask)
     return out
 
 

@@ -12,9 +12,10 @@ the position of its centre along the belt's travel minus the belt's encoder trav
 exposure, is fixed to the belt.  Parts upstream of the last one inspected have a smaller
 coordinate; the one inspected, still held at the station, has the same one.  A part taken
 off the belt at the end and put back at its entry (a loop) comes back with a coordinate one
-loop smaller, so it counts as new, as it should.  When the station is seen empty, or the
-belt stood still while the part there changed (parts placed by hand on a stopped belt),
-the coordinate says nothing and any part at the station is new.
+loop smaller, so it counts as new, as it should.  A part put by hand where the last one
+stood, the belt still, has its coordinate: its region in the top view tells it apart (a
+part of another shape or turned otherwise).  When the station is seen empty, any part that
+comes is new.
 """
 
 from __future__ import annotations
@@ -23,14 +24,20 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from robot.drivers.conveyor import BeltStatus, ControlledConveyor
 from vision.errors import Conflict
+from vision.segmentation import iou
 
 __all__ = ["PartTracker", "belt_status", "conveyor_of", "waiting_message"]
 
 #: Two parts seen at the station are one and the same when their belt coordinates are
-#: closer than this, metres (parts on a belt are never this close: they would touch).
+#: closer than this, metres (parts on a belt are never this close: they would touch) ...
 SAME_PART_M = 0.06
+#: ... and their regions in the top view overlap by at least this (intersection over union).
+SAME_REGION_IOU = 0.8
 
 
 def conveyor_of(rt: Any) -> ControlledConveyor | None:
@@ -84,26 +91,32 @@ class PartTracker:
     ----------
     last_u : float or None
         Belt coordinate of the last part inspected, metres (None: none yet, or forgotten).
-    last_travel : float
-        The belt's travel when it was seen, metres.
+    last_mask : ndarray of shape (H, W), bool, or None
+        Its region in the top view when it was found.
     """
 
     last_u: float | None = None
-    last_travel: float = 0.0
+    last_mask: NDArray[np.bool_] | None = None
 
-    def is_new(self, u: float, travel_m: float) -> bool:
-        """Whether a part at belt coordinate ``u`` (seen at travel ``travel_m``) is not the
-        last one inspected.  A part that is the same by its coordinate but the belt has not
-        moved since counts as the same (still there); any other coordinate counts as new."""
+    def is_new(self, u: float, mask: NDArray[np.bool_] | None = None) -> bool:
+        """Whether a part at belt coordinate ``u``, seen as ``mask`` in the top view, is not
+        the last one inspected: another coordinate, or at the same one another region (a
+        part put by hand where the last one stood, on a belt that did not move)."""
         if self.last_u is None or not math.isfinite(u):
             return True
-        return abs(u - self.last_u) >= SAME_PART_M
+        if abs(u - self.last_u) >= SAME_PART_M:
+            return True
+        if mask is None or self.last_mask is None or mask.shape != self.last_mask.shape:
+            return False
+        return iou(mask, self.last_mask) < SAME_REGION_IOU
 
-    def inspected(self, u: float | None, travel_m: float) -> None:
-        """Note the part just inspected (None: nothing to note)."""
+    def inspected(self, u: float | None, mask: NDArray[np.bool_] | None = None) -> None:
+        """Note the part just inspected (``u`` None or NaN: nothing to note)."""
         if u is not None and math.isfinite(u):
-            self.last_u, self.last_travel = float(u), float(travel_m)
+            self.last_u = float(u)
+            self.last_mask = None if mask is None else np.asarray(mask, dtype=bool)
 
     def station_empty(self) -> None:
         """The station was seen empty: any part that comes is new."""
         self.last_u = None
+        self.last_mask = None

@@ -18,17 +18,22 @@ from robot.drivers.conveyor import BeltStatus
 from vision.errors import CameraError
 
 
-def test_the_tracker_tells_the_next_part_by_its_belt_coordinate():
+def test_the_tracker_tells_the_next_part_by_its_belt_coordinate_and_region():
     t = waiting.PartTracker()
-    assert t.is_new(0.3, 0.0)  # nothing inspected yet
-    t.inspected(0.3, 1.0)
-    assert not t.is_new(0.3 + 0.01, 1.0)  # the same part, still at the station
-    assert t.is_new(0.3 - 0.42, 1.42)  # the next one, 0.42 m upstream
-    assert t.is_new(0.3 - 2.6, 3.6)  # the same part a loop later: new
+    here = np.zeros((40, 60), bool)
+    here[10:30, 20:40] = True
+    assert t.is_new(0.3, here)  # nothing inspected yet
+    t.inspected(0.3, here)
+    assert not t.is_new(0.3 + 0.01, here)  # the same part, still at the station
+    assert t.is_new(0.3 - 0.42, here)  # the next one, 0.42 m upstream
+    assert t.is_new(0.3 - 2.6, here)  # the same part a loop later: new
+    other = np.zeros_like(here)
+    other[5:35, 15:28] = True  # put by hand where the last one stood: another region
+    assert t.is_new(0.3, other)
     t.station_empty()
-    assert t.is_new(0.3, 1.0)  # a part placed by hand where the last one stood
-    t.inspected(math.nan, 0.0)  # nothing measured: nothing noted
-    assert t.last_u is None
+    assert t.is_new(0.3, here)  # the station was seen empty
+    t.inspected(math.nan, here)  # nothing measured: nothing noted
+    assert t.last_u is None and t.last_mask is None
 
 
 @pytest.mark.parametrize(
