@@ -6,6 +6,7 @@ from fastapi.routing import APIRoute
 from backend.api.fastpath import FastRead
 from backend.api.routes import (
     audit,
+    belt,
     calibration,
     camera,
     cells,
@@ -38,6 +39,7 @@ for _r in (
     recognition,
     models,
     inspections,
+    belt,
     calibration,
     sim,
     live,

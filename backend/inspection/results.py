@@ -58,11 +58,19 @@ class InspectionRecord:
     durations: dict[str, float] = field(default_factory=dict)
     pick: dict[str, Any] | None = None
     truth: dict[str, Any] | None = None
+    duration_s: float | None = None
+    """Wall time from the inspection's start to its end, seconds (the cycle time); None:
+    the sum of ``durations``."""
     views: tuple[ViewRecord, ...] = ()
 
     def __post_init__(self) -> None:
         if self.decision not in DECISIONS:
             raise InvalidInput(f"decision must be one of {DECISIONS}, got {self.decision!r}")
+        d = self.duration_s
+        if d is not None and (
+            isinstance(d, bool) or not isinstance(d, int | float) or not 0.0 <= d <= 1e6
+        ):
+            raise InvalidInput(f"duration_s must be in [0, 1e6] s, got {d!r}")
 
 
 async def store(
@@ -114,7 +122,9 @@ async def store(
             score=rec.score,
             viewpoints_visited=list(rec.viewpoints),
             object_pose=None if rec.pose is None else rec.pose.get("T_base_obj"),
-            duration_s=round(sum(rec.durations.values()), 4),
+            duration_s=round(
+                sum(rec.durations.values()) if rec.duration_s is None else rec.duration_s, 4
+            ),
             note=rec.reason[:2000],
             policy=rec.policy,
             reason=rec.reason,

@@ -4,10 +4,12 @@ One inspection (:func:`inspect_object`):
 
 1. **find**: the top view (viewpoint 1) at the station, planned by
    :func:`backend.recognition.teach.plan_shots` as teaching plans it, so the empty-belt
-   background grabbed by a teach applies.  Index mode: frames until an object lies still
-   (its region stable between two frames).  Constant speed (chapter 4.1): of the frames where
-   the moving object's region lies whole along the belt, the one nearest the station
-   (:class:`Approach`) is the top view;
+   background grabbed by a teach applies.  Index mode: frames until a part lies still
+   (the region nearest the station, whole along the belt, stable between two frames; in a
+   run, not the part inspected last: :mod:`backend.inspection.waiting`).  Constant speed
+   (chapter 4.1): of the frames where the moving object's region lies whole along the
+   belt, the one nearest the station (:class:`Approach`) is the top view.  Waiting for a
+   part is no inspection: nothing is stored until one is found;
 2. **segment**: the active contour initialised from the background difference, as teaching
    does (:func:`backend.recognition.segment.segment_object`);
 3. **recognise**: :func:`vision.recognition.recognise_views` with the live index and the
@@ -15,7 +17,7 @@ One inspection (:func:`inspect_object`):
    to side viewpoints 2 / 3 planned (:func:`backend.inspection.viewpoints.plan_viewpoints`)
    from where the top view found the object (predicted along the belt when it moves);
 4. **decide**: ``recognized`` (a model), ``unknown`` (no model passes, or models too alike:
-   ambiguous) or ``failed`` (nothing found, segmentation, a move, e-stop, stop), with the reason;
+   ambiguous) or ``failed`` (segmentation, a move, e-stop, stop), with the reason;
 5. **pose** (:mod:`backend.inspection.pose`) from the trained top views that verify on the
    top view; when it rests on too little (:func:`rests_on_too_little`) a second top view,
    turned about the camera's axis, gives it, or the object has no pose
@@ -24,9 +26,10 @@ One inspection (:func:`inspect_object`):
 7. **store** one row (:mod:`backend.inspection.results`) and publish an
    :class:`InspectionDone` event.
 
-Durations per stage (seconds of wall time): ``wait`` (for the object), ``move``, ``settle``,
-``acquire``, ``segment``, ``features``+``match`` (recognition, per its timings), ``decide``,
-``pose``, ``pick``.
+Durations per stage (seconds of wall time): ``wait`` (for the part to lie still), ``move``,
+``settle``, ``acquire``, ``segment``, ``features``+``match`` (recognition, per its timings),
+``decide``, ``pose``, ``pick``.  The row's ``duration_s`` is the inspection's wall time, from
+its start (the search's, or the moment its part came after a wait) to its end.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
+from datetime import timedelta
 from typing import Any
 
 import cv2
@@ -63,6 +67,7 @@ from backend.inspection.pose import (
 from backend.inspection.roi import SideRoi, height_bound, side_query, side_roi
 from backend.inspection.structure import FeatureHeights, HeightCache, TaughtTopView
 from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
+from backend.inspection.waiting import PartTracker, belt_status, conveyor_of, waiting_message
 from backend.recognition import thresholds
 from backend.recognition.images import encode_jpeg
 from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
@@ -128,7 +133,8 @@ class InspectOptions:
     max_views : int
         1..3.
     wait_s : float
-        Longest wait for an object at the station, seconds.
+        Longest wait for a part at the station, seconds, of one inspection (a run waits
+        until a part comes or it is stopped).
     speed : float, optional
         Arm speed fraction (default: the cell's).
     balance_light : bool
@@ -184,6 +190,11 @@ def carried_point(found: NDArray[np.float64], ahead_m: float, end_y_m: float,
             f"top view, past the belt's end (y {end_y_m:g} m): the views took too long"
         )
     return point
+
+
+class NotReady(Conflict):
+    """A setup step is missing (nothing trained, no empty-belt background of the top view):
+    no inspection can start; a run ends with the reason."""
 
 
 class NoObject(VisionCellError):
@@ -416,63 +427,150 @@ async def _next_frame(cell: Any, prev: Any) -> Any:
     return dataclasses.replace(f, robot_state=state, meta={**f.meta, "look": {}})
 
 
+@dataclass(frozen=True, eq=False)
+class Found:
+    """A part at the station: its top-view frame, the belt's travel at its exposure, the
+    background it was found against, its belt coordinate (:mod:`backend.inspection.waiting`;
+    NaN when not measured), when its inspection began (``time.monotonic()``: the start of
+    the search, or the moment the part came when the search had to wait for it) and its
+    region in the frame as found."""
+
+    frame: Any
+    travel_m: float
+    bg: NDArray[np.uint8] | None
+    u_m: float
+    t_start: float
+    mask: NDArray[np.bool_] | None = None
+
+
+@dataclass(frozen=True)
+class Waiting:
+    """How a search waits for a part: ``report(message)`` says what it waits for (the job's
+    progress); ``stopped()`` true ends the wait without a part (a run asked to stop);
+    ``forever`` waits until then (a run), else ``wait_s`` of the options bounds it."""
+
+    report: Any = None
+    stopped: Any = None
+    forever: bool = False
+
+
+def _station_px(ctx: _Ctx, T_cam: NDArray[np.float64], z_m: float) -> NDArray[np.float64]:
+    p = ctx.station.copy()
+    p[2] = z_m
+    return ctx.camera.project_world(p[None, :], np.linalg.inv(T_cam))[0]
+
+
+def _belt_coordinate(ctx: _Ctx, mask: NDArray[np.bool_], T_cam: NDArray[np.float64],
+                     z_m: float, travel_m: float) -> float:  # fmt: skip
+    """Where the region's centre rides on the belt: its offset along the travel (base
+    ``+y``) less the belt's travel at the exposure, metres (fixed to the belt)."""
+    ys, xs = np.nonzero(mask)
+    centre = plane_points(np.array([[xs.mean(), ys.mean()]]), ctx.camera, T_cam, z_m)[0]
+    return float(centre[1] - travel_m)
+
+
 async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg: NDArray[np.uint8],
-                durations: dict[str, float], clear_first: bool = False
-                ) -> tuple[Any, float, NDArray[np.uint8]]:  # fmt: skip
-    """The top-view frame of an object at the station, the belt travel at its exposure and
-    the background it was found against."""
+                durations: dict[str, float], *, tracker: Any = None,
+                waiting: Waiting | None = None) -> Found | None:  # fmt: skip
+    """The top-view frame of a part at the station (:class:`Found`), or None when
+    ``waiting.stopped()`` ended the wait.
+
+    Index mode: a region nearest the station that stays still between two frames, and --
+    with a ``tracker`` (:class:`~backend.inspection.waiting.PartTracker`, a run) -- is not
+    the part inspected last by its belt coordinate.  Constant speed: :class:`Approach`.
+    While nothing is there, the wait is reported and never counted as an inspection: the
+    stage times of a search that had to wait start when the part came.  :class:`NoObject`
+    when ``opts.wait_s`` passes first (unless ``waiting.forever``)."""
+    w = waiting or Waiting()
     cell = ctx.rt.cell
-    deadline = time.monotonic() + opts.wait_s
+    deadline = None if w.forever else time.monotonic() + opts.wait_s
     last = None
+    last_t = 0.0
     approach = Approach(start_m=_belt(ctx.rt)[2])
     z_mid = ctx.surface_z + AIM_HEIGHT_M / 2
     t0 = time.monotonic()
     frame = await cell.look(q_top, speed=opts.speed)
-    _look_times(frame, durations)
-    while clear_first:  # a run: the previous object must have left the station first
-        try:
-            await asyncio.to_thread(foreground_mask, frame.rgb, _background_for(ctx, frame, bg))
-        except SegmentationFailed:
-            break
-        if time.monotonic() >= deadline:
-            raise NoObject(
-                f"the previous object did not leave the station within {opts.wait_s:g} s"
-            )
-        await asyncio.sleep(0.1)
-        frame = await cell.look(None)
+    looks: dict[str, float] = {}
+    _look_times(frame, looks)
+    T_cam = _T_cam(frame.robot_state.q, ctx.T_ee_cam)
+    near = _station_px(ctx, T_cam, z_mid)
+    waited, said, first_seen = False, "", None
+    u = math.nan
     while True:
+        if w.stopped is not None and w.stopped():
+            return None
         mode, _, _ = _belt(ctx.rt)
         bg_now = _background_for(ctx, frame, bg)
-        try:
-            mask = await asyncio.to_thread(foreground_mask, frame.rgb, bg_now)
+        try:  # index mode: the part nearest the station, not a larger neighbour in view
+            mask = await asyncio.to_thread(foreground_mask, frame.rgb, bg_now,
+                                           near_px=None if mode == "continuous" else near)  # fmt: skip
         except SegmentationFailed:
             mask = None
+        idle = mask is None  # nothing there: waiting (else a part comes, or is there)
+        same = False
         if mode == "continuous":
             region = None
             if mask is not None:
-                T_cam = _T_cam(frame.robot_state.q, ctx.T_ee_cam)
-                region = along_belt(mask, ctx.camera, T_cam, ctx.station, z_mid)
+                T_now = _T_cam(frame.robot_state.q, ctx.T_ee_cam)
+                region = along_belt(mask, ctx.camera, T_now, ctx.station, z_mid)
+                first_seen = first_seen if first_seen is not None else time.monotonic()
             chosen = approach.take(frame, region, _travel_of(frame, ctx.rt))
             if chosen is not None:
                 frame = chosen
                 bg_now = _background_for(ctx, frame, bg)
+                start = first_seen if waited and first_seen is not None else t0
                 break
-        elif mask is not None and last is not None and iou(mask, last) > 0.97:
-            break
+        elif mask is None:
+            if tracker is not None:
+                tracker.station_empty()
+        elif last is not None and iou(mask, last) > 0.97:
+            travel = _travel_of(frame, ctx.rt)
+            u = _belt_coordinate(ctx, mask, T_cam, z_mid, travel)
+            # a neighbour cut by the image's edge along the belt is not at the station
+            whole = along_belt(mask, ctx.camera, T_cam, ctx.station, z_mid)[0]
+            if whole and (tracker is None or tracker.is_new(u, mask)):
+                start = last_t if waited else t0
+                break
+            idle, same = True, whole  # only a neighbour, or the part inspected last
+        if mask is not None and (last is None or iou(mask, last) <= 0.97):
+            last_t = time.monotonic()  # a part came, or moved: its still frames start here
         last = mask
-        if time.monotonic() >= deadline:
+        if idle:
+            waited = True
+            msg = waiting_message(belt_status(ctx.rt), same_part=same)
+            if msg != said and w.report is not None:
+                w.report(msg)
+            said = msg
+        if deadline is not None and time.monotonic() >= deadline:
             raise NoObject(f"no object came to the station within {opts.wait_s:g} s")
         if mode == "continuous":
             frame = await _next_frame(cell, frame)
         else:
             await asyncio.sleep(0.2)
             frame = await cell.look(None)
-    _add(
-        durations,
-        "wait",
-        time.monotonic() - t0 - sum(durations.get(k, 0) for k in ("move", "settle", "acquire")),
-    )
-    return frame, _travel_of(frame, ctx.rt), bg_now
+    found_t = time.monotonic()
+    if start == t0:  # the part was there at once: the move to the top view is its own
+        for k, v in looks.items():
+            _add(durations, k, v)
+        _add(durations, "wait", found_t - t0 - sum(looks.values()))
+    else:  # the arm waited at the top view: no move of this part's own
+        for k in looks:
+            _add(durations, k, 0.0)
+        _add(durations, "wait", found_t - start)
+    travel = _travel_of(frame, ctx.rt)
+    if mode == "continuous":
+        u = math.nan
+    return Found(frame, travel, bg_now, u, start, mask)
+
+
+async def _look_whole(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64],
+                      durations: dict[str, float]) -> Found:  # fmt: skip
+    """The top view of a cell with no empty-belt background: the next frame at the station
+    (a recorded cell's next image), to be recognised whole."""
+    t0 = time.monotonic()
+    frame = await ctx.rt.cell.look(q_top, speed=opts.speed)
+    _look_times(frame, durations)
+    return Found(frame, _travel_of(frame, ctx.rt), None, math.nan, t0, None)
 
 
 def _T_cam(q: Any, T_ee_cam: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -576,47 +674,70 @@ def _carried(rt: Any, found: NDArray[np.float64], travel0: float, speed_m_s: flo
 
 
 async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
-                         clear_first: bool = False,
-                         db_wait_s: float | None = None) -> dict[str, Any]:  # fmt: skip
-    """Inspect the next object at the station and store the result (module docstring).
+                         tracker: Any = None, waiting: Waiting | None = None,
+                         db_wait_s: float | None = None) -> dict[str, Any] | None:  # fmt: skip
+    """Inspect the next part at the station and store the result (module docstring).
 
-    ``clear_first`` (continuous operation, index mode): wait until the station is empty
-    before looking for the next object, so an object that stays is not inspected twice.
+    First the part is found (:func:`_find`): waiting for it is not an inspection, so it
+    stores nothing -- :class:`NoObject` when none comes within ``opts.wait_s``, None when
+    ``waiting.stopped()`` ends the wait (a run asked to stop), and a cancellation while
+    waiting leaves no row.  ``tracker`` (continuous operation, index mode): the part
+    inspected last is not taken again (:class:`~backend.inspection.waiting.PartTracker`).
 
-    Returns the stored inspection's public form.  Cut short (cancel: e-stop or stop), the
-    complete ``failed`` row is stored with the reason before the cancellation goes on.
+    Returns the stored inspection's public form; its ``duration_s`` is the wall time from
+    the inspection's start (the part found at once: the search's start; else the moment it
+    came) to its end.  Cut short (cancel: e-stop or stop), the complete ``failed`` row is
+    stored with the reason before the cancellation goes on.
 
-    Faults (issue 16): an in-progress marker is committed first (waiting, without moving,
-    up to ``db_wait_s`` -- None: until cancelled -- while the database is unavailable); any
-    failure inside becomes a ``failed`` row with its reason; the row is stored with retries
-    until the database takes it, in the transaction that removes the marker.
+    Faults (issue 16): an in-progress marker is committed once the part is found (waiting,
+    without moving, up to ``db_wait_s`` -- None: until cancelled -- while the database is
+    unavailable); any failure inside becomes a ``failed`` row with its reason; the row is
+    stored with retries until the database takes it, in the transaction that removes the
+    marker.
     """
     cell = ctx.rt.cell
-    started = utcnow()
+    report = (lambda f, m: job.report(f, m)) if job is not None else (lambda f, m: None)
+    if waiting is None:
+        waiting = Waiting(report=lambda m: report(0.05, m))
+    plan = await recovery.retry_database(
+        "reading the calibration", lambda: _plan_top(ctx), max_wait_s=db_wait_s,
+        on_wait=lambda m: report(0.0, "holding: " + m),
+    )  # fmt: skip
     durations: dict[str, float] = {}
+    report(0.05, "looking for a part at the station")
+    if plan.bg is None:
+        found: Found | None = await _look_whole(ctx, opts, plan.top.q, durations)
+    else:
+        found = await _find(ctx, opts, plan.top.q, plan.bg, durations, tracker=tracker,
+                            waiting=waiting)  # fmt: skip
+    if found is None:
+        return None
+    t_start = found.t_start
+    started = utcnow() - timedelta(seconds=time.monotonic() - t_start)
     views: list[results.ViewRecord] = []
     cams: list[NDArray[np.float64]] = []
     state: dict[str, Any] = {"decision": "failed", "reason": "", "truth": None, "scores": {},
                              "model": None, "model_id": None, "score": None, "pose": None,
-                             "viewpoints": (), "pick": None}  # fmt: skip
+                             "viewpoints": (), "pick": None, "u_m": found.u_m}  # fmt: skip
     view = getattr(ctx.rt, "view3d", None)
     state["scene"] = SceneRecorder(getattr(view, "server", None))
-    report = (lambda f, m: job.report(f, m)) if job is not None else (lambda f, m: None)
     db = ctx.rt.database
-    # The durable marker goes in before anything moves (a database outage holds here: no
-    # motion); the result's transaction removes it (recovery module).
+    # The durable marker goes in before the inspection moves the arm past the top view (a
+    # database outage holds here: no motion); the result's transaction removes it.
     marker = await recovery.retry_database(
         "starting an inspection", lambda: recovery.begin(db, ctx.rt.cell_id, opts.policy),
-        max_wait_s=db_wait_s, on_wait=lambda m: report(0.0, "holding: " + m),
+        max_wait_s=db_wait_s, on_wait=lambda m: report(0.05, "holding: " + m),
     )  # fmt: skip
     try:
-        await _inspect_body(ctx, opts, durations, views, cams, state, report, clear_first)
+        await _inspect_body(ctx, opts, plan, found, durations, views, cams, state, report)
     except asyncio.CancelledError:
         state["decision"] = "failed"
         state["reason"] = (
             "emergency stop" if cell.estopped else "stopped"
         ) + f" during {state.get('stage', 'the inspection')}"
-        await asyncio.shield(_store(ctx, opts, started, durations, views, cams, state, marker))
+        await asyncio.shield(
+            _store(ctx, opts, started, durations, views, cams, state, marker, t_start)
+        )
         raise
     except (VisionCellError, ValueError) as exc:
         state["decision"] = "failed"
@@ -632,7 +753,45 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
         else:
             log.exception("inspection failed unexpectedly")
             state["reason"] = f"internal_error: {type(exc).__name__}: {str(exc)[:300]}"
-    return await _store(ctx, opts, started, durations, views, cams, state, marker)
+    out = await _store(ctx, opts, started, durations, views, cams, state, marker, t_start)
+    if tracker is not None and out["decision"] != "failed":
+        tracker.inspected(found.u_m, found.mask)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class _TopPlan:
+    """The top view at the station, the plan's mounting, the thresholds in force and the
+    empty-belt background of that view (read once per inspection)."""
+
+    top: Any
+    T_plan: NDArray[np.float64]
+    choice: Any
+    bg: NDArray[np.uint8] | None
+
+
+async def _plan_top(ctx: _Ctx) -> _TopPlan:
+    """:class:`_TopPlan`; :class:`NotReady` when nothing is trained or the top view has no
+    empty-belt background (a setup step missing: no inspection, no row)."""
+    rt = ctx.rt
+    if len(rt.live_index) == 0:
+        raise NotReady("no trained views: teach a model first (POST /api/models/{id}/teach)")
+    from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
+
+    async with rt.database.session() as session:
+        T_plan = (await active_camera_calibration(session, rt.cell_id)).T_ee_cam
+        choice = await thresholds.current_choice(session)
+    T_plan = np.asarray(NOMINAL_T_EE_CAM if T_plan is None else T_plan, dtype=np.float64)
+    top = (await asyncio.to_thread(plan_shots, ctx.station, (1,), T_ee_cam=T_plan,
+                                   object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
+    bg = rt.teach_backgrounds.get(top)
+    # A real or recorded camera may have models imported or uploaded and no teach (so no
+    # background): its top view is recognised whole.  The simulated camera is always taught.
+    if bg is None and rt.cell.camera_status().name == "sim":
+        raise NotReady(
+            "no empty-belt background of the top view at the station: teach a model first"
+        )
+    return _TopPlan(top, T_plan, choice, bg)
 
 
 async def _reject_failed(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any]) -> None:
@@ -655,13 +814,15 @@ async def _reject_failed(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any])
 
 async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[str, float],
                  views: list[results.ViewRecord], cams: list[NDArray[np.float64]],
-                 state: dict[str, Any], marker: int | None = None) -> dict[str, Any]:  # fmt: skip
+                 state: dict[str, Any], marker: int | None = None,
+                 t_start: float | None = None) -> dict[str, Any]:  # fmt: skip
+    duration = None if t_start is None else max(0.0, time.monotonic() - t_start)
     rec = results.InspectionRecord(
         started_at=started, finished_at=utcnow(), decision=state["decision"], reason=state["reason"],
         policy=opts.policy, model_id=state["model_id"], model_name=state["model"],
         score=state["score"], viewpoints=tuple(state["viewpoints"]), scores=state["scores"],
         pose=state["pose"], durations=durations, pick=state["pick"], truth=state["truth"],
-        views=tuple(views),
+        views=tuple(views), duration_s=duration,
     )  # fmt: skip
     scene = await state["scene"].finish() if state.get("scene") is not None else None
     db = ctx.rt.database
@@ -687,49 +848,30 @@ async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[
     return await recovery.retry_database("reading an inspection back", read)
 
 
-async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, float],
-                        views: list[results.ViewRecord], cams: list[NDArray[np.float64]],
-                        state: dict[str, Any], report: Any, clear_first: bool) -> None:  # fmt: skip
+async def _inspect_body(ctx: _Ctx, opts: InspectOptions, plan: _TopPlan, part: Found,
+                        durations: dict[str, float], views: list[results.ViewRecord],
+                        cams: list[NDArray[np.float64]], state: dict[str, Any],
+                        report: Any) -> None:  # fmt: skip
     rt, cell = ctx.rt, ctx.rt.cell
     live = rt.live_index
-    if len(live) == 0:
-        raise Conflict("no trained views: teach a model first (POST /api/models/{id}/teach)")
-    from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
-
-    async with rt.database.session() as session:
-        T_plan = (await active_camera_calibration(session, rt.cell_id)).T_ee_cam
-        choice = await thresholds.current_choice(session)
-    T_plan = np.asarray(NOMINAL_T_EE_CAM if T_plan is None else T_plan, dtype=np.float64)
-    top = (await asyncio.to_thread(plan_shots, ctx.station, (1,), T_ee_cam=T_plan,
-                                   object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
-    bg = rt.teach_backgrounds.get(top)
-    # A real or recorded camera whose models were imported or uploaded has no empty-belt
-    # background (only a teach grabs one): its top view is the next frame at the station,
-    # recognised whole (a recorded cell's next image), said so in the result.  The
-    # simulated camera is always taught, so it keeps asking for a teach.
-    whole = bg is None and cell.camera_status().name != "sim"
-    if bg is None and not whole:
-        raise Conflict(
-            "no empty-belt background of the top view at the station: teach a model first"
-        )
-    state["stage"] = "finding the object"
-    report(0.05, "waiting for an object at the station")
-    if whole:
-        frame = await cell.look(top.q, speed=opts.speed)
-        _look_times(frame, durations)
-        travel0 = _travel_of(frame, rt)
-        region: Any = _WholeImage(np.ones(frame.rgb.shape[:2], dtype=bool))
-    else:
-        frame, travel0, bg = await _find(ctx, opts, top.q, bg, durations, clear_first)
+    T_plan, choice = plan.T_plan, plan.choice
+    frame, travel0, bg = part.frame, part.travel_m, part.bg
+    # No empty-belt background (a real or recorded camera whose models were imported or
+    # uploaded: only a teach grabs one): the top view is recognised whole, said so.
+    whole = bg is None
+    report(0.1, "inspecting the part at the station")
     mode, speed_m_s, _ = _belt(rt)
     T_cam_top = _T_cam(frame.robot_state.q, ctx.T_ee_cam)
+    z_mid = ctx.surface_z + AIM_HEIGHT_M / 2
     state["stage"] = "segmenting"
-    if not whole:
+    if whole:
+        region: Any = _WholeImage(np.ones(frame.rgb.shape[:2], dtype=bool))
+    else:
         t = time.monotonic()
-        region = await asyncio.to_thread(segment_object, frame.rgb, bg)
+        near = None if mode == "continuous" else _station_px(ctx, T_cam_top, z_mid)
+        region = await asyncio.to_thread(segment_object, frame.rgb, bg, near_px=near)
         _add(durations, "segment", time.monotonic() - t)
     ys, xs = np.nonzero(region.mask)
-    z_mid = ctx.surface_z + AIM_HEIGHT_M / 2
     found = plane_points(np.array([[xs.mean(), ys.mean()]]), ctx.camera, T_cam_top, z_mid)[0]
     found[2] = ctx.surface_z
     state["_found"] = found
@@ -1417,6 +1559,7 @@ async def start_inspection(rt: Any, opts: InspectOptions) -> Any:
 
     async def body(job: Any) -> dict[str, Any]:
         out = await inspect_object(ctx, opts, job, db_wait_s=opts.wait_s)
+        assert out is not None  # only a run's wait can be stopped
         return {"inspection": out, "inspection_id": out["id"]}
 
     return rt.jobs.start("inspect", body, motion=True,
@@ -1492,24 +1635,42 @@ def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun
         except Exception:  # the pose triangulates on first use instead
             log.warning("could not triangulate the taught views ahead of the run", exc_info=True)
         decisions: dict[str, int] = {}
-        last = ""
-        while not run.stop_requested and (count is None or run.done < count):
-            await hold_until_ready(rt, job)
-            index_mode = _belt(rt)[0] == "index"
-            # After a failed inspection the object may still be at the station: look at it
-            # again rather than wait for it to leave (it would never be inspected).
-            clear = run.done > 0 and index_mode and last != "failed"
-            out = await inspect_object(ctx, opts, None, clear_first=clear)
-            last = out["decision"]
-            run.done += 1
-            run.ids.append(out["id"])
-            decisions[out["decision"]] = decisions.get(out["decision"], 0) + 1
-            job.report(0.0 if count is None else run.done / count,
-                       f"{run.done} inspected: {out['decision']} {out['model'] or ''}".strip())  # fmt: skip
-            if rt.sim is not None and rt.sim.conveyor_state.running:
+        tracker = PartTracker()
+        conveyor = conveyor_of(rt)
+        if conveyor is not None:  # the run indexes the belt: each part waits for its release
+            await conveyor.hold_at_station(True)
+        try:
+            while not run.stop_requested and (count is None or run.done < count):
+                await hold_until_ready(rt, job)
+                progress = 0.0 if count is None else run.done / count
+                waiting = Waiting(report=lambda m, p=progress: job.report(p, m),
+                                  stopped=lambda: run.stop_requested, forever=True)  # fmt: skip
+                try:
+                    out = await inspect_object(ctx, opts, None, tracker=tracker, waiting=waiting)
+                except NotReady:
+                    raise
+                except (VisionCellError, ValueError) as exc:  # looking for a part failed
+                    why = f"{getattr(exc, 'code', 'error')}: {getattr(exc, 'detail', exc)}"
+                    log.warning("looking for a part: %s", why)
+                    job.report(progress, f"looking for a part failed ({why}): trying again")
+                    await asyncio.sleep(1.0)
+                    continue
+                if out is None:  # stopped while waiting for a part
+                    break
+                run.done += 1
+                run.ids.append(out["id"])
+                decisions[out["decision"]] = decisions.get(out["decision"], 0) + 1
+                job.report(0.0 if count is None else run.done / count,
+                           f"{run.done} inspected: {out['decision']} {out['model'] or ''}".strip())  # fmt: skip
+                # A failed inspection looks at the same part again; after any other the
+                # belt brings the next (index mode: the part held at the station goes on).
+                if out["decision"] != "failed" and conveyor is not None and _belt(rt)[0] == "index":
+                    with contextlib.suppress(Exception):
+                        await conveyor.release()
+        finally:
+            if conveyor is not None:
                 with contextlib.suppress(Exception):
-                    rt.sim.release_conveyor()
-                await asyncio.sleep(0.3)
+                    await conveyor.hold_at_station(False)
         return {"inspected": run.done, "inspection_ids": run.ids, "decisions": decisions,
                 "stopped": run.stop_requested}  # fmt: skip
 

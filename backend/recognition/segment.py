@@ -27,10 +27,11 @@ initialised from the difference with the empty-belt background.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from vision.errors import VisionCellError
 from vision.segmentation import active_contour, iou, mask_from_contour, resample_closed
@@ -102,8 +103,12 @@ def foreground_mask(
     *,
     min_diff: int = 12,
     min_area_frac: float = 0.002,
+    near_px: ArrayLike | None = None,
 ) -> NDArray[np.bool_]:
-    """The largest blob that differs from ``background`` (step 1), holes filled.
+    """The largest blob that differs from ``background`` (step 1), holes filled; with
+    ``near_px``, the blob nearest that pixel instead, of those at least a tenth of the
+    largest (the station's pixel: a neighbour on the belt, partly in view, may be larger
+    than the part at the station; a speck of noise is not a part).
 
     Parameters
     ----------
@@ -113,6 +118,9 @@ def foreground_mask(
         Smallest channel difference (grey levels) counted as foreground.
     min_area_frac : float
         Smallest blob, as a fraction of the image area.
+    near_px : array_like of shape (2,), optional
+        ``(u, v)`` pixel: of the blobs of at least ``min_area_frac`` and a tenth of the
+        largest blob, the one with a pixel nearest it (ties: the larger).
 
     Raises
     ------
@@ -120,6 +128,11 @@ def foreground_mask(
         Nothing differs enough from the background.
     """
     _check_pair(image, background)
+    near = None
+    if near_px is not None:
+        near = np.asarray(near_px, dtype=np.float64).reshape(-1)
+        if near.shape != (2,) or not np.isfinite(near).all():
+            raise ValueError(f"near_px must be a finite (u, v) pixel, got {near_px!r}")
     a = cv2.GaussianBlur(image, (5, 5), 1.2).astype(np.int16)
     b = cv2.GaussianBlur(background, (5, 5), 1.2).astype(np.int16)
     diff = np.abs(a - b).max(axis=2).astype(np.uint8)
@@ -130,8 +143,12 @@ def foreground_mask(
     if n <= 1:
         raise SegmentationFailed("nothing in the image differs from the empty-belt background")
     k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    min_area = min_area_frac * image.shape[0] * image.shape[1]
+    if near is not None:
+        least = max(min_area, NEAR_MIN_SHARE * float(stats[k, cv2.CC_STAT_AREA]))
+        k = _nearest_blob(labels, stats, near, least, default=k)
     area = int(stats[k, cv2.CC_STAT_AREA])
-    if area < min_area_frac * image.shape[0] * image.shape[1]:
+    if area < min_area:
         raise SegmentationFailed(
             f"the largest change from the background covers {area} px, under "
             f"{min_area_frac:.1%} of the image: is the object at the station?"
@@ -169,6 +186,7 @@ def segment_object(
     max_num_iter: int = 600,
     min_agreement: float = 0.6,
     recover_cut: bool = True,
+    near_px: ArrayLike | None = None,
 ) -> ObjectRegion:
     """Segment the object in ``image`` against ``background`` (module docstring).
 
@@ -190,6 +208,8 @@ def segment_object(
     recover_cut : bool
         Add back the parts of the foreground the snake cut off (:func:`cut_off_parts`):
         ``method="active contour + cut-off parts"``, the pixels added in ``note``.
+    near_px : array_like of shape (2,), optional
+        Segment the blob nearest this pixel (:func:`foreground_mask`), not the largest.
 
     Raises
     ------
@@ -198,7 +218,7 @@ def segment_object(
     """
     if not 0.0 <= margin_px <= 100.0:
         raise ValueError(f"margin_px must be in [0, 100], got {margin_px!r}")
-    blob = foreground_mask(image, background)
+    blob = foreground_mask(image, background, near_px=near_px)
     init = _initial_contour(blob, margin_px, n_points)
     snake = active_contour(image, init, balloon=balloon, max_num_iter=max_num_iter)
     mask = mask_from_contour(snake.contour, blob.shape)
@@ -238,6 +258,26 @@ def segment_object(
         method="active contour + cut-off parts",
         note=f"{int(cut.sum())} px of the background difference the contour cut off added back",
     )  # fmt: skip
+
+
+#: With ``near_px``: the smallest blob taken, as a share of the largest.
+NEAR_MIN_SHARE = 0.1
+
+
+def _nearest_blob(labels: NDArray[Any], stats: NDArray[Any], near: NDArray[np.float64],
+                  min_area: float, *, default: int) -> int:  # fmt: skip
+    """The label of the blob (of at least ``min_area`` pixels) with a pixel nearest
+    ``near`` (ties: the larger); ``default`` when none is large enough."""
+    best, key = default, None
+    for k in range(1, stats.shape[0]):
+        area = int(stats[k, cv2.CC_STAT_AREA])
+        if area < min_area:
+            continue
+        ys, xs = np.nonzero(labels == k)
+        d = float(np.min(np.hypot(xs - near[0], ys - near[1])))
+        if key is None or (d, -area) < key:
+            best, key = k, (d, -area)
+    return best
 
 
 def _fill(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:

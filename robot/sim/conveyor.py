@@ -1,8 +1,10 @@
-"""The simulated belt behind the :class:`~robot.drivers.conveyor.ConveyorDriver` protocol."""
+"""The simulated belt behind the :class:`~robot.drivers.conveyor.ControlledConveyor` protocol."""
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
+
+from robot.drivers.conveyor import BeltStatus
 
 if TYPE_CHECKING:
     from robot.sim.engine import SimEngine
@@ -17,6 +19,7 @@ class SimConveyor:
 
     def __init__(self, engine: SimEngine) -> None:
         self.engine = engine
+        self._own_dwell: float | str | None = "none held"
 
     @property
     def halted(self) -> bool:
@@ -30,3 +33,29 @@ class SimConveyor:
     async def resume(self) -> None:
         """Let the belt run again (if it was running)."""
         self.engine.resume_conveyor()
+
+    def status(self) -> BeltStatus:
+        """The belt's state; ``objects`` counts the objects riding it (the simulator knows)."""
+        st = self.engine.conveyor_state
+        return BeltStatus(bool(st.running), bool(st.halted), str(st.mode), float(st.speed_m_s),
+                          bool(st.at_station), float(st.travel_m), len(self.engine.objects()))  # fmt: skip
+
+    async def set_running(self, running: bool) -> BeltStatus:
+        """Start or stop the belt (refused while the emergency stop holds it)."""
+        self.engine.configure_conveyor(running=bool(running))
+        return self.status()
+
+    async def release(self) -> None:
+        """Index mode: let the object at the station go on."""
+        self.engine.release_conveyor()
+
+    async def hold_at_station(self, hold: bool) -> None:
+        """Hold each object at the station until released (the belt's dwell kept aside),
+        or give the belt its own dwell back."""
+        if hold:
+            if self._own_dwell == "none held":
+                self._own_dwell = self.engine.conveyor_state.dwell_s
+            self.engine.configure_conveyor(dwell_s=None)
+        elif self._own_dwell != "none held":
+            dwell, self._own_dwell = self._own_dwell, "none held"
+            self.engine.configure_conveyor(dwell_s=dwell)

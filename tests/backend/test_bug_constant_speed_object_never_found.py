@@ -119,7 +119,8 @@ def _find(belt, cell: _Cell):
     ctx = _ctx(belt, cell)
     opts = service.InspectOptions(wait_s=2.0)
     still = _render(0.0)
-    return asyncio.run(service._find(ctx, opts, Q, still, {}))
+    found = asyncio.run(service._find(ctx, opts, Q, still, {}))
+    return found.frame, found.travel_m, found.bg
 
 
 def _box_offset(cell: _Cell, travel: float) -> float:

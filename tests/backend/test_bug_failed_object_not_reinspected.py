@@ -1,8 +1,9 @@
 """Bug (fault campaign): in index mode a continuous run waited, before every object but the
 first, for the station to empty.  After a ``failed`` inspection (camera stall, link drop)
 the object is still there, so the run waited ``wait_s``, stored a second failure and the
-object was never inspected.  Now the run looks at the station again after a failure, and
-holds (no motion) while the camera or the arm's link is down or the database is away."""
+object was never inspected.  Now the run looks at the station again after a failure (the
+belt keeps the part there: it is released only after a complete inspection), and holds (no
+motion) while the camera or the arm's link is down or the database is away."""
 
 from __future__ import annotations
 
@@ -12,12 +13,40 @@ from types import SimpleNamespace
 from backend.cell.events import CameraStatus
 from backend.inspection import service
 from backend.jobs import JobManager
+from robot.drivers.conveyor import BeltStatus
+
+
+class _Conveyor:
+    """An indexing belt that records what the run asks of it."""
+
+    name = "belt"
+    halted = False
+
+    def __init__(self) -> None:
+        self.calls: list[str] = []
+
+    def status(self) -> BeltStatus:
+        return BeltStatus(True, False, "index", 0.1, True, 0.0, None)
+
+    async def halt(self) -> None: ...
+
+    async def resume(self) -> None: ...
+
+    async def set_running(self, running: bool) -> BeltStatus:
+        return self.status()
+
+    async def release(self) -> None:
+        self.calls.append("release")
+
+    async def hold_at_station(self, hold: bool) -> None:
+        self.calls.append(f"hold {hold}")
 
 
 class _Cell:
     def __init__(self) -> None:
         self.camera_ok = True
         self.connected = True
+        self.conveyors = [_Conveyor()]
 
     def check_can_move(self) -> None:
         pass
@@ -52,8 +81,10 @@ async def test_the_run_looks_again_after_a_failure_and_holds_while_not_ready(mon
     async def fake_context(rt):
         return SimpleNamespace()
 
-    async def fake_inspect(ctx, opts, job=None, *, clear_first=False, db_wait_s=None):
-        seen.append((clear_first, cell.camera_ok))
+    async def fake_inspect(ctx, opts, job=None, *, tracker=None, waiting=None, db_wait_s=None):
+        belt = cell.conveyors[0]
+        seen.append((belt.calls.count("release"), cell.camera_ok))
+        assert tracker is not None and waiting.forever  # a run waits for parts until stopped
         d = next(decisions)
         if d == "failed":  # the fault: the camera fails, the database goes for 2 checks
             cell.camera_ok = False
@@ -68,9 +99,10 @@ async def test_the_run_looks_again_after_a_failure_and_holds_while_not_ready(mon
     run.job.on_report = lambda j: messages.append(j.message)
     await rt.jobs.wait(run.job)
     assert run.job.state.value == "done", run.job.error
-    # first object: nothing to clear; after a complete one: wait for it to leave; after a
-    # failed one: look at the same object again (no clearing)
-    assert [c for c, _ in seen] == [False, True, False, True, False]
+    # the run holds each part at the station; after a complete inspection the belt brings
+    # the next one, after a failed one the run looks at the same part again
+    assert [c for c, _ in seen] == [0, 1, 1, 2, 2]
+    assert cell.conveyors[0].calls == ["hold True", "release", "release", "release", "hold False"]
     assert all(ok for _, ok in seen)  # never started while the camera was failing
     assert any("holding: camera cam: camera stalled" in m for m in messages)
     assert any("database unavailable" in m for m in messages)

@@ -138,22 +138,40 @@ def test_estop_during_inspection_ends_it_failed_with_reason(cell):
     client, h = cell
     op = h["operator"]
     engine = client.app.state.runtime.sim
+    if client.get("/api/models", headers=op).json()["count"] == 0:  # run alone
+        _teach(client, h["engineer"], engine, engine.config.layout.conveyor.station_s_m)
     engine.clear_objects()
     engine.configure_conveyor(running=False)
     before = client.get("/api/inspections", headers=op).json()["count"]
+    # Waiting for a part is no inspection: an e-stop then cancels the job and stores nothing.
     r = client.post("/api/inspections", json={"wait_s": 60}, headers=op)
     assert r.status_code == 202, r.text
     job_id = r.json()["job"]["id"]
-    _wait(client, op, job_id, until="waiting for an object", timeout_s=60)
-    time.sleep(0.5)
+    _wait(client, op, job_id, until="waiting for a part", timeout_s=60)
+    assert client.post("/api/robot/estop", headers=op).status_code in (200, 202, 204)
+    job = _wait(client, op, job_id, timeout_s=30)
+    assert job["state"] == "cancelled", job
+    assert client.get("/api/inspections", headers=op).json()["count"] == before
+    assert client.post("/api/robot/reset", headers=h["engineer"]).status_code in (200, 202, 204)
+    # During an inspection: one complete failed row with the reason, nothing partial.
+    engine.spawn("gear-housing", s_m=engine.config.layout.conveyor.station_s_m, yaw_rad=0.3)
+    r = client.post("/api/inspections", json={"wait_s": 60}, headers=op)
+    assert r.status_code == 202, r.text
+    job_id = r.json()["job"]["id"]
+    t0 = time.monotonic()
+    while not any(w in client.get(f"/api/jobs/{job_id}", headers=op).json()["job"]["message"]
+                  for w in ("inspecting the part", "viewpoint")):  # fmt: skip
+        assert time.monotonic() - t0 < 120, "the inspection never began"
+        time.sleep(0.05)
     assert client.post("/api/robot/estop", headers=op).status_code in (200, 202, 204)
     job = _wait(client, op, job_id, timeout_s=30)
     assert job["state"] == "cancelled", job
     page = client.get("/api/inspections?limit=500", headers=op).json()
-    assert page["count"] == before + 1  # one complete row, nothing partial
+    assert page["count"] == before + 1
     row = page["data"][0]
     assert row["decision"] == "failed" and "emergency stop" in row["reason"], row
     assert client.post("/api/robot/reset", headers=h["engineer"]).status_code in (200, 202, 204)
+    engine.clear_objects()
 
 
 def test_a_pose_on_too_little_is_looked_at_again_from_the_top(cell, monkeypatch):

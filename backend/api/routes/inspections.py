@@ -46,7 +46,11 @@ class InspectIn(BaseModel):
     policy: Policy = "two-views"
     sort: bool = Field(False, description="Pick and sort into the part's bin")
     max_views: int = Field(3, ge=1, le=3)
-    wait_s: float = Field(60.0, ge=0.0, le=service.MAX_WAIT_S, allow_inf_nan=False)
+    wait_s: float = Field(
+        60.0, ge=0.0, le=service.MAX_WAIT_S, allow_inf_nan=False,
+        description="One inspection: longest wait for a part, s (then its job fails no_object "
+        "and nothing is stored); a run waits until a part comes or it is stopped",
+    )  # fmt: skip
     speed: float | None = Field(None, gt=0.0, le=1.0, allow_inf_nan=False)
     balance_light: bool = Field(
         True, description="Scale the views back to the teach light by the belt's colour"

@@ -79,10 +79,16 @@ class ObjectIn(BaseModel):
         description="Catalogue name (GET /api/sim/catalogue)",
         examples=["wheel-5spoke"],
     )
+    at: Literal["station", "entry"] | None = Field(
+        None,
+        description="Where to put it: the inspection station or the belt's entry (give this "
+        "or position_along_belt_m, not both; neither: the station while the belt is stopped, "
+        "the entry while it runs)",
+    )
     position_along_belt_m: (
         Annotated[
             float,
-            bounded_float(0.0, 100.0, "Distance from the belt's entry, m (default: the entry)"),
+            bounded_float(0.0, 100.0, "Distance from the belt's entry, m (default: see at)"),
         ]
         | None
     ) = None
@@ -106,6 +112,22 @@ class ObjectIn(BaseModel):
         if v not in names:
             raise ValueError(f"unknown catalogue name {v!r}; valid names: {', '.join(names)}")
         return v
+
+    @model_validator(mode="after")
+    def _one_place(self) -> ObjectIn:
+        if self.at is not None and self.position_along_belt_m is not None:
+            raise ValueError(
+                f"give at or position_along_belt_m, not both (got at={self.at!r}, "
+                f"position_along_belt_m={self.position_along_belt_m!r})"
+            )
+        return self
+
+    def along_belt_m(self, station_s_m: float, belt_running: bool) -> float:
+        """Where along the belt (metres from its entry) the object goes."""
+        if self.position_along_belt_m is not None:
+            return float(self.position_along_belt_m)
+        at = self.at or ("entry" if belt_running else "station")
+        return float(station_s_m) if at == "station" else 0.0
 
 
 class LightIn(BaseModel):
@@ -229,13 +251,16 @@ async def read_objects(
 @router.post(
     "/objects",
     status_code=status.HTTP_201_CREATED,
-    summary="Put an object on the belt",
+    summary='Put an object on the belt: at the station ("at": "station"), its entry '
+    '("at": "entry") or a position along it; by default at the station while the belt is '
+    "stopped, at the entry while it runs",
     response_model=ObjectOut,
 )
 async def create_object(_: EngineerUser, sim: SimDep, body: ObjectIn) -> dict[str, Any]:
+    station = float(sim.config.layout.conveyor.station_s_m)
     obj = sim.spawn(
         body.name,
-        s_m=body.position_along_belt_m or 0.0,
+        s_m=body.along_belt_m(station, bool(sim.conveyor_state.running)),
         lateral_m=body.lateral_m,
         yaw_rad=body.yaw_rad,
     )

@@ -3,6 +3,10 @@
 // every model's score as bars, the viewpoints visited); a filmstrip of the last results
 // (images load lazily); counters per shift and the throughput over the last minute.
 //
+// The belt card shows the belt's state (GET /api/belt): a run waiting for a part says so in
+// its job line, and an operator starts or stops the belt here; an engineer on the simulator
+// can put a catalogue part at the station.
+//
 // Counters: the shift start is kept in this browser (localStorage, per cell), the counts are
 // the server's (GET /api/inspections?since=<shift start>&decision=...): a reload or a second
 // console shows the same numbers, and "New shift" needs no server state or role.
@@ -76,8 +80,43 @@ async function stopRun() {
   if (r) setText(q("#insp-run-state"), "stopping after the current object…");
 }
 
+// -- the belt ----------------------------------------------------------------------------------
+async function loadBelt() {
+  const gen = generation;
+  let b;
+  try { b = await api("GET", "/belt"); } catch (e) { return; }
+  if (gen !== generation || !root) return;
+  setText(q("#belt-state"), b.summary);
+  const have = !!b.belt;
+  q("#belt-start").disabled = !have || b.belt.running || b.belt.halted;
+  q("#belt-stop").disabled = !have || !b.belt.running;
+}
+
+async function setBelt(running) {
+  const r = await command("POST", "/belt", { running });
+  if (r) setText(q("#belt-state"), r.summary);
+  loadBelt();
+}
+
+async function loadCatalogue() {
+  if (!ctx.can("engineer")) return;
+  let cat;
+  try { cat = await api("GET", "/sim/catalogue?limit=100"); } catch (e) { return; }  // not simulated
+  if (!root) return;
+  q("#belt-place-name").replaceChildren(...cat.data.map((c) => el("option", { value: c.name }, c.name)));
+  q("#belt-place").hidden = false;
+}
+
+async function placePart() {
+  const name = q("#belt-place-name").value;
+  const r = await command("POST", "/sim/objects", { name, at: "station" });
+  if (r) setText(q("#belt-state"), `${name} placed at the station (object ${r.object.id})`);
+  setTimeout(loadBelt, 1000);
+}
+
 function onJob(job) {
   if (!root) return;
+  if (job.kind === "inspection-run" || job.kind === "inspect") loadBelt();
   if (job.kind === "inspection-run") {
     runJob = job.state === "running" ? job : null;
     q("#insp-stop").disabled = !runJob;
@@ -211,6 +250,15 @@ function build() {
     el("p", { className: "small" }, el("span", { id: "shift-since" }), " ",
       el("button", { id: "new-shift", type: "button", className: "small-button", on: { click: newShift } }, "New shift")),
     el("p", { id: "insp-message", className: "error", role: "status" }));
+  const belt = el("div", { className: "card insp-belt" },
+    el("h2", {}, "Belt"),
+    el("p", { id: "belt-state", className: "small", role: "status" }, "-"),
+    el("div", { className: "row", dataset: { minRole: "operator" } },
+      el("button", { id: "belt-start", type: "button", disabled: "", on: { click: () => setBelt(true) } }, "Start belt"),
+      el("button", { id: "belt-stop", type: "button", disabled: "", on: { click: () => setBelt(false) } }, "Stop belt")),
+    el("div", { id: "belt-place", className: "row", hidden: "", dataset: { minRole: "engineer" } },
+      el("label", { className: "inline" }, "Part ", el("select", { id: "belt-place-name" })),
+      el("button", { id: "belt-place-go", type: "button", on: { click: placePart } }, "Place at the station")));
   const live = el("div", { className: "card insp-live" },
     el("h2", {}, "Last result ", el("span", { id: "live-label", className: "decision" }, "-")),
     el("p", { id: "live-reason", className: "small" }),
@@ -220,7 +268,7 @@ function build() {
     el("h3", {}, "Scores ", el("span", { id: "live-threshold-note", className: "small" })),
     el("canvas", { id: "live-scores", className: "chart bars" }));
   const strip = el("div", { className: "card insp-strip" }, el("h2", {}, "Recent results"), el("div", { id: "filmstrip", className: "filmstrip" }));
-  return el("section", { id: "inspection-page", className: "page" }, el("div", { className: "insp-grid" }, controls, live, strip));
+  return el("section", { id: "inspection-page", className: "page" }, el("div", { className: "insp-grid" }, controls, belt, live, strip));
 }
 
 export default {
@@ -244,7 +292,9 @@ export default {
       if (run) onJob(run);
     }).catch(() => {});
     refresh();
-    timer = setInterval(() => { if (document.visibilityState === "visible") loadCounters(); }, REFRESH_MS);
+    loadBelt();
+    loadCatalogue();
+    timer = setInterval(() => { if (document.visibilityState === "visible") { loadCounters(); loadBelt(); } }, REFRESH_MS);
   },
 
   unmount() {
