@@ -17,8 +17,12 @@ With the object at the station the job
    background difference (:mod:`backend.recognition.segment`), extracts the features inside
    the object's region and stores the trained view (image, mask, features, joints, camera
    pose) in one transaction with the others, then in the live index;
-4. recomputes the automatic threshold (:mod:`backend.recognition.thresholds`) and reports
-   the models confusable from the top.
+4. measures the part's height from the top view's and the side views' regions
+   (:mod:`backend.recognition.geometry`; a 2d model's teach takes one side view more for
+   this alone) and stores it with the model, unless an engineer entered one: the pick
+   needs it.  When it cannot be measured the result says so and the console asks for it;
+5. recomputes the automatic threshold (:mod:`backend.recognition.thresholds`) and reports
+   the models confusable from the top, with what to add when the views are too few.
 
 Progress is reported per shot.  Nothing is stored unless every shot succeeded.
 """
@@ -29,7 +33,7 @@ import asyncio
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -40,10 +44,14 @@ from backend.db.session import Database
 from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
 from backend.recognition import thresholds
 from backend.recognition.index import LiveIndex
-from backend.recognition.models import get_model
+from backend.recognition.geometry import HeightMeasurement, Silhouette, measure_height
+from backend.recognition.index import IndexedModel
+from backend.recognition.models import get_model, set_measured_geometry
 from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
 from backend.recognition.views import ViewInput, add_views, view_public
 from robot.collision import CollisionWorld
+from robot.kinematics import T_base_ee
+from vision.camera import PinholeCamera
 from vision.errors import InvalidInput, VisionCellError
 from vision.segmentation import iou
 
@@ -183,6 +191,8 @@ class Shot:
     T_base_cam: NDArray[np.float64]
     reason: str = ""
     """Why the planner replaced the nominal viewpoint (empty when it did not)."""
+    geometry_only: bool = False
+    """Taken only to measure the part's height (a 2d model's side view): not stored."""
 
     @property
     def key(self) -> tuple[float, ...]:
@@ -275,6 +285,7 @@ async def run_teach(
     store: BackgroundStore,
     world: CollisionWorld | None = None,
     by: audit.By | None = None,
+    camera: PinholeCamera | None = None,
 ) -> dict[str, Any]:
     """The teach job's body (module docstring); runs holding the arm.
 
@@ -290,6 +301,9 @@ async def run_teach(
         Camera mounting (the active hand-eye calibration, or the nominal one).
     store : BackgroundStore
         Backgrounds of earlier teaches (read for ``"stored"``, written for ``"grab"``).
+    camera : PinholeCamera, optional
+        The camera model, for measuring the part's height (default: the nominal lens for
+        the frames' size).
     """
     async with db.session() as session:
         model = await get_model(session, model_id)
@@ -304,6 +318,13 @@ async def run_teach(
         top_rolls_rad=options.top_rolls_rad,
         world=world,
     )
+    if 1 in vps and not any(s.viewpoint in (2, 3) for s in shots):
+        # No side view among the views to store: one more, for the height alone.
+        extra = await asyncio.to_thread(
+            _geometry_shot, point, T_ee_cam, options.object_height_m, world
+        )
+        if extra is not None and (options.background == "grab" or store.get(extra) is not None):
+            shots.append(extra)
     n = len(shots)
     steps = 2 * n if options.background == "grab" else n
     done = 0
@@ -329,6 +350,8 @@ async def run_teach(
             backgrounds[k] = bg
     inputs: list[ViewInput] = []
     shots_out: list[dict[str, Any]] = []
+    silhouettes: list[tuple[Shot, Silhouette]] = []
+    frame_size: tuple[int, int] = (640, 480)
     for k, shot in enumerate(shots):
         job.report(
             done / steps,
@@ -345,6 +368,25 @@ async def run_teach(
         mask = region.mask
         state = frame.robot_state
         q_seen = np.asarray(getattr(state, "q", shot.q), dtype=np.float64)
+        frame_size = (int(frame.rgb.shape[1]), int(frame.rgb.shape[0]))
+        silhouettes.append((shot, Silhouette(mask, T_base_ee(q_seen) @ T_ee_cam)))
+        shots_out.append(
+            {
+                "viewpoint": shot.viewpoint,
+                "roll_rad": shot.roll_rad,
+                "joints": [float(v) for v in q_seen],
+                "mask_px": int(mask.sum()),
+                "segmentation": region.method,
+                "segmentation_note": region.note,
+                "planner": shot.reason,
+                "look_s": round(t1 - t0, 3),
+                "segment_s": round(time.monotonic() - t1, 3),
+                "geometry_only": shot.geometry_only,
+            }
+        )
+        done += 1
+        if shot.geometry_only:
+            continue
         inputs.append(
             ViewInput(
                 frame.rgb,
@@ -358,22 +400,11 @@ async def run_teach(
                 name=f"viewpoint {shot.viewpoint} roll {math.degrees(shot.roll_rad):.0f} deg",
             )
         )
-        shots_out.append(
-            {
-                "viewpoint": shot.viewpoint,
-                "roll_rad": shot.roll_rad,
-                "joints": [float(v) for v in q_seen],
-                "mask_px": int(mask.sum()),
-                "segmentation": region.method,
-                "segmentation_note": region.note,
-                "planner": shot.reason,
-                "look_s": round(t1 - t0, 3),
-                "segment_s": round(time.monotonic() - t1, 3),
-            }
-        )
-        done += 1
+    job.report(done / steps, "measuring the part's height")
+    geometry = await _measure(silhouettes, camera, frame_size, float(point[2]))
     job.report(done / steps, "storing the views")
     rows = await add_views(db, live, model_id, inputs, replace=options.replace, by=by)
+    geometry_out = await _store_geometry(db, live, model_id, geometry)
     if options.threshold:
         job.report(1.0, "choosing the threshold")
         outcome = await thresholds.recompute(db, live)
@@ -383,9 +414,71 @@ async def run_teach(
         "model": {"id": model_id, "name": name, "kind": kind},
         "views": [view_public(r) for r in rows],
         "shots": shots_out,
+        "geometry": geometry_out,
         "threshold": outcome.public(),
         "confusable_from_top": list(outcome.confusable),
     }
+
+
+def _geometry_shot(
+    point: NDArray[np.float64],
+    T_ee_cam: NDArray[np.float64],
+    object_height_m: float,
+    world: CollisionWorld | None,
+) -> Shot | None:
+    """The side view a top-only teach takes to measure the part's height (the inner side
+    view, else the outer one; None when neither can be planned)."""
+    for vp in (2, 3):
+        try:
+            (shot,) = plan_shots(point, (vp,), T_ee_cam=T_ee_cam, object_height_m=object_height_m,
+                                 top_rolls_rad=(0.0,), world=world)  # fmt: skip
+        except VisionCellError:
+            continue
+        return replace(shot, geometry_only=True)
+    return None
+
+
+async def _measure(
+    silhouettes: list[tuple[Shot, Silhouette]],
+    camera: PinholeCamera | None,
+    frame_size: tuple[int, int],
+    surface_z_m: float,
+) -> HeightMeasurement:
+    """The part's height from the first top view (roll 0) and every side view."""
+    tops = [s for shot, s in silhouettes if shot.viewpoint == 1]
+    sides = [s for shot, s in silhouettes if shot.viewpoint in (2, 3)][:4]
+    if not tops or not sides:
+        return HeightMeasurement(None, (), (0.0, 0.0), "no side view was taken")
+    if camera is None:
+        from backend.calibration import nominal_camera
+
+        camera = nominal_camera(*frame_size)
+    try:
+        return await asyncio.to_thread(
+            measure_height, tops[0], sides, camera, surface_z_m=surface_z_m
+        )
+    except VisionCellError as exc:
+        return HeightMeasurement(None, (), (0.0, 0.0), f"not measured: {exc.detail}")
+
+
+async def _store_geometry(
+    db: Database, live: LiveIndex, model_id: int, got: HeightMeasurement
+) -> dict[str, Any]:
+    """Store a measured height with the model (unless an engineer entered one) and say what
+    the model has now; ``needed`` is True when it has no height (the console asks)."""
+    out: dict[str, Any] = {"measured": got.public(), "stored": False}
+    if got.height_m is not None:
+        row = await set_measured_geometry(db, model_id, got.height_m, None)
+        out["stored"] = row is not None
+    async with db.session() as session:
+        row = await get_model(session, model_id)
+    live.put_model(IndexedModel.of(row))
+    out.update(height_m=row.height_m, source=row.geometry_source or "",
+               needed=row.height_m is None)  # fmt: skip
+    if row.height_m is None:
+        out["ask"] = (f"The part's height could not be measured ({got.note}). Enter it (mm) so "
+                      "the cell can pick the part into its bin.")  # fmt: skip
+    return out
 
 
 async def start_teach(
@@ -398,12 +491,15 @@ async def start_teach(
     store: BackgroundStore,
     point: NDArray[np.float64] | None = None,
     by: audit.By | None = None,
+    camera: PinholeCamera | None = None,
 ) -> Any:
     """Check what can be checked at once (the model exists, the arm is free), then start
     the teach as a motion job; returns the job.
 
     ``point`` defaults to the station point of the cell's conveyor; the camera mounting is
-    the active hand-eye calibration of the cell, else the nominal one.
+    the active hand-eye calibration of the cell, else the nominal one; the camera model
+    (for measuring the part's height) the active intrinsics, else ``camera``, else the
+    nominal lens.
     """
     from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
     from robot.sim.world import ConveyorSpec
@@ -413,7 +509,9 @@ async def start_teach(
         cell_id = getattr(cell, "db_id", None)
         T_ee_cam = None
         if cell_id is not None:
-            T_ee_cam = (await active_camera_calibration(session, cell_id)).T_ee_cam
+            cal = await active_camera_calibration(session, cell_id)
+            T_ee_cam = cal.T_ee_cam
+            camera = cal.camera or camera
     T = np.asarray(NOMINAL_T_EE_CAM if T_ee_cam is None else T_ee_cam, dtype=np.float64)
     p = np.asarray(ConveyorSpec().station_point if point is None else point, dtype=np.float64)
     if p.shape != (3,) or not np.all(np.isfinite(p)) or np.linalg.norm(p[:2]) > 1.6:
@@ -434,6 +532,7 @@ async def start_teach(
             T_ee_cam=T,
             store=store,
             by=by,
+            camera=camera,
         )
 
     params = {
