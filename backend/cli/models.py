@@ -188,8 +188,10 @@ def add_model(
     threshold: Annotated[float | None, typer.Option(help="Own threshold in [0, 1]")] = None,
     height_mm: Annotated[
         float | None,
-        typer.Option(help="Part height above its sitting base, mm, in (0, 500] (default: "
-                     "measured by the teach)"),
+        typer.Option(
+            help="Part height above its sitting base, mm, in (0, 500] (default: "
+            "measured by the teach)"
+        ),
     ] = None,
 ) -> None:
     """Create an object model; prints its id on the last line."""

@@ -167,7 +167,11 @@ def pick_outcome(pick: Any, decision: str) -> dict[str, Any]:
     how = pick.get("how") if isinstance(pick.get("how"), str) else ""
     if not pick.get("sorted"):
         if pick.get("ok"):
-            return {"outcome": "approach", "bin": None, "text": "sorting off: moved to the approach pose"}
+            return {
+                "outcome": "approach",
+                "bin": None,
+                "text": "sorting off: moved to the approach pose",
+            }
         return {"outcome": "not_picked", "bin": None, "text": f"not picked: {reason}"}
     reject = bool(pick.get("reject")) if "reject" in pick else (b == "reject")
     if not pick.get("ok"):
@@ -175,7 +179,8 @@ def pick_outcome(pick: Any, decision: str) -> dict[str, Any]:
         return {"outcome": "not_placed", "bin": b, "text": f"not placed{where}: {reason}"}
     if reject:
         why = {"unknown": "not a taught model", "failed": "the inspection failed"}.get(
-            decision, how.rsplit("; ", 1)[-1] if how else "rejected")
+            decision, how.rsplit("; ", 1)[-1] if how else "rejected"
+        )
         return {"outcome": "rejected", "bin": b, "text": f"rejected into {b}: {why}"}
     return {"outcome": "placed", "bin": b, "text": f"placed in {b}"}
 

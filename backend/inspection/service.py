@@ -919,16 +919,16 @@ async def _pick_stage(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], po
         state["pick"] = await _pick(ctx, opts, state, pose, stored_h, radius, grasp)
     elif recognised:
         if stored_h is not None:
-            top, why = min(0.5, stored_h + MEASURED_MARGIN_M), (
-                f"height {stored_h * 1e3:.0f} mm {source or 'stored'}: guarded descent from "
-                f"{MEASURED_MARGIN_M * 1e3:.0f} mm above it")
+            top = min(0.5, stored_h + MEASURED_MARGIN_M)
+            why = (f"height {stored_h * 1e3:.0f} mm {source or 'stored'}: guarded descent from "
+                   f"{MEASURED_MARGIN_M * 1e3:.0f} mm above it")  # fmt: skip
             if pose is None:
                 why += "; no pose: over the footprint's centre"
         else:
-            top, why = UNKNOWN_MAX_HEIGHT_M, (
-                f"no height stored for {state['model']}: guarded descent from "
-                f"{UNKNOWN_MAX_HEIGHT_M * 1e3:.0f} mm (teach the model again or enter its "
-                "height on the Models page to pick it directly)")
+            top = UNKNOWN_MAX_HEIGHT_M
+            why = (f"no height stored for {state['model']}: guarded descent from "
+                   f"{UNKNOWN_MAX_HEIGHT_M * 1e3:.0f} mm (teach the model again or enter its "
+                   "height on the Models page to pick it directly)")  # fmt: skip
         state["pick"] = await _pick_unknown(ctx, opts, state, pose, at, radius,
                                             max_height_m=top, why=why)  # fmt: skip
     else:
@@ -943,7 +943,8 @@ def _note_pick(state: dict[str, Any]) -> None:
         return
     where = f" into {pick['bin']}" if pick.get("bin") else ""
     state["reason"] = (state["reason"] + "; " if state["reason"] else "") + (
-        f"not sorted{where}: {pick.get('reason', 'unknown')}")
+        f"not sorted{where}: {pick.get('reason', 'unknown')}"
+    )
 
 
 #: The second top view, taken when the first one's pose rests on too little

@@ -8,11 +8,14 @@ explained by a prism of height ``h`` when its viewing ray passes over the footpr
 height between the belt and ``h``.  The lowest height at which a ray is over the footprint
 is therefore the least ``h`` that pixel needs; for a camera looking down at the object, the
 silhouette's far outline (the top face's far edge) needs the whole height, every other
-pixel less.  The height is a high percentile of those needs over the side views' regions
-(a visual hull bound; Laurentini, "The visual hull concept for silhouette-based image
-understanding", IEEE PAMI 16(2), 1994), and the footprint is taken again on the plane of
-the height found (starting on the belt's plane, where the footprint is widest and the
-heights least) until the two agree.
+pixel less.  Each side view's height is a high percentile of those needs over its region
+(a lower bound for a part narrower at the top than its footprint, exact for a prism), and
+the part's height the largest of the side views' (silhouette constraints as in the visual
+hull; Laurentini, "The visual hull concept for silhouette-based image understanding", IEEE
+PAMI 16(2), 1994).  The footprint is taken again on the plane of the height found
+(starting on the belt's plane, where the footprint is widest and the heights least) until
+the two agree.  The pick starts its guarded descent a margin above this height, so an
+underestimate within the margin costs nothing.
 
 A 2d model is taught from the top only; its teach takes one side view more, used for this
 measurement alone (:mod:`backend.recognition.teach`).  When no side view gives a height
@@ -49,8 +52,9 @@ MAX_PIXELS = 6000
 #: Percentile of the side pixels' needed heights taken as the height (the far outline's
 #: pixels are few; the top one per cent are dropped as segmentation noise).
 PERCENTILE = 99.0
-#: Largest disagreement of two side views' heights for the measurement to be trusted, m.
-MAX_SPREAD_M = 0.02
+#: Largest disagreement of two side views' heights for the measurement to be trusted, m
+#: (beyond it one region is wrong: a shadow or a neighbour taken for the part).
+MAX_SPREAD_M = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,7 +161,7 @@ def _footprint(
     allp = np.concatenate(polys)
     x0, y0 = allp.min(axis=0) - 2 * CELL_M
     x1, y1 = allp.max(axis=0) + 2 * CELL_M
-    w, h = int(math.ceil((x1 - x0) / CELL_M)) + 1, int(math.ceil((y1 - y0) / CELL_M)) + 1
+    w, h = math.ceil((x1 - x0) / CELL_M) + 1, math.ceil((y1 - y0) / CELL_M) + 1
     if w * h > 4_000_000:  # more than 2 m x 2 m: not an object at the station
         return None
     grid = np.zeros((h, w), np.uint8)
@@ -179,7 +183,7 @@ def _needed_heights(
     ys, xs = np.nonzero(sil_mask)
     if len(xs) == 0:
         return np.zeros(0)
-    step = max(1, int(math.ceil(len(xs) / MAX_PIXELS)))
+    step = max(1, math.ceil(len(xs) / MAX_PIXELS))
     px = np.stack([xs[::step], ys[::step]], axis=1).astype(np.float64)
     d = _rays(px, camera, T)
     down = d[:, 2] < -1e-6
@@ -261,7 +265,7 @@ def measure_height(
         if not per:
             return HeightMeasurement(None, (), _extent(foot), "no side view's region lies "
                                      "over the top view's footprint")  # fmt: skip
-        new = float(np.mean(per))
+        new = float(max(per))  # each view's need is a lower bound: the largest is the best
         if abs(new - h) < 0.5 * STEP_M:
             h = new
             break

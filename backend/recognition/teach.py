@@ -43,9 +43,8 @@ from backend import audit
 from backend.db.session import Database
 from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
 from backend.recognition import thresholds
-from backend.recognition.index import LiveIndex
 from backend.recognition.geometry import HeightMeasurement, Silhouette, measure_height
-from backend.recognition.index import IndexedModel
+from backend.recognition.index import IndexedModel, LiveIndex
 from backend.recognition.models import get_model, set_measured_geometry
 from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
 from backend.recognition.views import ViewInput, add_views, view_public
@@ -286,6 +285,7 @@ async def run_teach(
     world: CollisionWorld | None = None,
     by: audit.By | None = None,
     camera: PinholeCamera | None = None,
+    T_ee_cam_seen: NDArray[np.float64] | None = None,
 ) -> dict[str, Any]:
     """The teach job's body (module docstring); runs holding the arm.
 
@@ -304,7 +304,12 @@ async def run_teach(
     camera : PinholeCamera, optional
         The camera model, for measuring the part's height (default: the nominal lens for
         the frames' size).
+    T_ee_cam_seen : ndarray of shape (4, 4), optional
+        The camera mounting the images are measured with (default ``T_ee_cam``): the
+        planner keeps the nominal mounting so the shots (and their stored backgrounds)
+        stay the same, the measurement needs the best one known.
     """
+    T_seen = np.asarray(T_ee_cam if T_ee_cam_seen is None else T_ee_cam_seen, dtype=np.float64)
     async with db.session() as session:
         model = await get_model(session, model_id)
         kind, name = model.kind.value, model.name
@@ -369,7 +374,7 @@ async def run_teach(
         state = frame.robot_state
         q_seen = np.asarray(getattr(state, "q", shot.q), dtype=np.float64)
         frame_size = (int(frame.rgb.shape[1]), int(frame.rgb.shape[0]))
-        silhouettes.append((shot, Silhouette(mask, T_base_ee(q_seen) @ T_ee_cam)))
+        silhouettes.append((shot, Silhouette(mask, T_base_ee(q_seen) @ T_seen)))
         shots_out.append(
             {
                 "viewpoint": shot.viewpoint,
@@ -492,14 +497,16 @@ async def start_teach(
     point: NDArray[np.float64] | None = None,
     by: audit.By | None = None,
     camera: PinholeCamera | None = None,
+    mounting: NDArray[np.float64] | None = None,
 ) -> Any:
     """Check what can be checked at once (the model exists, the arm is free), then start
     the teach as a motion job; returns the job.
 
     ``point`` defaults to the station point of the cell's conveyor; the camera mounting is
     the active hand-eye calibration of the cell, else the nominal one; the camera model
-    (for measuring the part's height) the active intrinsics, else ``camera``, else the
-    nominal lens.
+    and mounting the part's height is measured with: the active calibration, else
+    ``camera`` and ``mounting`` (the simulator's nominal ones, as inspections take them),
+    else the nominal lens and mounting.
     """
     from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
     from robot.sim.world import ConveyorSpec
@@ -513,6 +520,7 @@ async def start_teach(
             T_ee_cam = cal.T_ee_cam
             camera = cal.camera or camera
     T = np.asarray(NOMINAL_T_EE_CAM if T_ee_cam is None else T_ee_cam, dtype=np.float64)
+    T_seen = T if T_ee_cam is not None or mounting is None else np.asarray(mounting, np.float64)
     p = np.asarray(ConveyorSpec().station_point if point is None else point, dtype=np.float64)
     if p.shape != (3,) or not np.all(np.isfinite(p)) or np.linalg.norm(p[:2]) > 1.6:
         raise InvalidInput(
@@ -533,6 +541,7 @@ async def start_teach(
             store=store,
             by=by,
             camera=camera,
+            T_ee_cam_seen=T_seen,
         )
 
     params = {

@@ -43,11 +43,11 @@ __all__ = [
     "MIN_AUTO_THRESHOLD",
     "RECOMMENDED_ROUNDS",
     "ThresholdOutcome",
+    "advice",
     "back_to_automatic",
     "choice_from_detail",
     "confusable_pairs",
     "current_choice",
-    "advice",
     "deferred",
     "floored",
     "latest_settings",
@@ -272,7 +272,9 @@ async def current_choice(session: AsyncSession) -> ThresholdChoice:
     )
 
 
-def floored(choice: ThresholdChoice, floor: float = MIN_AUTO_THRESHOLD) -> tuple[ThresholdChoice, bool]:
+def floored(
+    choice: ThresholdChoice, floor: float = MIN_AUTO_THRESHOLD
+) -> tuple[ThresholdChoice, bool]:
     """``choice`` with every threshold it holds (global, per model, per viewpoint, the
     candidates and the own bars) raised to at least ``floor``; and whether any was raised
     (the rule's text then says so)."""

@@ -18,8 +18,8 @@ from typing import Any
 from sqlalchemy import func, select
 
 from backend.db.models import Cell, Inspection
-from backend.inspection.results import pick_outcome
 from backend.db.session import Database
+from backend.inspection.results import pick_outcome
 from backend.reports.filters import ReportFilters, conditions
 from vision.errors import InvalidInput
 

@@ -57,14 +57,14 @@ def _cylinder(r, h, at=(0.8, 0.0)):
     a = np.linspace(0, 2 * math.pi, 180, endpoint=False)
     ring = np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
     out = [np.column_stack([ring, np.full(len(a), z)]) for z in (0.0, h)]
-    return np.concatenate(out) + [at[0], at[1], SURFACE_Z]
+    return np.concatenate(out) + np.array([at[0], at[1], SURFACE_Z])
 
 
 def _shots(points, at=(0.8, 0.0)):
     """The top view from 0.45 m above and two side views 30 deg off vertical (inner and
     outer side, as the teach's planner places them)."""
     target = np.array([at[0], at[1], SURFACE_Z + 0.05])
-    top = _look_at(target + [0.0, 0.0, 0.45], target)
+    top = _look_at(target + np.array([0.0, 0.0, 0.45]), target)
     sides = []
     for sign in (-1.0, 1.0):
         off = np.array([sign * math.sin(math.radians(30)), 0.0, math.cos(math.radians(30))])

@@ -417,8 +417,9 @@ async def teach_model(
         store=store,
         point=None if body.point is None else np.asarray(body.point, dtype=np.float64),
         by=_by(user, body.reason),
-        # Without calibrated intrinsics: the simulator's lens (as inspections use it).
+        # Without a calibration: the simulator's lens and mounting (as inspections use them).
         camera=None if runtime.sim is None else runtime.sim.config.camera.pinhole,
+        mounting=None if runtime.sim is None else runtime.sim.config.camera.T_ee_cam,
     )
     return {"job": job.public()}
 
