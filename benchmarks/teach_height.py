@@ -3,11 +3,12 @@
     python -m benchmarks.teach_height [--json] [--objects 12] [--yaws 2]
 
 Procedure (simulated cell, rendered afresh, nothing stored): the teach's shots are planned
-at the station by :func:`backend.recognition.teach.plan_shots` (top view at roll 0 and the
-two side views), their empty-belt backgrounds grabbed, then each trainable catalogue entry
-lies at the station at ``--yaws`` yaws (evenly spread), is seen from those shots,
-segmented by the active contour from the backgrounds (as the teach does) and measured by
-:func:`backend.recognition.geometry.measure_height`.  The error is taken against the
+at the station by :func:`backend.recognition.teach.plan_shots` (the top view at its three
+rolls and the two side views), their empty-belt backgrounds grabbed, then each trainable
+catalogue entry lies at the station at ``--yaws`` yaws (evenly spread), is seen from those
+shots, segmented by the active contour from the backgrounds and its features extracted
+inside the region (as the teach does), and measured as the teach measures it (the top
+views' triangulated features, else the silhouettes: :mod:`backend.recognition.geometry`).  The error is taken against the
 catalogue's height (the top of its mesh's bounding box): that truth is read here only, for
 the comparison, never by the product.  The baseline is what a model without a measured
 height assumes (the tallest object the station admits, 0.25 m, and the search descent it
@@ -17,6 +18,7 @@ implies).
 from __future__ import annotations
 
 import argparse
+import asyncio
 import json
 import math
 import time
@@ -33,9 +35,12 @@ def run(*, objects: int = 12, yaws: int = 2) -> dict[str, Any]:
 
     headless_mujoco()
     from backend.calibration.autoplan import NOMINAL_T_EE_CAM
-    from backend.recognition.geometry import Silhouette, measure_height
+    from backend.recognition import teach
+    from backend.recognition.geometry import Silhouette, TopShot
+    from backend.recognition.index import FEATURE_OPTIONS
     from backend.recognition.segment import segment_object
-    from backend.recognition.teach import plan_shots
+    from backend.recognition.teach import TOP_ROLLS_RAD, plan_shots
+    from vision.recognition import ViewIndex
     from robot.kinematics import T_base_ee
     from robot.sim import CATALOGUE, SimEngine
     from robot.sim.imaging import capture
@@ -48,7 +53,8 @@ def run(*, objects: int = 12, yaws: int = 2) -> dict[str, Any]:
         names = [n for n, e in CATALOGUE.items() if e.trainable][:objects]
         point = np.asarray(belt.station_point, dtype=np.float64)
         shots = plan_shots(point, (1, 2, 3), T_ee_cam=NOMINAL_T_EE_CAM, object_height_m=0.1,
-                           top_rolls_rad=(0.0,))  # fmt: skip
+                           top_rolls_rad=TOP_ROLLS_RAD)  # fmt: skip
+        index = ViewIndex("sift", feature_options=FEATURE_OPTIONS.get("sift", {}))
         engine.clear_objects()
         backgrounds = {s.key: capture(engine, s.q).rgb for s in shots}
         rows = []
@@ -60,14 +66,18 @@ def run(*, objects: int = 12, yaws: int = 2) -> dict[str, Any]:
                 print(f"  {k + 1}/{len(names)} {name} at {math.degrees(yaw):.0f} deg", flush=True)
                 engine.clear_objects()
                 engine.spawn(name, s_m=belt.station_s_m, yaw_rad=yaw)
-                sils = []
+                sils, tops = [], []
                 for s in shots:
                     rgb = capture(engine, s.q).rgb
                     region = segment_object(rgb, backgrounds[s.key])
                     # the camera's mounting as the product takes it in the simulator
                     # (no hand-eye calibration: the simulator's nominal mounting)
-                    sils.append(Silhouette(region.mask, T_base_ee(s.q) @ T_ee_cam))
-                got = measure_height(sils[0], sils[1:], camera, surface_z_m=float(point[2]))
+                    T = T_base_ee(s.q) @ T_ee_cam
+                    sils.append((s, Silhouette(region.mask, T)))
+                    if s.viewpoint == 1:
+                        feats = index.features(rgb, mask=region.mask.astype(np.uint8))
+                        tops.append(TopShot(feats, T))
+                got = asyncio.run(teach._measure(sils, tops, camera, (640, 480), float(point[2])))
                 rows.append({
                     "name": name, "yaw_deg": round(math.degrees(yaw), 1),
                     "truth_mm": round(truth * 1e3, 1),
@@ -75,10 +85,11 @@ def run(*, objects: int = 12, yaws: int = 2) -> dict[str, Any]:
                     "error_mm": None if got.height_m is None
                     else round((got.height_m - truth) * 1e3, 1),
                     "per_view_mm": [round(v * 1e3, 1) for v in got.per_view_m],
-                    "note": got.note,
+                    "method": got.method, "note": got.note,
                 })  # fmt: skip
         errs = np.array([abs(r["error_mm"]) for r in rows if r["error_mm"] is not None])
         base = np.array([abs(BASELINE_M * 1e3 - r["truth_mm"]) for r in rows])
+        by_features = [r for r in rows if r["method"] == "features" and r["error_mm"] is not None]
         return {
             "measurements": len(rows),
             "measured": len(errs),
@@ -86,6 +97,10 @@ def run(*, objects: int = 12, yaws: int = 2) -> dict[str, Any]:
             "abs_error_mm_p90": round(float(np.percentile(errs, 90)), 1) if len(errs) else None,
             "abs_error_mm_max": round(float(errs.max()), 1) if len(errs) else None,
             "baseline_abs_error_mm_median": round(float(np.median(base)), 1),
+            "from_features": len(by_features),
+            "from_features_within_5mm": sum(abs(r["error_mm"]) <= 5.0 for r in by_features),
+            "under_by_more_than_margin": sum(r["error_mm"] is not None and r["error_mm"] < -30.0
+                                             for r in rows),  # fmt: skip
             "rows": rows,
             "seconds": round(time.perf_counter() - t0, 1),
         }
@@ -103,16 +118,19 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         ap.error(f"--objects must be in 1..12 and --yaws in 1..8, got {args.objects}, {args.yaws}")
     out = run(objects=args.objects, yaws=args.yaws)
     print(f"\nHeight measured at teach from the silhouettes, {out['measurements']} placements")
-    print(f"{'part':24s} {'yaw':>6s} {'truth mm':>9s} {'measured':>9s} {'error':>7s}  per view")
+    print(f"{'part':24s} {'yaw':>6s} {'truth mm':>9s} {'measured':>9s} {'error':>7s}  method")
     for r in out["rows"]:
         m = "-" if r["measured_mm"] is None else f"{r['measured_mm']:.1f}"
         e = "-" if r["error_mm"] is None else f"{r['error_mm']:+.1f}"
         print(f"{r['name']:24s} {r['yaw_deg']:6.0f} {r['truth_mm']:9.1f} {m:>9s} {e:>7s}  "
-              f"{r['per_view_mm']} {'' if r['measured_mm'] is not None else r['note']}")  # fmt: skip
+              f"{r['method']}: {r['note']}")  # fmt: skip
     print(f"measured {out['measured']}/{out['measurements']}; |error| median "
           f"{out['abs_error_mm_median']} mm, p90 {out['abs_error_mm_p90']} mm, max "
           f"{out['abs_error_mm_max']} mm; baseline (assume {BASELINE_M * 1e3:.0f} mm) median "
-          f"{out['baseline_abs_error_mm_median']} mm")  # fmt: skip
+          f"{out['baseline_abs_error_mm_median']} mm; from the features "
+          f"{out['from_features']}, of them within 5 mm {out['from_features_within_5mm']}; "
+          f"under the truth by more than the pick's 30 mm margin: "
+          f"{out['under_by_more_than_margin']}")  # fmt: skip
     if args.json:
         print(json.dumps(out))
     return out

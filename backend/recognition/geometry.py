@@ -1,4 +1,12 @@
-"""A taught part's height, measured from the teach's silhouettes (what the pick needs).
+"""A taught part's height, measured from the teach's images (what the pick needs).
+
+First from the top views' features (:func:`height_from_features`): the teach takes the top
+view at three camera rolls, and the camera sits off the flange's axis, so the rolls see the
+object from camera places about 90 mm apart; the features matched between them are
+triangulated (:func:`backend.inspection.structure.triangulate_heights`, the same guided
+matching the pose uses) and the part's height is a high percentile of their heights: the
+highest textured surface, where the suction cup seals.  Where too few features are
+triangulated (a part with a plain top), from the silhouettes (:func:`measure_height`):
 
 The teach sees the object from the top (viewpoint 1) and from the side views (2 inner,
 3 outer: 30 deg off vertical), each with its segmented region and the camera pose of the
@@ -35,8 +43,9 @@ from numpy.typing import NDArray
 
 from vision.camera import PinholeCamera
 from vision.errors import InvalidInput
+from vision.features.types import Features
 
-__all__ = ["HeightMeasurement", "Silhouette", "measure_height"]
+__all__ = ["HeightMeasurement", "Silhouette", "TopShot", "height_from_features", "measure_height"]
 
 #: Tallest part the measurement looks for, metres (the models' bound, MAX_HEIGHT_M).
 MAX_HEIGHT_M = 0.5
@@ -52,6 +61,10 @@ MAX_PIXELS = 6000
 #: Percentile of the side pixels' needed heights taken as the height (the far outline's
 #: pixels are few; the top one per cent are dropped as segmentation noise).
 PERCENTILE = 99.0
+#: Fewest triangulated features for a height from the features.
+MIN_FEATURES = 8
+#: Percentile of the triangulated features' heights taken as the part's height.
+FEATURE_PERCENTILE = 99.0
 #: Largest disagreement of two side views' heights for the measurement to be trusted, m
 #: (beyond it one region is wrong: a shadow or a neighbour taken for the part).
 MAX_SPREAD_M = 0.05
@@ -93,6 +106,8 @@ class HeightMeasurement:
     per_view_m: tuple[float, ...]
     footprint_m: tuple[float, float]
     note: str
+    method: str = "silhouettes"
+    """``features`` (triangulated top-view features) or ``silhouettes``."""
 
     def public(self) -> dict[str, object]:
         """JSON form (millimetres, as the console shows it)."""
@@ -100,8 +115,83 @@ class HeightMeasurement:
             "height_mm": None if self.height_m is None else round(self.height_m * 1e3, 1),
             "per_view_mm": [round(h * 1e3, 1) for h in self.per_view_m],
             "footprint_mm": [round(v * 1e3, 1) for v in self.footprint_m],
+            "method": self.method,
             "note": self.note,
         }
+
+
+@dataclass(frozen=True, eq=False)
+class TopShot:
+    """A taught top view's features and where its camera was.
+
+    Attributes
+    ----------
+    features : Features
+        The view's features (pixels of the trained image, inside the object's region).
+    T_base_cam : ndarray of shape (4, 4)
+        Camera pose of the shot, base frame.
+    """
+
+    features: Features
+    T_base_cam: NDArray[np.float64]
+
+
+def height_from_features(
+    shots: Sequence[TopShot],
+    camera: PinholeCamera,
+    *,
+    surface_z_m: float,
+    max_height_m: float = MAX_HEIGHT_M,
+) -> HeightMeasurement:
+    """The part's height from the features of top views taken from different camera places
+    with the object still (module docstring): ``height_m`` None, with the reason, when fewer
+    than :data:`MIN_FEATURES` are triangulated.
+
+    Parameters
+    ----------
+    shots : sequence of TopShot
+        Two to 24 top views of one teach round (the object did not move between them).
+    camera : PinholeCamera
+        The camera model the views were taken with.
+    surface_z_m : float
+        Height of the belt surface in the base frame, metres.
+    max_height_m : float
+        Tallest height looked for, metres (kept below the lowest camera).
+    """
+    from backend.inspection.structure import TaughtTopView, triangulate_heights
+
+    if not 2 <= len(shots) <= 24:
+        raise InvalidInput(f"shots must hold 2 to 24 top views, got {len(shots)}")
+    if not (isinstance(surface_z_m, int | float) and math.isfinite(surface_z_m)):
+        raise InvalidInput(f"surface_z_m must be a finite number, got {surface_z_m!r}")
+    Ts = [np.asarray(s.T_base_cam, dtype=np.float64) for s in shots]
+    if any(T.shape != (4, 4) or not np.isfinite(T).all() for T in Ts):
+        raise InvalidInput("every T_base_cam must be a finite 4x4 matrix")
+    lowest_cam = min(float(T[2, 3]) for T in Ts) - surface_z_m
+    top = min(max_height_m, lowest_cam - 0.05)
+    if top <= MIN_HEIGHT_M:
+        return HeightMeasurement(None, (), (0.0, 0.0), "the cameras are not above the belt",
+                                 "features")  # fmt: skip
+    T_obj = np.eye(4)
+    T_obj[2, 3] = surface_z_m
+    views = [
+        TaughtTopView(k, s.features, T, T_obj)
+        for k, (s, T) in enumerate(zip(shots, Ts, strict=True))
+    ]
+    got = triangulate_heights(
+        views, camera=camera, z_floor_m=surface_z_m, z_top_m=surface_z_m + top
+    )
+    z = np.concatenate([v[np.isfinite(v)] for v in got.by_view.values()]) - surface_z_m
+    if len(z) < MIN_FEATURES:
+        return HeightMeasurement(None, (), (0.0, 0.0),
+                                 f"{len(z)} feature(s) triangulated from the top views (fewer "
+                                 f"than {MIN_FEATURES})", "features")  # fmt: skip
+    h = float(np.percentile(z, FEATURE_PERCENTILE))
+    if h < MIN_HEIGHT_M:
+        return HeightMeasurement(None, (), (0.0, 0.0), "the features lie on the belt", "features")
+    return HeightMeasurement(min(h, top), (), (0.0, 0.0),
+                             f"{len(z)} features triangulated from {len(shots)} top views, "
+                             f"median {np.median(z) * 1e3:.0f} mm", "features")  # fmt: skip
 
 
 def _rays(

@@ -17,10 +17,11 @@ With the object at the station the job
    background difference (:mod:`backend.recognition.segment`), extracts the features inside
    the object's region and stores the trained view (image, mask, features, joints, camera
    pose) in one transaction with the others, then in the live index;
-4. measures the part's height from the top view's and the side views' regions
-   (:mod:`backend.recognition.geometry`; a 2d model's teach takes one side view more for
-   this alone) and stores it with the model, unless an engineer entered one: the pick
-   needs it.  When it cannot be measured the result says so and the console asks for it;
+4. measures the part's height (:mod:`backend.recognition.geometry`): from the features
+   the top views at their three rolls share (triangulated), else from the top view's and
+   the side views' regions (a 2d model's teach takes one side view more for this alone),
+   and stores it with the model unless an engineer entered one: the pick needs it.  When
+   it cannot be measured the result says so and the console asks for it;
 5. recomputes the automatic threshold (:mod:`backend.recognition.thresholds`) and reports
    the models confusable from the top, with what to add when the views are too few.
 
@@ -43,7 +44,13 @@ from backend import audit
 from backend.db.session import Database
 from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
 from backend.recognition import thresholds
-from backend.recognition.geometry import HeightMeasurement, Silhouette, measure_height
+from backend.recognition.geometry import (
+    HeightMeasurement,
+    Silhouette,
+    TopShot,
+    height_from_features,
+    measure_height,
+)
 from backend.recognition.index import IndexedModel, LiveIndex
 from backend.recognition.models import get_model, set_measured_geometry
 from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
@@ -52,6 +59,7 @@ from robot.collision import CollisionWorld
 from robot.kinematics import T_base_ee
 from vision.camera import PinholeCamera
 from vision.errors import InvalidInput, VisionCellError
+from vision.features.types import Features
 from vision.segmentation import iou
 
 __all__ = [
@@ -405,10 +413,16 @@ async def run_teach(
                 name=f"viewpoint {shot.viewpoint} roll {math.degrees(shot.roll_rad):.0f} deg",
             )
         )
-    job.report(done / steps, "measuring the part's height")
-    geometry = await _measure(silhouettes, camera, frame_size, float(point[2]))
     job.report(done / steps, "storing the views")
     rows = await add_views(db, live, model_id, inputs, replace=options.replace, by=by)
+    job.report(done / steps, "measuring the part's height")
+    stored = [s for s in silhouettes if not s[0].geometry_only]
+    tops = [
+        TopShot(Features.from_bytes(r.features), sil.T_base_cam)
+        for r, (shot, sil) in zip(rows, stored, strict=True)
+        if shot.viewpoint == 1 and r.viewpoint == 1
+    ]
+    geometry = await _measure(silhouettes, tops, camera, frame_size, float(point[2]))
     geometry_out = await _store_geometry(db, live, model_id, geometry)
     if options.threshold:
         job.report(1.0, "choosing the threshold")
@@ -445,25 +459,40 @@ def _geometry_shot(
 
 async def _measure(
     silhouettes: list[tuple[Shot, Silhouette]],
+    top_shots: list[TopShot],
     camera: PinholeCamera | None,
     frame_size: tuple[int, int],
     surface_z_m: float,
 ) -> HeightMeasurement:
-    """The part's height from the first top view (roll 0) and every side view."""
-    tops = [s for shot, s in silhouettes if shot.viewpoint == 1]
-    sides = [s for shot, s in silhouettes if shot.viewpoint in (2, 3)][:4]
-    if not tops or not sides:
-        return HeightMeasurement(None, (), (0.0, 0.0), "no side view was taken")
+    """The part's height (:mod:`backend.recognition.geometry`): from the top views'
+    triangulated features, else from the first top view's and the side views' regions."""
     if camera is None:
         from backend.calibration import nominal_camera
 
         camera = nominal_camera(*frame_size)
+    notes: list[str] = []
+    if len(top_shots) >= 2:
+        try:
+            got = await asyncio.to_thread(height_from_features, top_shots[:24], camera,
+                                          surface_z_m=surface_z_m)  # fmt: skip
+        except (VisionCellError, ValueError) as exc:
+            notes.append(f"features: {exc}")
+        else:
+            if got.height_m is not None:
+                return got
+            notes.append(got.note)
+    else:
+        notes.append("one top view: nothing to triangulate")
+    tops = [s for shot, s in silhouettes if shot.viewpoint == 1]
+    sides = [s for shot, s in silhouettes if shot.viewpoint in (2, 3)][:4]
+    if not tops or not sides:
+        return HeightMeasurement(None, (), (0.0, 0.0), "; ".join([*notes, "no side view"]))
     try:
-        return await asyncio.to_thread(
-            measure_height, tops[0], sides, camera, surface_z_m=surface_z_m
-        )
+        got = await asyncio.to_thread(measure_height, tops[0], sides, camera,
+                                      surface_z_m=surface_z_m)  # fmt: skip
     except VisionCellError as exc:
-        return HeightMeasurement(None, (), (0.0, 0.0), f"not measured: {exc.detail}")
+        return HeightMeasurement(None, (), (0.0, 0.0), "; ".join([*notes, exc.detail]))
+    return replace(got, note="; ".join([*notes, got.note]))
 
 
 async def _store_geometry(
