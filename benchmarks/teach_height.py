@@ -40,10 +40,10 @@ def run(*, objects: int = 12, yaws: int = 2) -> dict[str, Any]:
     from backend.recognition.index import FEATURE_OPTIONS
     from backend.recognition.segment import segment_object
     from backend.recognition.teach import TOP_ROLLS_RAD, plan_shots
-    from vision.recognition import ViewIndex
     from robot.kinematics import T_base_ee
     from robot.sim import CATALOGUE, SimEngine
     from robot.sim.imaging import capture
+    from vision.recognition import ViewIndex
 
     engine = SimEngine()
     try:
@@ -99,8 +99,9 @@ def run(*, objects: int = 12, yaws: int = 2) -> dict[str, Any]:
             "baseline_abs_error_mm_median": round(float(np.median(base)), 1),
             "from_features": len(by_features),
             "from_features_within_5mm": sum(abs(r["error_mm"]) <= 5.0 for r in by_features),
-            "under_by_more_than_margin": sum(r["error_mm"] is not None and r["error_mm"] < -30.0
-                                             for r in rows),  # fmt: skip
+            "under_by_more_than_margin": sum(
+                r["error_mm"] is not None and r["error_mm"] < -30.0 for r in rows
+            ),
             "rows": rows,
             "seconds": round(time.perf_counter() - t0, 1),
         }
