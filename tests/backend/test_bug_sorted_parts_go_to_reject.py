@@ -90,6 +90,11 @@ def test_a_taught_part_without_an_entered_height_goes_to_its_own_bin(tmp_path):
         assert after["geometry_source"] == "measured"
         assert after["height_m"] == pytest.approx(geometry["height_m"])
 
+        # One model: no automatic threshold yet (it needs two); the engineer sets the
+        # model's own, as the console's Models page offers.
+        r = client.patch(f"/api/models/{model['id']}", json={"threshold": 0.3}, headers=eng)
+        assert r.status_code == 200, r.text
+
         # One sorted inspection of the part, turned a little and moved a few mm.
         engine.clear_objects()
         engine.spawn(name, s_m=station + 0.003, lateral_m=-0.002, yaw_rad=0.05)
