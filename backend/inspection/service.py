@@ -478,9 +478,10 @@ UNKNOWN_MAX_HEIGHT_M = 0.25
 
 
 #: How far above a measured height the pick's guarded descent starts, metres: more than the
-#: silhouette measurement's error (``python -m benchmarks.teach_height``), so the cup never
-#: starts below the part's top.
-MEASURED_MARGIN_M = 0.03
+#: teach's measurement falls short of the part's top on the catalogue's parts but one
+#: (``python -m benchmarks.teach_height``: 26 mm at most; a thin upright plate with no
+#: features on its edge is the exception, and its approach still starts above it).
+MEASURED_MARGIN_M = 0.04
 
 
 def _geometry(live: Any, name: str | None) -> tuple[float | None, NDArray[np.float64] | None]:

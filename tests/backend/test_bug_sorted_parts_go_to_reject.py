@@ -27,6 +27,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
+from backend.inspection.service import MEASURED_MARGIN_M
 from robot.sim import CATALOGUE
 from tests.utils.factories import TEST_SECRET, make_settings, migrate
 
@@ -109,7 +110,8 @@ def test_a_taught_part_without_an_entered_height_goes_to_its_own_bin(tmp_path):
         want = next(b.name for b in engine.config.layout.bins if name in b.parts)
         assert row["pick"]["sorted"] is True and row["pick"]["ok"] is True, row["pick"]
         assert row["pick"]["bin"] == want, row["pick"]
-        assert "guarded descent from 30 mm above" in row["pick"]["how"], row["pick"]
+        margin_mm = round(MEASURED_MARGIN_M * 1e3)
+        assert f"guarded descent from {margin_mm} mm above" in row["pick"]["how"], row["pick"]
         assert row["pick_outcome"] == {"outcome": "placed", "bin": want,
                                        "text": f"placed in {want}"}  # fmt: skip
         # ... where the simulator says it landed,
