@@ -186,15 +186,26 @@ def add_model(
     part: Annotated[str | None, typer.Option(help="Physical part (default: the name)")] = None,
     base: Annotated[str, typer.Option(help="Sitting base")] = "default",
     threshold: Annotated[float | None, typer.Option(help="Own threshold in [0, 1]")] = None,
+    height_mm: Annotated[
+        float | None,
+        typer.Option(
+            help="Part height above its sitting base, mm, in (0, 500] (default: "
+            "measured by the teach)"
+        ),
+    ] = None,
 ) -> None:
     """Create an object model; prints its id on the last line."""
     from backend import audit
     from backend.recognition import models as svc
 
+    if height_mm is not None and not (math.isfinite(height_mm) and 0.0 < height_mm <= 500.0):
+        raise _fail(f"--height-mm must be in (0, 500] mm, got {height_mm!r}")
     try:
         fields = svc.ModelFields(
-            name=name, part=part, sitting_base=base, kind=svc.parse_kind(kind), threshold=threshold
-        )
+            name=name, part=part, sitting_base=base, kind=svc.parse_kind(kind), threshold=threshold,
+            height_m=None if height_mm is None else height_mm / 1000.0,
+            height_given=height_mm is not None,
+        )  # fmt: skip
     except ValueError as exc:
         raise _fail(str(exc)) from None
 

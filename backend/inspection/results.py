@@ -25,8 +25,11 @@ from backend.db.models import (
 from backend.db.session import Database
 from vision.errors import InvalidInput, NotFound
 
-__all__ = ["InspectionRecord", "ViewRecord", "get_image", "get_inspection", "inspection_public",
-           "list_inspections", "store"]  # fmt: skip
+__all__ = ["PICK_OUTCOMES", "InspectionRecord", "ViewRecord", "get_image", "get_inspection",
+           "inspection_public", "list_inspections", "pick_outcome", "store"]  # fmt: skip
+
+#: What happened to the object after the decision (:func:`pick_outcome`).
+PICK_OUTCOMES = ("placed", "rejected", "not_placed", "approach", "not_picked", "not_sorted")
 
 DECISIONS = tuple(d.value for d in Decision)
 
@@ -157,6 +160,41 @@ async def store(
         return int(row.id)
 
 
+def pick_outcome(pick: Any, decision: str) -> dict[str, Any]:
+    """What happened to the object, from the stored pick (the console, the drill-down and
+    the exports show it): ``outcome`` (one of :data:`PICK_OUTCOMES`), the ``bin`` it went
+    to (or was meant for) and ``text``, a sentence for the operator.
+
+    ``placed``: in its own bin; ``rejected``: in the reject bin (unknown, failed, or no bin
+    for its part); ``not_placed``: a pick was tried and did not place it (or could not be
+    planned), the reason said; ``approach``: sorting off, the arm went to the approach
+    pose; ``not_picked``: sorting off and no approach; ``not_sorted``: no pick at all (the
+    object was not found, or the inspection ended before)."""
+    if not isinstance(pick, dict):
+        return {"outcome": "not_sorted", "bin": None, "text": "not sorted"}
+    b = pick.get("bin") if isinstance(pick.get("bin"), str) else None
+    reason = str(pick.get("reason") or "")[:500]
+    how = pick.get("how") if isinstance(pick.get("how"), str) else ""
+    if not pick.get("sorted"):
+        if pick.get("ok"):
+            return {
+                "outcome": "approach",
+                "bin": None,
+                "text": "sorting off: moved to the approach pose",
+            }
+        return {"outcome": "not_picked", "bin": None, "text": f"not picked: {reason}"}
+    reject = bool(pick.get("reject")) if "reject" in pick else (b == "reject")
+    if not pick.get("ok"):
+        where = f" in {b}" if b else ""
+        return {"outcome": "not_placed", "bin": b, "text": f"not placed{where}: {reason}"}
+    if reject:
+        why = {"unknown": "not a taught model", "failed": "the inspection failed"}.get(
+            decision, how.rsplit("; ", 1)[-1] if how else "rejected"
+        )
+        return {"outcome": "rejected", "bin": b, "text": f"rejected into {b}: {why}"}
+    return {"outcome": "placed", "bin": b, "text": f"placed in {b}"}
+
+
 def inspection_public(row: Inspection, n_images: int | None = None) -> dict[str, Any]:
     """The API's form of a row."""
     n = len(row.images) if n_images is None else n_images
@@ -177,6 +215,7 @@ def inspection_public(row: Inspection, n_images: int | None = None) -> dict[str,
         "durations": row.durations or {},
         "duration_s": row.duration_s,
         "pick": row.pick,
+        "pick_outcome": pick_outcome(row.pick, row.decision.value),
         "truth": row.truth,
         "images": [f"/api/inspections/{row.id}/images/{k}.jpg" for k in range(n)],
     }

@@ -582,6 +582,13 @@ def _T_cam(q: Any, T_ee_cam: NDArray[np.float64]) -> NDArray[np.float64]:
 UNKNOWN_MAX_HEIGHT_M = 0.25
 
 
+#: How far above a measured height the pick's guarded descent starts, metres: more than the
+#: teach's measurement falls short of the part's top on the catalogue's parts but one
+#: (``python -m benchmarks.teach_height``: 26 mm at most; a thin upright plate with no
+#: features on its edge is the exception, and its approach still starts above it).
+MEASURED_MARGIN_M = 0.04
+
+
 def _geometry(live: Any, name: str | None) -> tuple[float | None, NDArray[np.float64] | None]:
     """Height and suction point of a recognised model, as stored with it (``height_m``,
     ``grasp_obj``: measured at teach time or entered by an engineer); ``(None, None)`` for
@@ -591,6 +598,12 @@ def _geometry(live: Any, name: str | None) -> tuple[float | None, NDArray[np.flo
         return None, None
     g = None if m.grasp_obj is None else np.asarray(m.grasp_obj, dtype=np.float64)
     return m.height_m, g
+
+
+def _geometry_source(live: Any, name: str | None) -> str:
+    """How a recognised model's height was stored: ``measured``, ``entered`` or ``""``."""
+    m = None if name is None else live.model_of_name(name)
+    return "" if m is None else str(getattr(m, "geometry_source", "") or "")
 
 
 def _footprint_radius(
@@ -810,6 +823,7 @@ async def _reject_failed(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any])
         )
     except (VisionCellError, ValueError) as exc:
         state["pick"] = {"sorted": True, "ok": False, "reason": f"cannot reject: {exc}"}
+    _note_pick(state)
 
 
 async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[str, float],
@@ -1056,7 +1070,14 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, plan: _TopPlan, part: F
 async def _pick_stage(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: ObjectPose | None,
                       stored_h: float | None, radius: float, grasp: NDArray[np.float64] | None,
                       found: NDArray[np.float64], mode: str, travel0: float) -> None:  # fmt: skip
-    """The pick (or the approach) of the inspected object, by what the model stores."""
+    """The pick (or the approach) of the inspected object, by what the model stores.
+
+    A recognised part goes to its own bin: straight to an engineer's entered height and
+    grasp point; by a short guarded descent from just above a height the teach measured
+    (the measurement's error is taken up by the vacuum switch); by the guarded descent from
+    the tallest admitted height when no height is stored (slow: the reason says to teach
+    or enter it).  An unknown or failed object goes to the reject bin.  A pick that cannot
+    be planned or does not hold the part says so in the inspection's reason."""
     rt = ctx.rt
     if pose is None and ctx.uncalibrated:
         why = f"not picked: a pick {ctx.uncalibrated}"
@@ -1064,15 +1085,48 @@ async def _pick_stage(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], po
             why += f"; {NO_BINS}"
         state["pick"] = {"sorted": opts.sort, "ok": False, "reason": why}
         return
-    if pose is not None and (stored_h is not None or not opts.sort):
-        # Sorting off, no stored height: the approach pose above the tallest admitted object.
-        h_pick = UNKNOWN_MAX_HEIGHT_M if stored_h is None else stored_h
-        state["pick"] = await _pick(ctx, opts, state, pose, h_pick, radius, grasp)
+    recognised = state["decision"] == "recognized"
+    source = _geometry_source(rt.live_index, state["model"]) if recognised else ""
+    at = found.copy()
+    if mode == "continuous":
+        at[1] += _belt(rt)[2] - travel0
+    if not opts.sort:
+        if pose is not None:
+            # Sorting off: the approach pose (above the tallest admitted object without a height).
+            h_pick = UNKNOWN_MAX_HEIGHT_M if stored_h is None else stored_h
+            state["pick"] = await _pick(ctx, opts, state, pose, h_pick, radius, grasp)
+        else:
+            state["pick"] = await _pick_unknown(ctx, opts, state, pose, at, radius)
+    elif recognised and stored_h is not None and source != "measured" and pose is not None:
+        state["pick"] = await _pick(ctx, opts, state, pose, stored_h, radius, grasp)
+    elif recognised:
+        if stored_h is not None:
+            top = min(0.5, stored_h + MEASURED_MARGIN_M)
+            why = (f"height {stored_h * 1e3:.0f} mm {source or 'stored'}: guarded descent from "
+                   f"{MEASURED_MARGIN_M * 1e3:.0f} mm above it")  # fmt: skip
+            if pose is None:
+                why += "; no pose: over the footprint's centre"
+        else:
+            top = UNKNOWN_MAX_HEIGHT_M
+            why = (f"no height stored for {state['model']}: guarded descent from "
+                   f"{UNKNOWN_MAX_HEIGHT_M * 1e3:.0f} mm (teach the model again or enter its "
+                   "height on the Models page to pick it directly)")  # fmt: skip
+        state["pick"] = await _pick_unknown(ctx, opts, state, pose, at, radius,
+                                            max_height_m=top, why=why)  # fmt: skip
     else:
-        at = found.copy()
-        if mode == "continuous":
-            at[1] += _belt(rt)[2] - travel0
         state["pick"] = await _pick_unknown(ctx, opts, state, pose, at, radius)
+    _note_pick(state)
+
+
+def _note_pick(state: dict[str, Any]) -> None:
+    """Say in the inspection's reason when its pick did not place the part where it belongs."""
+    pick = state.get("pick")
+    if not isinstance(pick, dict) or not pick.get("sorted") or pick.get("ok"):
+        return
+    where = f" into {pick['bin']}" if pick.get("bin") else ""
+    state["reason"] = (state["reason"] + "; " if state["reason"] else "") + (
+        f"not sorted{where}: {pick.get('reason', 'unknown')}"
+    )
 
 
 #: The second top view, taken when the first one's pose rests on too little
@@ -1370,21 +1424,30 @@ def _bin_for(rt: Any, part: str | None) -> Any:
 
 
 async def _pick_unknown(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any],
-                        pose: ObjectPose | None, at: NDArray[np.float64], radius: float) -> dict[str, Any]:  # fmt: skip
-    """An object the cell cannot pick as a model (unknown, failed, or a model without a
-    stored height): with ``sort``, into the reject bin by a guarded descent over its
-    footprint centre (:func:`robot.pick.execute_search_pick_place`: the height is found by
-    the vacuum switch); without ``sort``, left on the belt."""
+                        pose: ObjectPose | None, at: NDArray[np.float64], radius: float, *,
+                        max_height_m: float = UNKNOWN_MAX_HEIGHT_M,
+                        why: str | None = None) -> dict[str, Any]:  # fmt: skip
+    """A pick by a guarded descent over the footprint centre from ``max_height_m``
+    (:func:`robot.pick.execute_search_pick_place`: the height is found by the vacuum
+    switch).  With ``why`` (a recognised part; ``why`` says which height it starts from)
+    into the part's own bin; without it (unknown or failed) into the reject bin.  Without
+    ``sort``, left on the belt."""
     from robot.pick import execute_search_pick_place
 
     rt, cell = ctx.rt, ctx.rt.cell
     if not opts.sort:
         return {"sorted": False, "ok": False,
-                "reason": "not picked: no stored height for this object (sorting off)"}  # fmt: skip
-    b = _bin_for(rt, None)
+                "reason": "not picked: no pose or no stored height for this object (sorting off)"}  # fmt: skip
+    part = None
+    if why is not None:
+        m = rt.live_index.model_of_name(state["model"]) if state["model"] else None
+        part = None if m is None else m.part
+    b = _bin_for(rt, part)
     if b is None:
         return {"sorted": True, "ok": False,
                 "reason": NO_BINS if rt.sim is None else "no reject bin in this cell"}  # fmt: skip
+    if why is not None and b.reject:
+        why += f"; no bin takes part {part!r}: rejected"
     T = np.eye(4)
     if pose is not None:
         T[:3, :3] = pose.T_base_obj[:3, :3]
@@ -1396,13 +1459,15 @@ async def _pick_unknown(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any],
     try:
         with cell._arm("a pick"):  # the job holds the arm; this is its motion
             out, h = await execute_search_pick_place(
-                cell.driver, T, np.asarray(b.drop_point), max_height_m=UNKNOWN_MAX_HEIGHT_M,
+                cell.driver, T, np.asarray(b.drop_point), max_height_m=max_height_m,
                 object_radius_m=radius, world=cell.world, q_return=q0,
             )  # fmt: skip
     except Unreachable as exc:
-        return {"sorted": True, "ok": False, "bin": b.name, "reason": f"cannot pick: {exc}"}
-    return {"sorted": True, "ok": out.ok, "bin": b.name, "stage": out.stage, "reason": out.reason,
-            "search": True, "found_height_m": h}  # fmt: skip
+        return {"sorted": True, "ok": False, "bin": b.name, "reject": bool(b.reject),
+                "reason": f"cannot pick: {exc}", "search": True, "how": why}  # fmt: skip
+    return {"sorted": True, "ok": out.ok, "bin": b.name, "reject": bool(b.reject),
+            "stage": out.stage, "reason": out.reason, "search": True, "found_height_m": h,
+            "how": why}  # fmt: skip
 
 
 async def _pick(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: ObjectPose,
@@ -1422,7 +1487,7 @@ async def _pick(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: Ob
                                        object_radius_m=radius, grasp_obj=grasp, world=cell.world)  # fmt: skip
     except Unreachable as exc:
         return {"sorted": opts.sort, "ok": False, "bin": None if b is None else b.name,
-                "reason": f"cannot pick: {exc}"}  # fmt: skip
+                "reject": bool(b is not None and b.reject), "reason": f"cannot pick: {exc}"}  # fmt: skip
     if not opts.sort:
         await cell.execute(plan.steps[0].trajectory)
         return {
@@ -1436,7 +1501,9 @@ async def _pick(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: Ob
                 "reason": NO_BINS if rt.sim is None else "no bins in this cell"}  # fmt: skip
     with cell._arm("a pick"):  # the job holds the arm; this is its motion
         out = await execute_pick_place(cell.driver, plan)
-    return {"sorted": True, "ok": out.ok, "bin": b.name, "stage": out.stage, "reason": out.reason}
+    return {"sorted": True, "ok": out.ok, "bin": b.name, "reject": bool(b.reject),
+            "stage": out.stage, "reason": out.reason,
+            "how": f"height {height * 1e3:.0f} mm stored: planned pick to the grasp point"}  # fmt: skip
 
 
 # -- jobs -------------------------------------------------------------------------------------

@@ -74,13 +74,16 @@ class IndexedModel:
     """Height above the sitting base, metres (stored with the model; None: not known)."""
     grasp_obj: tuple[float, float, float] | None = None
     """Suction point on the upper surface, object frame, metres (None: not stored)."""
+    geometry_source: str = ""
+    """``measured`` (by the teach: the pick searches near the height), ``entered`` (by an
+    engineer: the pick goes to it) or empty (none stored)."""
 
     @classmethod
     def of(cls, row: ObjectModel) -> IndexedModel:
         from backend.recognition.models import grasp_of
 
         return cls(row.id, row.name, row.part, row.sitting_base, row.kind.value, row.threshold,
-                   row.height_m, grasp_of(row))  # fmt: skip
+                   row.height_m, grasp_of(row), row.geometry_source or "")  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -17,8 +17,13 @@ With the object at the station the job
    background difference (:mod:`backend.recognition.segment`), extracts the features inside
    the object's region and stores the trained view (image, mask, features, joints, camera
    pose) in one transaction with the others, then in the live index;
-4. recomputes the automatic threshold (:mod:`backend.recognition.thresholds`) and reports
-   the models confusable from the top.
+4. measures the part's height (:mod:`backend.recognition.geometry`): from the features
+   the top views at their three rolls share (triangulated), else from the top view's and
+   the side views' regions (a 2d model's teach takes one side view more for this alone),
+   and stores it with the model unless an engineer entered one: the pick needs it.  When
+   it cannot be measured the result says so and the console asks for it;
+5. recomputes the automatic threshold (:mod:`backend.recognition.thresholds`) and reports
+   the models confusable from the top, with what to add when the views are too few.
 
 Progress is reported per shot.  Nothing is stored unless every shot succeeded.
 """
@@ -29,7 +34,7 @@ import asyncio
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -40,12 +45,22 @@ from backend.db.session import Database
 from backend.heavy import HeavyPool
 from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
 from backend.recognition import thresholds
-from backend.recognition.index import LiveIndex
-from backend.recognition.models import get_model
+from backend.recognition.geometry import (
+    HeightMeasurement,
+    Silhouette,
+    TopShot,
+    height_from_features,
+    measure_height,
+)
+from backend.recognition.index import IndexedModel, LiveIndex
+from backend.recognition.models import get_model, set_measured_geometry
 from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
 from backend.recognition.views import ViewInput, add_views, view_public
 from robot.collision import CollisionWorld
+from robot.kinematics import T_base_ee
+from vision.camera import PinholeCamera
 from vision.errors import Conflict, InvalidInput, VisionCellError
+from vision.features.types import Features
 from vision.segmentation import iou
 
 __all__ = [
@@ -184,6 +199,8 @@ class Shot:
     T_base_cam: NDArray[np.float64]
     reason: str = ""
     """Why the planner replaced the nominal viewpoint (empty when it did not)."""
+    geometry_only: bool = False
+    """Taken only to measure the part's height (a 2d model's side view): not stored."""
 
     @property
     def key(self) -> tuple[float, ...]:
@@ -277,6 +294,8 @@ async def run_teach(
     world: CollisionWorld | None = None,
     by: audit.By | None = None,
     heavy: HeavyPool | None = None,
+    camera: PinholeCamera | None = None,
+    T_ee_cam_seen: NDArray[np.float64] | None = None,
 ) -> dict[str, Any]:
     """The teach job's body (module docstring); runs holding the arm.
 
@@ -292,7 +311,15 @@ async def run_teach(
         Camera mounting (the active hand-eye calibration, or the nominal one).
     store : BackgroundStore
         Backgrounds of earlier teaches (read for ``"stored"``, written for ``"grab"``).
+    camera : PinholeCamera, optional
+        The camera model, for measuring the part's height (default: the nominal lens for
+        the frames' size).
+    T_ee_cam_seen : ndarray of shape (4, 4), optional
+        The camera mounting the images are measured with (default ``T_ee_cam``): the
+        planner keeps the nominal mounting so the shots (and their stored backgrounds)
+        stay the same, the measurement needs the best one known.
     """
+    T_seen = np.asarray(T_ee_cam if T_ee_cam_seen is None else T_ee_cam_seen, dtype=np.float64)
     async with db.session() as session:
         model = await get_model(session, model_id)
         kind, name = model.kind.value, model.name
@@ -306,6 +333,13 @@ async def run_teach(
         top_rolls_rad=options.top_rolls_rad,
         world=world,
     )
+    if 1 in vps and not any(s.viewpoint in (2, 3) for s in shots):
+        # No side view among the views to store: one more, for the height alone.
+        extra = await asyncio.to_thread(
+            _geometry_shot, point, T_ee_cam, options.object_height_m, world
+        )
+        if extra is not None and (options.background == "grab" or store.get(extra) is not None):
+            shots.append(extra)
     n = len(shots)
     steps = 2 * n if options.background == "grab" else n
     done = 0
@@ -331,6 +365,8 @@ async def run_teach(
             backgrounds[k] = bg
     inputs: list[ViewInput] = []
     shots_out: list[dict[str, Any]] = []
+    silhouettes: list[tuple[Shot, Silhouette]] = []
+    frame_size: tuple[int, int] = (640, 480)
     for k, shot in enumerate(shots):
         job.report(
             done / steps,
@@ -347,6 +383,25 @@ async def run_teach(
         mask = region.mask
         state = frame.robot_state
         q_seen = np.asarray(getattr(state, "q", shot.q), dtype=np.float64)
+        frame_size = (int(frame.rgb.shape[1]), int(frame.rgb.shape[0]))
+        silhouettes.append((shot, Silhouette(mask, T_base_ee(q_seen) @ T_seen)))
+        shots_out.append(
+            {
+                "viewpoint": shot.viewpoint,
+                "roll_rad": shot.roll_rad,
+                "joints": [float(v) for v in q_seen],
+                "mask_px": int(mask.sum()),
+                "segmentation": region.method,
+                "segmentation_note": region.note,
+                "planner": shot.reason,
+                "look_s": round(t1 - t0, 3),
+                "segment_s": round(time.monotonic() - t1, 3),
+                "geometry_only": shot.geometry_only,
+            }
+        )
+        done += 1
+        if shot.geometry_only:
+            continue
         inputs.append(
             ViewInput(
                 frame.rgb,
@@ -360,22 +415,17 @@ async def run_teach(
                 name=f"viewpoint {shot.viewpoint} roll {math.degrees(shot.roll_rad):.0f} deg",
             )
         )
-        shots_out.append(
-            {
-                "viewpoint": shot.viewpoint,
-                "roll_rad": shot.roll_rad,
-                "joints": [float(v) for v in q_seen],
-                "mask_px": int(mask.sum()),
-                "segmentation": region.method,
-                "segmentation_note": region.note,
-                "planner": shot.reason,
-                "look_s": round(t1 - t0, 3),
-                "segment_s": round(time.monotonic() - t1, 3),
-            }
-        )
-        done += 1
     job.report(done / steps, "storing the views")
     rows = await add_views(db, live, model_id, inputs, replace=options.replace, by=by)
+    job.report(done / steps, "measuring the part's height")
+    stored = [s for s in silhouettes if not s[0].geometry_only]
+    tops = [
+        TopShot(Features.from_bytes(r.features), sil.T_base_cam)
+        for r, (shot, sil) in zip(rows, stored, strict=True)
+        if shot.viewpoint == 1 and r.viewpoint == 1
+    ]
+    geometry = await _measure(silhouettes, tops, camera, frame_size, float(point[2]))
+    geometry_out = await _store_geometry(db, live, model_id, geometry)
     if options.threshold:
         job.report(1.0, "choosing the threshold")
         outcome = await thresholds.recompute(db, live, heavy=heavy)
@@ -385,6 +435,7 @@ async def run_teach(
         "model": {"id": model_id, "name": name, "kind": kind},
         "views": [view_public(r) for r in rows],
         "shots": shots_out,
+        "geometry": geometry_out,
         "threshold": outcome.public(),
         "confusable_from_top": list(outcome.confusable),
     }
@@ -405,6 +456,82 @@ def check_live_camera(cell: Any) -> None:
         )
 
 
+def _geometry_shot(
+    point: NDArray[np.float64],
+    T_ee_cam: NDArray[np.float64],
+    object_height_m: float,
+    world: CollisionWorld | None,
+) -> Shot | None:
+    """The side view a top-only teach takes to measure the part's height (the inner side
+    view, else the outer one; None when neither can be planned)."""
+    for vp in (2, 3):
+        try:
+            (shot,) = plan_shots(point, (vp,), T_ee_cam=T_ee_cam, object_height_m=object_height_m,
+                                 top_rolls_rad=(0.0,), world=world)  # fmt: skip
+        except VisionCellError:
+            continue
+        return replace(shot, geometry_only=True)
+    return None
+
+
+async def _measure(
+    silhouettes: list[tuple[Shot, Silhouette]],
+    top_shots: list[TopShot],
+    camera: PinholeCamera | None,
+    frame_size: tuple[int, int],
+    surface_z_m: float,
+) -> HeightMeasurement:
+    """The part's height (:mod:`backend.recognition.geometry`): from the top views'
+    triangulated features, else from the first top view's and the side views' regions."""
+    if camera is None:
+        from backend.calibration import nominal_camera
+
+        camera = nominal_camera(*frame_size)
+    notes: list[str] = []
+    if len(top_shots) >= 2:
+        try:
+            got = await asyncio.to_thread(height_from_features, top_shots[:24], camera,
+                                          surface_z_m=surface_z_m)  # fmt: skip
+        except (VisionCellError, ValueError) as exc:
+            notes.append(f"features: {exc}")
+        else:
+            if got.height_m is not None:
+                return got
+            notes.append(got.note)
+    else:
+        notes.append("one top view: nothing to triangulate")
+    tops = [s for shot, s in silhouettes if shot.viewpoint == 1]
+    sides = [s for shot, s in silhouettes if shot.viewpoint in (2, 3)][:4]
+    if not tops or not sides:
+        return HeightMeasurement(None, (), (0.0, 0.0), "; ".join([*notes, "no side view"]))
+    try:
+        got = await asyncio.to_thread(measure_height, tops[0], sides, camera,
+                                      surface_z_m=surface_z_m)  # fmt: skip
+    except VisionCellError as exc:
+        return HeightMeasurement(None, (), (0.0, 0.0), "; ".join([*notes, exc.detail]))
+    return replace(got, note="; ".join([*notes, got.note]))
+
+
+async def _store_geometry(
+    db: Database, live: LiveIndex, model_id: int, got: HeightMeasurement
+) -> dict[str, Any]:
+    """Store a measured height with the model (unless an engineer entered one) and say what
+    the model has now; ``needed`` is True when it has no height (the console asks)."""
+    out: dict[str, Any] = {"measured": got.public(), "stored": False}
+    if got.height_m is not None:
+        row = await set_measured_geometry(db, model_id, got.height_m, None)
+        out["stored"] = row is not None
+    async with db.session() as session:
+        row = await get_model(session, model_id)
+    live.put_model(IndexedModel.of(row))
+    out.update(height_m=row.height_m, source=row.geometry_source or "",
+               needed=row.height_m is None)  # fmt: skip
+    if row.height_m is None:
+        out["ask"] = (f"The part's height could not be measured ({got.note}). Enter it (mm) so "
+                      "the cell can pick the part into its bin.")  # fmt: skip
+    return out
+
+
 async def start_teach(
     *,
     cell: Any,
@@ -416,13 +543,20 @@ async def start_teach(
     point: NDArray[np.float64] | None = None,
     by: audit.By | None = None,
     heavy: HeavyPool | None = None,
+
+
+    camera: PinholeCamera | None = None,
+    mounting: NDArray[np.float64] | None = None,
 ) -> Any:
     """Check what can be checked at once (the model exists, the arm is free), then start
     the teach as a motion job; returns the job.  ``heavy`` (the runtime's heavy-work pool)
     runs the threshold choice at its end.
 
     ``point`` defaults to the station point of the cell's conveyor; the camera mounting is
-    the active hand-eye calibration of the cell, else the nominal one.
+    the active hand-eye calibration of the cell, else the nominal one; the camera model
+    and mounting the part's height is measured with: the active calibration, else
+    ``camera`` and ``mounting`` (the simulator's nominal ones, as inspections take them),
+    else the nominal lens and mounting.
     """
     from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
     from robot.sim.world import ConveyorSpec
@@ -432,8 +566,11 @@ async def start_teach(
         cell_id = getattr(cell, "db_id", None)
         T_ee_cam = None
         if cell_id is not None:
-            T_ee_cam = (await active_camera_calibration(session, cell_id)).T_ee_cam
+            cal = await active_camera_calibration(session, cell_id)
+            T_ee_cam = cal.T_ee_cam
+            camera = cal.camera or camera
     T = np.asarray(NOMINAL_T_EE_CAM if T_ee_cam is None else T_ee_cam, dtype=np.float64)
+    T_seen = T if T_ee_cam is not None or mounting is None else np.asarray(mounting, np.float64)
     p = np.asarray(ConveyorSpec().station_point if point is None else point, dtype=np.float64)
     if p.shape != (3,) or not np.all(np.isfinite(p)) or np.linalg.norm(p[:2]) > 1.6:
         raise InvalidInput(
@@ -455,6 +592,8 @@ async def start_teach(
             store=store,
             by=by,
             heavy=heavy,
+            camera=camera,
+            T_ee_cam_seen=T_seen,
         )
 
     params = {

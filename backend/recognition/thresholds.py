@@ -9,6 +9,13 @@ per-model thresholds, the score distributions and the confusion table) as a new 
 reported until the engineer hands the choice back (:func:`back_to_automatic`, ``PUT
 /api/recognition/settings`` with ``{"global_threshold": null}``).  A model's own
 ``threshold`` overrides the automatic per-model one.
+
+An automatic threshold never falls below :data:`MIN_AUTO_THRESHOLD` (:func:`floored`): with
+few trained views the conformal rule cannot reach its target and takes the largest impostor
+score, which is 0 when the few impostors all scored 0 (two models taught once each), and a
+threshold of 0 names any object as some model.  When the data cannot support the target
+false-accept rate, :func:`advice` says in plain words what to add (teach rounds at other
+yaws, more models); the teach wizard shows it.
 """
 
 from __future__ import annotations
@@ -20,11 +27,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend import audit
-from backend.db.models import ObjectModel, RecognitionSettings
+from backend.db.models import ObjectModel, RecognitionSettings, TrainedView
 from backend.db.session import Database
 from backend.heavy import HeavyPool
 from backend.recognition.index import LiveIndex
@@ -34,15 +41,20 @@ __all__ = [
     "CONFUSABLE_RATE",
     "DEFAULT_TARGET_FAR",
     "DEFAULT_THRESHOLD",
+    "MIN_AUTO_THRESHOLD",
+    "RECOMMENDED_ROUNDS",
     "ThresholdOutcome",
+    "advice",
     "back_to_automatic",
     "choice_from_detail",
     "confusable_pairs",
     "current_choice",
     "deferred",
+    "floored",
     "latest_settings",
     "recompute",
     "settings_audit_value",
+    "teach_rounds",
 ]
 
 #: Global threshold before anything was chosen.
@@ -52,6 +64,14 @@ DEFAULT_TARGET_FAR = 0.01
 #: A pair of models is reported confusable when one passes the other's threshold on at
 #: least this share of the other's held-out top views.
 CONFUSABLE_RATE = 0.05
+#: Lowest automatic threshold.  The automatic rule with enough data chose 0.155 (twelve
+#: models taught at four yaws) to 0.241 (eight yaws) in the simulated cell's campaigns, and
+#: an untrained part turned off a taught yaw scored up to 0.10-0.15 from the top: a bar
+#: below this lets untrained parts through as models.
+MIN_AUTO_THRESHOLD = 0.15
+#: Teach rounds (object yaws 45 deg apart) a model needs to be recognised at any yaw: the
+#: end-to-end campaigns named every trained object at random yaw with eight.
+RECOMMENDED_ROUNDS = 8
 
 
 @dataclass(frozen=True)
@@ -69,6 +89,10 @@ class ThresholdOutcome:
     """What was done, in words."""
     confusable: tuple[dict[str, Any], ...]
     """Pairs of models alike from the top (viewpoint 1), most confused first."""
+    advice: tuple[str, ...] = ()
+    """What to add (teach rounds, models) when the data cannot support the target rate."""
+    floor: float | None = None
+    """The floor the automatic threshold was raised to, None when the rule's own was kept."""
 
     def public(self) -> dict[str, Any]:
         return {
@@ -77,6 +101,8 @@ class ThresholdOutcome:
             "in_force": self.in_force,
             "reason": self.reason,
             "confusable_from_top": list(self.confusable),
+            "advice": list(self.advice),
+            "floor": self.floor,
         }
 
 
@@ -215,7 +241,8 @@ async def current_choice(session: AsyncSession) -> ThresholdChoice:
     if row is None:
         choice = choice_from_detail(DEFAULT_THRESHOLD, {"rule": "default"})
     elif row.chosen_by == "auto":
-        choice = choice_from_detail(row.global_threshold, row.detail)
+        # Floored again: a row stored before the floor existed may hold 0.
+        choice = floored(choice_from_detail(row.global_threshold, row.detail))[0]
     else:
         choice = choice_from_detail(row.global_threshold, {"rule": row.chosen_by})
     rows = (
@@ -244,6 +271,107 @@ async def current_choice(session: AsyncSession) -> ThresholdChoice:
         per_model_viewpoint=per_vp,
         own_viewpoint=own_vp,
     )
+
+
+def floored(
+    choice: ThresholdChoice, floor: float = MIN_AUTO_THRESHOLD
+) -> tuple[ThresholdChoice, bool]:
+    """``choice`` with every threshold it holds (global, per model, per viewpoint, the
+    candidates and the own bars) raised to at least ``floor``; and whether any was raised
+    (the rule's text then says so)."""
+    from dataclasses import replace
+
+    if not (math.isfinite(floor) and 0.0 <= floor <= 1.0):
+        raise ValueError(f"floor must be in [0, 1], got {floor!r}")
+
+    def up(v: float) -> float:
+        return max(float(v), floor)
+
+    def up_map(d: Mapping[Any, float]) -> dict[Any, float]:
+        return {k: up(v) for k, v in d.items()}
+
+    raised = (
+        choice.threshold < floor
+        or any(v < floor for v in choice.per_model.values())
+        or any(v < floor for v in choice.per_viewpoint.values())
+        or any(v < floor for row in choice.per_model_viewpoint.values() for v in row.values())
+    )
+    if not raised and choice.candidate >= floor:
+        return choice, False
+    rule = choice.rule
+    if choice.threshold < floor:
+        rule += f"; raised from {choice.threshold:.3f} to the floor {floor:.3f}"
+    elif raised:
+        rule += f"; per-model or per-viewpoint thresholds raised to the floor {floor:.3f}"
+    out = replace(
+        choice,
+        threshold=up(choice.threshold),
+        per_model=up_map(choice.per_model),
+        rule=rule,
+        candidate=up(choice.candidate),
+        per_viewpoint=up_map(choice.per_viewpoint),
+        per_model_viewpoint={vp: up_map(r) for vp, r in choice.per_model_viewpoint.items()},
+        candidate_viewpoint=up_map(choice.candidate_viewpoint),
+        own_viewpoint={vp: up_map(r) for vp, r in choice.own_viewpoint.items()},
+    )
+    return out, raised or choice.candidate < floor
+
+
+def advice(
+    rounds: Mapping[str, int],
+    *,
+    impostors: int | None = None,
+    target_far: float = DEFAULT_TARGET_FAR,
+    reachable: bool = True,
+) -> tuple[str, ...]:
+    """What to add so the automatic threshold can be trusted, in plain words.
+
+    Parameters
+    ----------
+    rounds : mapping of model name to int
+        Teach rounds of each model (distinct object yaws of its top views).
+    impostors : int, optional
+        Impostor scores the rule had (one per trained view, scored against the other models).
+    target_far : float
+        The target false-accept rate.
+    reachable : bool
+        Whether the rule reached the target with the scores it had.
+    """
+    out: list[str] = []
+    if len(rounds) < 2:
+        out.append(
+            "Teach at least one more model: the automatic threshold is chosen from how the "
+            "models score each other's views, so it needs two or more."
+        )
+    short = sorted((n, r) for n, r in rounds.items() if r < RECOMMENDED_ROUNDS)
+    if short:
+        listed = ", ".join(f"{n} ({r} of {RECOMMENDED_ROUNDS})" for n, r in short)
+        out.append(
+            f"Teach more rounds: a model is recognised at any yaw after {RECOMMENDED_ROUNDS} "
+            f"rounds, the object turned {360 // RECOMMENDED_ROUNDS} degrees between them; "
+            f"short of that: {listed}."
+        )
+    if not reachable and impostors is not None:
+        need = math.ceil(1.0 / target_far - 1.0)
+        out.append(
+            f"A false-accept rate of {target_far * 100:g} % needs {need} views scored against "
+            f"other models; the trained views give {impostors}. More rounds or more models "
+            f"add them; until then the threshold is the largest score another model's view "
+            f"reached, and at least {MIN_AUTO_THRESHOLD:.2f}."
+        )
+    return tuple(out)
+
+
+async def teach_rounds(session: AsyncSession) -> dict[str, int]:
+    """Teach rounds of every model with trained views: the distinct object yaws of its top
+    views (a round turns the object; its camera rolls share the yaw)."""
+    rows = await session.execute(
+        select(ObjectModel.name, func.count(func.distinct(TrainedView.yaw_rad)))
+        .join(TrainedView, TrainedView.model_id == ObjectModel.id)
+        .where(TrainedView.viewpoint == 1)
+        .group_by(ObjectModel.name)
+    )
+    return {str(n): int(c) for n, c in rows}
 
 
 def _choose(snapshot: bytes, target_far: float) -> tuple[ThresholdChoice, int]:
@@ -275,17 +403,24 @@ async def recompute(
     ``asyncio.to_thread``."""
     with live.reading() as index:
         snapshot = index.to_bytes()  # a copy: the choice runs without the lock
+    async with db.session() as session:
+        rounds = await teach_rounds(session)
     try:
         if heavy is None:
-            choice, n_views = await asyncio.to_thread(_choose, snapshot, target_far)
+            raw, n_views = await asyncio.to_thread(_choose, snapshot, target_far)
         else:
             async with heavy.job(wait_s=None) as work:
-                choice, n_views = await work.run(_choose, snapshot, target_far)
+                raw, n_views = await work.run(_choose, snapshot, target_far)
     except ValueError as exc:
         async with db.session() as session:
             row = await latest_settings(session)
         in_force = DEFAULT_THRESHOLD if row is None else row.global_threshold
-        return ThresholdOutcome(False, None, in_force, f"not chosen: {exc}", ())
+        return ThresholdOutcome(False, None, in_force, f"not chosen: {exc}", (),
+                                advice(rounds, target_far=target_far))  # fmt: skip
+    choice, raised = floored(raw)
+    tips = advice(rounds, impostors=len(raw.impostor), target_far=target_far,
+                  reachable=raw.far_bound is not None)  # fmt: skip
+    floor = MIN_AUTO_THRESHOLD if raised else None
     confusable = confusable_pairs(choice)
     async with db.session() as session:
         row = await latest_settings(session)
@@ -297,12 +432,16 @@ async def recompute(
                 f"the manual threshold {row.global_threshold:.3f} stays in force; the "
                 f"automatic rule would choose {choice.threshold:.3f} ({choice.rule})",
                 confusable,
+                tips,
+                floor,
             )
+        detail = _detail(choice, n_views)
+        detail.update(advice=list(tips), floor=floor, rounds=rounds)
         session.add(
             RecognitionSettings(
                 global_threshold=float(choice.threshold),
                 chosen_by="auto",
-                detail=_detail(choice, n_views),
+                detail=detail,
             )
         )
         audit.record(
@@ -319,4 +458,5 @@ async def recompute(
             },
             reason=choice.rule[: audit.MAX_REASON_LENGTH],
         )
-    return ThresholdOutcome(True, choice.threshold, choice.threshold, choice.rule, confusable)
+    return ThresholdOutcome(True, choice.threshold, choice.threshold, choice.rule, confusable,
+                            tips, floor)  # fmt: skip

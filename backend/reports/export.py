@@ -19,15 +19,20 @@ from sqlalchemy import func, select
 
 from backend.db.models import Cell, Inspection
 from backend.db.session import Database
+from backend.inspection.results import pick_outcome
 from backend.reports.filters import ReportFilters, conditions
 from vision.errors import InvalidInput
 
 __all__ = ["FIELDS", "MAX_EXPORT_ROWS", "PAGE_ROWS", "check_export", "export_csv", "export_jsonl",
            "export_rows"]  # fmt: skip
 
-#: Columns of the export, in order (the API contract), then ``viewpoints`` (added).
+#: Columns of the export, in order (the API contract), then ``viewpoints`` and the pick's
+#: ``bin``, ``pick`` (its outcome, :data:`backend.inspection.results.PICK_OUTCOMES`) and
+#: ``pick_detail`` (the sentence the console shows), added at the end so that consumers
+#: reading the columns by position keep working.
 FIELDS = ("id", "cell", "started_at", "finished_at", "decision", "model", "score", "policy",
-          "views", "duration_s", "reason", "x_mm", "y_mm", "yaw_deg", "truth_name", "viewpoints")  # fmt: skip
+          "views", "duration_s", "reason", "x_mm", "y_mm", "yaw_deg", "truth_name", "viewpoints",
+          "bin", "pick", "pick_detail")  # fmt: skip
 PAGE_ROWS = 1000
 MAX_EXPORT_ROWS = 1_000_000
 
@@ -42,6 +47,8 @@ def _row(r: Any) -> dict[str, Any]:
     yaw = pose.get("yaw_rad")
     truth = r.truth if isinstance(r.truth, dict) else {}
     vps = [int(v) for v in (r.viewpoints_visited or [])]
+    decision = str(getattr(r.decision, "value", r.decision))
+    picked = pick_outcome(r.pick, decision)
     return {
         "id": int(r.id),
         "cell": r.cell,
@@ -59,6 +66,9 @@ def _row(r: Any) -> dict[str, Any]:
         "yaw_deg": round(math.degrees(float(yaw)), 3) if isinstance(yaw, int | float) else None,
         "truth_name": truth.get("name"),
         "viewpoints": vps,
+        "bin": picked["bin"],
+        "pick": picked["outcome"],
+        "pick_detail": picked["text"],
     }
 
 
@@ -97,6 +107,7 @@ async def export_rows(db: Database, f: ReportFilters) -> AsyncIterator[dict[str,
                     _I.reason,
                     _I.pose,
                     _I.truth,
+                    _I.pick,
                 )
                 .join(Cell, Cell.id == _I.cell_id)
                 .where(*conds, _I.id > last)

@@ -76,6 +76,24 @@ HeightM = Annotated[
     Field(gt=0.0, le=0.5, allow_inf_nan=False,
           description="Height above the sitting base, metres (what the pick plans with)"),
 ]  # fmt: skip
+#: The same height in millimetres (the console's and the CLI's unit); give one of the two.
+HeightMm = Annotated[
+    float,
+    Field(gt=0.0, le=500.0, allow_inf_nan=False,
+          description="Height above the sitting base, millimetres (instead of height_m)"),
+]  # fmt: skip
+
+
+def _height_fields(body: BaseModel, given: set[str]) -> dict[str, Any]:
+    """``height_m`` from ``height_m`` or ``height_mm`` (not both), as given."""
+    if "height_mm" not in given:
+        return {"height_m": body.height_m} if "height_m" in given else {}  # type: ignore[attr-defined]
+    if "height_m" in given:
+        raise InvalidInput("give height_m or height_mm, not both")
+    mm = body.height_mm  # type: ignore[attr-defined]
+    return {"height_m": None if mm is None else float(mm) / 1000.0}
+
+
 #: Suction point on the part's upper surface in the object frame, shared by create and update.
 GraspObj = Annotated[
     list[Annotated[float, Field(ge=-0.5, le=0.5, allow_inf_nan=False)]],
@@ -98,6 +116,7 @@ class ModelCreate(BaseModel):
     )
     description: str = Field("", max_length=2000)
     height_m: HeightM | None = None
+    height_mm: HeightMm | None = None
     grasp_obj: GraspObj | None = None
     reason: Reason = None
 
@@ -114,6 +133,7 @@ class ModelUpdate(BaseModel):
     threshold: float | None = Field(None, ge=0.0, le=1.0, allow_inf_nan=False)
     description: str | None = Field(None, max_length=2000)
     height_m: HeightM | None = None
+    height_mm: HeightMm | None = None
     grasp_obj: GraspObj | None = None
     reason: Reason = None
 
@@ -258,10 +278,11 @@ async def fast_read_models(req: FastRequest) -> Fresh | None:
 async def create_model(
     user: EngineerUser, db: DatabaseDep, live: LiveIndexDep, body: ModelCreate
 ) -> dict[str, Any]:
-    data = body.model_dump(exclude={"reason"})
-    given = body.model_fields_set
+    data = body.model_dump(exclude={"reason", "height_m", "height_mm"})
+    given = set(body.model_fields_set)
+    height = _height_fields(body, given)
     fields = svc.ModelFields(
-        **data, height_given="height_m" in given, grasp_given="grasp_obj" in given
+        **data, **height, height_given=bool(height), grasp_given="grasp_obj" in given
     )
     row = await svc.create_model(db, fields, by=_by(user, body.reason))
     live.put_model(IndexedModel.of(row))
@@ -290,10 +311,12 @@ async def update_model(
     for key in ("name", "part", "sitting_base", "kind", "description"):
         if key in given and getattr(body, key) is None:
             raise InvalidInput(f"{key} may not be null (leave it out to keep it)")
+    height = _height_fields(body, given)
     fields = svc.ModelFields(
-        **{k: getattr(body, k) for k in given},
+        **{k: getattr(body, k) for k in given - {"height_m", "height_mm"}},
+        **height,
         threshold_given="threshold" in given,
-        height_given="height_m" in given,
+        height_given=bool(height),
         grasp_given="grasp_obj" in given,
     )
     _before, row = await svc.update_model(db, model_id, fields, by=_by(user, body.reason))
@@ -396,6 +419,9 @@ async def teach_model(
         point=None if body.point is None else np.asarray(body.point, dtype=np.float64),
         by=_by(user, body.reason),
         heavy=rt.heavy,
+        # Without a calibration: the simulator's lens and mounting (as inspections use them).
+        camera=None if rt.sim is None else rt.sim.config.camera.pinhole,
+        mounting=None if rt.sim is None else rt.sim.config.camera.T_ee_cam,
     )
     return {"job": job.public()}
 

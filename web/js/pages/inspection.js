@@ -135,6 +135,15 @@ function decisionText(r) {
   return r.decision === "recognized" ? `${r.model} (${(r.score ?? 0).toFixed(3)})` : r.decision;
 }
 
+// Where the object went: its bin, the reject bin and why, or why it was not placed.
+function showPick(node, r) {
+  const p = r.pick_outcome || { outcome: "not_sorted", bin: null, text: "not sorted" };
+  node.className = `small pick pick-${p.outcome}${p.outcome === "not_placed" ? " error" : ""}`;
+  node.dataset.outcome = p.outcome;
+  node.dataset.bin = p.bin || "";
+  setText(node, `Pick: ${p.text}`);
+}
+
 async function showInspection(id) {
   const gen = generation;
   let r;
@@ -145,6 +154,7 @@ async function showInspection(id) {
   title.className = `decision decision-${r.decision}`;
   setText(title, `#${r.id} ${decisionText(r)}`);
   setText(q("#live-reason"), r.reason);
+  showPick(q("#live-pick"), r);
   const pics = q("#live-images");
   releaseImages(pics);
   pics.replaceChildren(...r.images.map((url, k) => el("figure", {},
@@ -262,6 +272,7 @@ function build() {
   const live = el("div", { className: "card insp-live" },
     el("h2", {}, "Last result ", el("span", { id: "live-label", className: "decision" }, "-")),
     el("p", { id: "live-reason", className: "small" }),
+    el("p", { id: "live-pick", className: "small pick" }),
     el("div", { id: "live-images", className: "live-images" }),
     el("p", { id: "live-viewpoints", className: "small" }),
     el("p", { id: "live-pose", className: "small" }),

@@ -20,6 +20,10 @@ let teachJob = null;       // id of the teach job followed
 let sim = null;            // {station_s_m, catalogue: [names]} when the cell is simulated
 let camTimer = null;
 let generation = 0;
+// Teach rounds of the selected model: the object is turned by 360/N degrees between rounds,
+// so the model is recognised at any yaw (the server counts the distinct yaws it was taught).
+const DEFAULT_ROUNDS = 8;
+let rounds = { model: null, n: DEFAULT_ROUNDS, k: 0, baseYawDeg: 0 };
 
 const q = (sel) => (root ? $(sel, root) : null);
 
@@ -103,7 +107,10 @@ async function selectModel(id) {
   setText(q("#model-title"), `${m.name} (${m.kind}, part ${m.part}, base ${m.sitting_base})`);
   const per = Object.entries(m.views_per_viewpoint).map(([vp, n]) => `viewpoint ${vp}: ${n}`).join(", ");
   setText(q("#model-summary"), `${m.views} trained views${per ? ` (${per})` : ""}; ${m.indexed_views} in the live index`
-    + `${m.stale_views ? `, ${m.stale_views} stale` : ""}. Threshold: ${m.threshold === null ? "automatic" : m.threshold.toFixed(3)}.`);
+    + `${m.stale_views ? `, ${m.stale_views} stale` : ""}. Threshold: ${m.threshold === null ? "automatic" : m.threshold.toFixed(3)}.`
+    + ` Height: ${m.height_m === null ? "not known (teach it, or enter it below)" : `${(m.height_m * 1000).toFixed(1)} mm (${m.geometry_source || "stored"})`}.`);
+  q("#model-height").value = m.height_m === null ? "" : (m.height_m * 1000).toFixed(1);
+  if (rounds.model !== m.id) resetRounds(m.id);
   q("#model-threshold").value = m.threshold === null ? "" : String(m.threshold);
   const grid = q("#views-grid");
   releaseImages(grid);
@@ -153,7 +160,54 @@ function authHeader() {
   return t ? { Authorization: `Bearer ${t}` } : {};
 }
 
+// The part's height (mm): measured by the teach, or entered here when it could not be.
+async function saveHeight(sel) {
+  if (!selected) return;
+  const text = q(sel).value.trim();
+  const mm = Number(text);
+  if (text === "" || !Number.isFinite(mm) || mm <= 0 || mm > 500) {
+    say("#model-message", `height must be a number of millimetres in (0, 500], got ${JSON.stringify(text)}`);
+    return;
+  }
+  const r = await call("#model-message", "PATCH", `/models/${selected.id}`, { height_mm: mm, reason: "height entered in the console" });
+  if (r) { say("#teach-message", ""); q("#teach-height-ask").hidden = true; await loadModels(); }
+}
+
 // -- the teach wizard -------------------------------------------------------------------------
+// Yaw of round k of n (0-based), degrees in (-180, 180]: as backend.recognition.teach_yaws_rad.
+function roundYawDeg(k, n) {
+  const d = (360 * k) / n;
+  return d > 180 ? d - 360 : d;
+}
+
+function resetRounds(modelId) {
+  const n = Number(q("#teach-rounds").value) || DEFAULT_ROUNDS;
+  rounds = { model: modelId, n: Math.min(12, Math.max(1, Math.round(n))), k: 0, baseYawDeg: Number(q("#place-yaw").value) || 0 };
+  showRound();
+}
+
+function showRound() {
+  if (!root) return;
+  const { n, k } = rounds;
+  const bar = q("#teach-rounds-progress");
+  bar.max = n;
+  bar.value = Math.min(k, n);
+  const done = k >= n;
+  setText(q("#teach-round"), done
+    ? `All ${n} rounds taught: the model is taught at ${n} yaws, ${Math.round(360 / n)}° apart.`
+    : `Round ${k + 1} of ${n}: the object turned ${roundYawDeg(k, n).toFixed(0)}° from its first round's pose`
+      + (k > 0 ? " (turn it, keep it at the station; the stored backgrounds are used)." : "."));
+  q("#teach-start").textContent = done ? "Teach again" : `Teach round ${k + 1} of ${n}`;
+  if (k > 0 && !done) q("#teach-background").value = "stored";
+}
+
+function changeRounds() {
+  const n = Number(q("#teach-rounds").value);
+  if (!Number.isInteger(n) || n < 1 || n > 12) { say("#teach-message", `rounds must be a whole number in 1..12, got ${q("#teach-rounds").value}`); return; }
+  rounds.n = n;
+  showRound();
+}
+
 async function detectSim() {
   if (!ctx.can("engineer")) return;
   try {
@@ -187,6 +241,14 @@ async function clearStation() {
 
 async function placeObject() {
   if (!sim) return;
+  if (rounds.k > 0) {
+    // a later round: the object at the station is turned, not a second one added
+    const objs = await call("#teach-message", "GET", "/sim/objects?limit=100");
+    if (!objs) return;
+    for (const o of objs.data) await call("#teach-message", "DELETE", `/sim/objects/${o.id}`);
+  } else {
+    rounds.baseYawDeg = Number(q("#place-yaw").value) || 0;
+  }
   const name = q("#place-name").value;
   const yawDeg = Number(q("#place-yaw").value || 0);
   if (!Number.isFinite(yawDeg) || Math.abs(yawDeg) > 180) { say("#teach-message", `yaw must be within ±180°, got ${q("#place-yaw").value}`); return; }
@@ -198,9 +260,12 @@ async function placeObject() {
 async function startTeach(ev) {
   ev.preventDefault();
   if (!selected) return;
+  if (rounds.model !== selected.id || rounds.k >= rounds.n) resetRounds(selected.id);
+  const yawDeg = roundYawDeg(rounds.k, rounds.n);
   const body = {
-    background: q("#teach-background").value,
-    replace: q("#teach-replace").checked,
+    background: rounds.k > 0 ? "stored" : q("#teach-background").value,
+    replace: rounds.k === 0 && q("#teach-replace").checked,
+    yaw_rad: (yawDeg * Math.PI) / 180,
     wait_s: 120,
     ...(q("#teach-rolls").value === "one" ? { top_rolls_rad: [0] } : {}),
     reason: "taught in the console",
@@ -237,11 +302,28 @@ function onTeachJob(job) {
   }
   say("#teach-message", "");
   const res = job.result || {};
-  const shots = res.shots || [];
+  const shots = (res.shots || []).filter((s) => !s.geometry_only);
   const out = q("#teach-result");
+  if (res.model && rounds.model === res.model.id) { rounds.k += 1; showRound(); }
+  if (sim && rounds.k < rounds.n) {
+    let next = rounds.baseYawDeg + roundYawDeg(rounds.k, rounds.n);
+    if (next > 180) next -= 360;
+    q("#place-yaw").value = String(Math.round(next));
+  }
+  const thr = res.threshold || {};
+  const geo = res.geometry || {};
+  const measured = geo.measured || {};
   out.replaceChildren(
     el("p", {}, `${(res.views || []).length} view(s) stored for ${res.model ? res.model.name : "the model"}. `
-      + `Threshold: ${res.threshold ? res.threshold.reason : ""}`),
+      + `Threshold in force: ${Number.isFinite(thr.in_force) ? thr.in_force.toFixed(3) : "-"}`
+      + `${thr.floor ? ` (the floor: the views cannot support a lower one yet)` : ""}. ${thr.reason || ""}`),
+    el("p", { id: "teach-height", className: "small" }, geo.height_m
+      ? `Part height ${(geo.height_m * 1000).toFixed(1)} mm (${geo.source}${geo.source === "measured" && measured.note ? `: ${measured.note}` : ""}).`
+      : `Part height not known: ${measured.note || "not measured"}.`),
+    ...(thr.advice && thr.advice.length
+      ? [el("div", { id: "teach-advice", className: "warning" }, el("strong", {}, "To make recognition reliable: "),
+        el("ul", {}, ...thr.advice.map((a) => el("li", {}, a))))]
+      : []),
     el("div", { className: "views-grid" }, ...(res.views || []).map((v, i) => el("figure", { className: "view-card new-view" },
       el("div", { className: "view-pair" },
         lazyImage(v.thumbnail_url, fetchBlob, { alt: `new view ${v.id}` }),
@@ -249,6 +331,9 @@ function onTeachJob(job) {
       el("figcaption", {}, `vp ${v.viewpoint}${shots[i] ? ` · ${shots[i].mask_px} px mask · ${shots[i].segmentation}` : ""}`)))));
   const conf = res.confusable_from_top || [];
   if (conf.length) out.append(confusableList(conf));
+  const ask = q("#teach-height-ask");
+  ask.hidden = !geo.needed;
+  setText(q("#teach-height-why"), geo.ask || "");
   loadModels();
   loadThresholds();
 }
@@ -291,6 +376,10 @@ async function loadThresholds() {
   const rates = Number.isFinite(d.far) && Number.isFinite(d.frr)
     ? ` FAR ${(d.far * 100).toFixed(2)} %, FRR ${(d.frr * 100).toFixed(2)} % on held-out views.` : "";
   setText(q("#threshold-summary"), `Global threshold ${t.toFixed(3)} (${s.chosen_by}${rule}).${rates}`);
+  const advice = d.advice || [];
+  q("#threshold-advice").replaceChildren(...(advice.length
+    ? [el("strong", {}, "To make recognition reliable: "), el("ul", {}, ...advice.map((a) => el("li", {}, a)))] : []));
+  q("#threshold-advice").hidden = !advice.length;
   // A refresh that lands after the engineer began typing a threshold keeps what was typed
   // (it replaces the field only while the field still shows the last value loaded).
   const field = q("#global-threshold");
@@ -359,6 +448,9 @@ function build() {
         el("label", {}, "Own threshold ", el("input", { id: "model-threshold", type: "number", min: 0, max: 1, step: 0.01, placeholder: "auto" })),
         el("button", { id: "model-threshold-save", type: "button", className: "small-button", on: { click: () => saveModelThreshold(false) } }, "Set"),
         el("button", { id: "model-threshold-clear", type: "button", className: "small-button", on: { click: () => saveModelThreshold(true) } }, "Automatic")),
+      el("div", { className: "row" },
+        el("label", {}, "Height (mm) ", el("input", { id: "model-height", type: "number", min: 0.1, max: 500, step: 0.1, placeholder: "teach measures it" })),
+        el("button", { id: "model-height-save", type: "button", className: "small-button", on: { click: () => saveHeight("#model-height") } }, "Set height")),
       el("form", { id: "upload-form", className: "row", on: { submit: uploadViews } },
         el("label", {}, "Images ", el("input", { id: "upload-images", type: "file", multiple: "", accept: "image/png,image/jpeg" })),
         el("label", {}, "Masks ", el("input", { id: "upload-masks", type: "file", multiple: "", accept: "image/png,image/jpeg" })),
@@ -372,6 +464,11 @@ function build() {
     el("ol", { className: "wizard" },
       el("li", {}, "Empty the station. ",
         el("button", { id: "sim-clear", type: "button", className: "small-button", hidden: true, on: { click: clearStation } }, "Clear the station (simulator)")),
+      el("li", {}, "Teach in rounds, the object turned between them: ",
+        el("label", { className: "inline" }, el("input", { id: "teach-rounds", type: "number", min: 1, max: 12, step: 1, value: DEFAULT_ROUNDS, on: { change: changeRounds } }), " rounds"),
+        " (8 let the model be recognised at any yaw). ",
+        el("span", { id: "teach-round", className: "small" }), " ",
+        el("progress", { id: "teach-rounds-progress", max: DEFAULT_ROUNDS, value: 0 })),
       el("li", {}, el("form", { id: "teach-form", className: "row", on: { submit: startTeach } },
         "Start teaching ", el("span", { id: "teach-kind", className: "small" }), ": ",
         el("select", { id: "teach-background" }, el("option", { value: "grab" }, "grab the empty background first"),
@@ -386,7 +483,7 @@ function build() {
           el("select", { id: "place-name" }),
           el("label", { className: "inline" }, " yaw° ", el("input", { id: "place-yaw", type: "number", min: -180, max: 180, step: 1, value: 0 })),
           el("button", { id: "place-object", type: "button", className: "small-button", on: { click: placeObject } }, "Place at the station"))),
-      el("li", {}, "Watch the views arrive; the threshold is chosen again at the end.")),
+      el("li", {}, "Watch the views arrive; the part's height is measured and the threshold chosen again at the end of each round.")),
     el("div", { className: "teach-live" },
       el("div", {}, el("img", { id: "teach-camera", alt: "Live camera while teaching", hidden: true }),
         el("p", { id: "teach-camera-status", className: "small" })),
@@ -394,11 +491,16 @@ function build() {
         el("progress", { id: "teach-progress", max: 1, value: 0, hidden: true }),
         el("ul", { id: "teach-steps", className: "samples" }))),
     el("div", { id: "teach-result" }),
+    el("div", { id: "teach-height-ask", className: "warning row", hidden: true },
+      el("span", { id: "teach-height-why" }), " ",
+      el("label", {}, "Height (mm) ", el("input", { id: "teach-height-mm", type: "number", min: 0.1, max: 500, step: 0.1 })),
+      el("button", { id: "teach-height-save", type: "button", className: "small-button", on: { click: () => saveHeight("#teach-height-mm") } }, "Set height")),
     el("p", { id: "teach-message", className: "error", role: "status" }));
 
   const thresholds = el("div", { className: "card thresholds" },
     el("h2", {}, "Thresholds"),
     el("p", { id: "threshold-summary", className: "small" }),
+    el("div", { id: "threshold-advice", className: "warning", hidden: true }),
     el("p", { id: "threshold-none", className: "small" }),
     el("div", { id: "threshold-plots", className: "chart-pair" },
       el("figure", {}, el("canvas", { id: "score-hist", className: "chart" }), el("figcaption", { className: "small" }, "Best-score distributions of held-out views: own model (genuine) and others (impostor); dashed: the global threshold.")),

@@ -124,12 +124,20 @@ async function loadTable() {
   },
   el("td", {}, `#${r.id}`), el("td", {}, when(r.started_at)), el("td", {}, r.decision), el("td", {}, r.model || ""),
   el("td", {}, r.score === null ? "-" : r.score.toFixed(3)), el("td", {}, r.policy), el("td", {}, r.viewpoints_visited.length),
-  el("td", {}, sec(r.duration_s)), el("td", {}, r.truth ? r.truth.name : ""))));
-  if (!page.count) q("#rep-table tbody").append(el("tr", {}, el("td", { colSpan: 9, className: "small" }, "No inspections match.")));
+  el("td", {}, sec(r.duration_s)), el("td", {}, r.truth ? r.truth.name : ""),
+  el("td", { className: "rep-bin" }, pickCell(r)))));
+  if (!page.count) q("#rep-table tbody").append(el("tr", {}, el("td", { colSpan: 10, className: "small" }, "No inspections match.")));
   const last = Math.min(offset + page.data.length, page.count);
   setText(q("#rep-range"), page.count ? `${offset + 1}-${last} of ${page.count} (this cell)` : "0 of 0");
   q("#rep-prev").disabled = offset === 0;
   q("#rep-next").disabled = last >= page.count;
+}
+
+// The bin an inspection's object went to, or what happened to it instead (short, for the table).
+function pickCell(r) {
+  const p = r.pick_outcome || { outcome: "not_sorted", bin: null };
+  if (p.outcome === "placed" || p.outcome === "rejected") return p.bin || p.outcome;
+  return p.outcome.replace("_", " ");
 }
 
 // -- one inspection ------------------------------------------------------------------------------
@@ -143,6 +151,12 @@ async function openInspection(id) {
   for (const tr of root.querySelectorAll("#rep-table tbody tr")) tr.classList.toggle("selected", Number(tr.dataset.id) === r.id);
   setText(q("#rep-detail-title"), `Inspection #${r.id}: ${r.decision}${r.model ? ` ${r.model}` : ""}${r.score === null ? "" : ` (${r.score.toFixed(3)})`}`);
   setText(q("#rep-detail-reason"), `${r.reason} · policy ${r.policy} · started ${when(r.started_at)} UTC · ${sec(r.duration_s)}`);
+  const pick = r.pick_outcome || { outcome: "not_sorted", bin: null, text: "not sorted" };
+  const pickNode = q("#rep-detail-pick");
+  pickNode.className = `small pick pick-${pick.outcome}${pick.outcome === "not_placed" ? " error" : ""}`;
+  pickNode.dataset.outcome = pick.outcome;
+  pickNode.dataset.bin = pick.bin || "";
+  setText(pickNode, `Pick: ${pick.text}${r.pick && r.pick.how ? ` (${r.pick.how})` : ""}`);
   const views = q("#rep-detail-views");
   releaseImages(views);
   views.replaceChildren(...r.images.map((url, k) => el("figure", {},
@@ -264,7 +278,7 @@ function build() {
   const gallery = el("div", { className: "card rep-gallery" }, el("h2", {}, "Unknown and failed"), el("div", { id: "rep-gallery", className: "filmstrip" }));
   const list = el("div", { className: "card rep-list" },
     el("h2", {}, "Inspections"),
-    el("table", { id: "rep-table" }, el("thead", {}, el("tr", {}, ...["Id", "Started (UTC)", "Decision", "Model", "Score", "Policy", "Views", "Cycle", "Truth"].map((h) => el("th", {}, h)))), el("tbody")),
+    el("table", { id: "rep-table" }, el("thead", {}, el("tr", {}, ...["Id", "Started (UTC)", "Decision", "Model", "Score", "Policy", "Views", "Cycle", "Truth", "Bin"].map((h) => el("th", {}, h)))), el("tbody")),
     el("p", { className: "row" },
       el("button", { id: "rep-prev", type: "button", className: "small-button", on: { click: () => { offset = Math.max(0, offset - TABLE_SIZE); loadTable(); } } }, "Newer"),
       el("span", { id: "rep-range", className: "small" }),
@@ -272,6 +286,7 @@ function build() {
   const detail = el("div", { id: "rep-detail", className: "card rep-detail", hidden: true },
     el("h2", { id: "rep-detail-title" }, "Inspection"),
     el("p", { id: "rep-detail-reason", className: "small" }),
+    el("p", { id: "rep-detail-pick", className: "small pick" }),
     el("div", { id: "rep-detail-views", className: "live-images" }),
     el("p", { id: "rep-detail-pose", className: "small" }),
     el("div", { className: "chart-pair" },
