@@ -136,7 +136,8 @@ class Settings(BaseSettings):
     )
     bootstrap_operator: bool = Field(
         True,
-        description="At start-up, issue a fresh token for the built-in 'operator' user and print it.",
+        description="At start-up, issue a fresh token for a built-in user and print it: "
+        "'engineer' on a development cell listening on loopback only, 'operator' otherwise.",
     )
     view3d_enabled: bool = Field(True, description="Start the viser 3D view.")
     sim_demo: bool = Field(
@@ -306,6 +307,11 @@ class Settings(BaseSettings):
         if self.http_port == self.viser_port and self.http_host == self.viser_host:
             raise ValueError(f"http_port and viser_port must differ, both are {self.http_port}")
         return self
+
+    def loopback_only(self) -> bool:
+        """Whether the console, the REST API and the 3D view listen on the loopback
+        interface only (nobody else on the network can reach them)."""
+        return _is_loopback(self.http_host) and _is_loopback(self.viser_host)
 
     # -- derived paths ---------------------------------------------------------------------
     @property

@@ -70,7 +70,7 @@ from backend.recognition.teach import plan_shots
 from backend.reports.scenes import SceneRecorder
 from robot.errors import Unreachable
 from robot.kinematics import T_base_ee
-from vision.errors import Conflict, InvalidInput, VisionCellError
+from vision.errors import Conflict, InvalidInput, NothingTrained, VisionCellError
 from vision.recognition import POLICIES, recognise_views
 from vision.recognition.light import apply_gain, light_gain, surround_colour
 from vision.recognition.recognise import verify_view
@@ -83,6 +83,12 @@ log = logging.getLogger(__name__)
 #: Longest wait for an object at the station, seconds; most objects in one run.
 MAX_WAIT_S = 600.0
 MAX_COUNT = 10_000
+#: Why an inspection cannot start before a teach (the console links its Models page on the
+#: error's code, ``nothing_trained``).
+NOT_TRAINED = (
+    "no trained views: teach a model first (the console's Models page, "
+    "`visioncell models teach NAME` or POST /api/models/{id}/teach)"
+)
 #: Aiming height of the viewpoints (as teaching's default), metres.
 AIM_HEIGHT_M = 0.1
 
@@ -686,7 +692,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
     rt, cell = ctx.rt, ctx.rt.cell
     live = rt.live_index
     if len(live) == 0:
-        raise Conflict("no trained views: teach a model first (POST /api/models/{id}/teach)")
+        raise NothingTrained(NOT_TRAINED)
     from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
 
     async with rt.database.session() as session:
@@ -697,7 +703,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, durations: dict[str, fl
                                    object_height_m=AIM_HEIGHT_M, top_rolls_rad=(0.0,)))[0]  # fmt: skip
     bg = rt.teach_backgrounds.get(top)
     if bg is None:
-        raise Conflict(
+        raise NothingTrained(
             "no empty-belt background of the top view at the station: teach a model first"
         )
     state["stage"] = "finding the object"
@@ -1352,7 +1358,7 @@ def _check_ready(rt: Any) -> None:
     rt.cell.check_can_move()
     rt.jobs.check_arm_free()
     if len(rt.live_index) == 0:
-        raise Conflict("no trained views: teach a model first (POST /api/models/{id}/teach)")
+        raise NothingTrained(NOT_TRAINED)
 
 
 async def start_inspection(rt: Any, opts: InspectOptions) -> Any:

@@ -48,10 +48,27 @@ function options() {
   return body;
 }
 
+/**
+ * A refusal in the page's words: with nothing taught yet, the way to the Models page (and,
+ * for a user who may not teach, the role it takes) rather than the API's own path.
+ */
+function refusal(code, detail) {
+  if (code !== "nothing_trained") return detail;
+  return el("span", {}, "Nothing to recognise yet: teach a model first on the ",
+    el("a", { id: "insp-teach-link", href: "#models" }, "Models page"),
+    ctx && ctx.can("engineer") ? "." : " (teaching needs the engineer role).");
+}
+
+function showRefusal(sel, code, detail) {
+  const box = q(sel);
+  if (!box) return;
+  box.replaceChildren(refusal(code, detail) || "");
+}
+
 async function command(method, path, body) {
   setText(q("#insp-message"), "");
   try { return await api(method, path, body); }
-  catch (e) { setText(q("#insp-message"), e.message); return null; }
+  catch (e) { showRefusal("#insp-message", e.code, e.message); return null; }
 }
 
 async function inspectOnce() {
@@ -88,6 +105,9 @@ function onJob(job) {
   } else if (job.kind === "inspect") {
     setText(q("#insp-run-state"), job.state === "running" ? `inspecting: ${job.message || ""}`
       : `inspection ${job.state}${job.error ? ` (${job.error.detail})` : ""}`);
+  }
+  if (job.state === "failed" && job.error && job.error.error === "nothing_trained") {
+    showRefusal("#insp-message", job.error.error, job.error.detail);
   }
 }
 
@@ -196,7 +216,7 @@ function build() {
       el("label", { className: "inline" }, "Max views ", el("select", { id: "insp-max-views" },
         ...[3, 2, 1].map((v) => el("option", { value: v }, String(v))))),
       el("label", { className: "inline" }, el("input", { id: "insp-sort", type: "checkbox" }), " sort into bins")),
-    el("div", { className: "row", dataset: { minRole: "operator" } },
+    el("div", { className: "row", dataset: { minRole: "operator", roleHint: "Inspecting and running the cell" } },
       el("button", { id: "insp-once", type: "button", on: { click: inspectOnce } }, "Inspect once"),
       el("button", { id: "insp-run", type: "button", className: "go", on: { click: startRun } }, "Start"),
       el("button", { id: "insp-stop", type: "button", disabled: "", on: { click: stopRun } }, "Stop"),

@@ -4,7 +4,7 @@
 // score distributions and the ROC from GET /api/recognition/settings; by hand: engineer) and
 // the confusability warnings.  Viewers read; engineers change (the server enforces it too).
 
-import { api, ApiError, fetchBlob, getToken } from "../api.js";
+import { api, ApiError, checkRefused, fetchBlob, getToken } from "../api.js";
 import { $, applyRoles, el, lazyImage, releaseBlob, releaseImages, setText, showBlob } from "../dom.js";
 import { binCounts, bars, histogram, lines, rocPoints } from "../charts.js";
 
@@ -138,7 +138,9 @@ async function uploadViews(ev) {
   form.append("reason", "uploaded in the console");
   say("#upload-message", "uploading…");
   try {
+    const sent = getToken();
     const res = await fetch(`/api/models/${selected.id}/views`, { method: "POST", body: form, headers: authHeader() });
+    checkRefused(res, sent);
     const text = await res.text();
     const body = text ? JSON.parse(text) : {};
     if (!res.ok) throw new ApiError(res.status, body.error, typeof body.detail === "string" ? body.detail : JSON.stringify(body.detail));
@@ -343,7 +345,8 @@ function build() {
     el("table", { id: "models-table" },
       el("thead", {}, el("tr", {}, ...["Name", "Kind", "Part", "Views", "Threshold"].map((h) => el("th", {}, h)))),
       el("tbody")),
-    engineer(el("form", { id: "new-model-form", className: "row", on: { submit: createModel } },
+    el("div", { dataset: { minRole: "engineer", roleHint: "Creating, teaching and changing models" } },
+      el("form", { id: "new-model-form", className: "row", on: { submit: createModel } },
       el("input", { id: "new-model-name", type: "text", placeholder: "new model name", required: "", maxlength: 64 }),
       el("select", { id: "new-model-kind" }, el("option", { value: "2d" }, "2d"), el("option", { value: "3d" }, "3d")),
       el("input", { id: "new-model-part", type: "text", placeholder: "part (default: name)", maxlength: 64 }),
