@@ -28,7 +28,13 @@ function listen(target, type, fn) {
   listeners.push(() => target.removeEventListener(type, fn));
 }
 
-function say(sel, text) { setText(q(sel), text || ""); }
+/** Show `text` in the message line `sel`: in red, or in green when `ok` (a success). */
+function say(sel, text, ok = false) {
+  const node = q(sel);
+  if (!node) return;
+  setText(node, text || "");
+  node.classList.toggle("ok", ok);
+}
 
 async function call(msgSel, method, path, body) {
   say(msgSel, "");
@@ -183,7 +189,7 @@ async function clearStation() {
     await api("POST", "/sim/conveyor", { running: false, mode: "index", dwell_s: null });
     const objs = await api("GET", "/sim/objects?limit=100");
     for (const o of objs.data) await api("DELETE", `/sim/objects/${o.id}`);
-    say("#teach-message", `station cleared (${objs.count} object(s) taken off the belt, belt stopped)`);
+    say("#teach-message", `station cleared (${objs.count} object(s) taken off the belt, belt stopped)`, true);
   } catch (e) { say("#teach-message", e.message); }
 }
 
@@ -194,7 +200,7 @@ async function placeObject() {
   if (!Number.isFinite(yawDeg) || Math.abs(yawDeg) > 180) { say("#teach-message", `yaw must be within ±180°, got ${q("#place-yaw").value}`); return; }
   const r = await call("#teach-message", "POST", "/sim/objects",
     { name, position_along_belt_m: sim.station_s_m, lateral_m: 0, yaw_rad: (yawDeg * Math.PI) / 180 });
-  if (r) say("#teach-message", `${name} placed at the station (object ${r.object.id})`);
+  if (r) say("#teach-message", `${name} placed at the station (object ${r.object.id})`, true);
 }
 
 async function startTeach(ev) {
