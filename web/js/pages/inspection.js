@@ -21,7 +21,7 @@ let ctx = null;
 let listeners = [];
 let timer = null;
 let threshold = null;      // the global threshold
-let perModel = {};         // model name -> the threshold that applies to it
+let perModel = {};         // model name -> the threshold that applies to it (every taught model)
 let shownId = null;
 let generation = 0;
 let runJob = null;
@@ -134,7 +134,7 @@ async function showInspection(id) {
   if (!r.images.length) pics.append(el("p", { className: "small" }, "No image kept for this inspection."));
   setText(q("#live-viewpoints"), `Viewpoints visited: ${r.viewpoints_visited.join(" → ") || "none"} · policy ${r.policy}`
     + ` · ${r.duration_s === null ? "" : `${r.duration_s.toFixed(2)} s`}`);
-  const items = Object.entries(r.scores).sort((a, b) => b[1] - a[1])
+  const items = everyScore(r.scores, Object.keys(perModel))
     .map(([m, s]) => ({ label: m, value: s, color: m === r.model ? "#15803d" : "#9ca3af", mark: perModel[m] ?? threshold }));
   bars(q("#live-scores"), items, { max: 1 });
   const pose = r.pose && r.pose.T_base_obj;
@@ -142,6 +142,15 @@ async function showInspection(id) {
     ? `pose: x ${(pose[0][3] * 1000).toFixed(1)} mm, y ${(pose[1][3] * 1000).toFixed(1)} mm, yaw ${(Math.atan2(pose[1][0], pose[0][0]) * 180 / Math.PI).toFixed(1)}°`
     : "");
   for (const f of root.querySelectorAll("#filmstrip figure")) f.classList.toggle("selected", Number(f.dataset.id) === r.id);
+}
+
+/**
+ * Every model's score, best first: the inspection's scores plus each taught model it did not
+ * score (0: none of its views matched well enough to be verified), so every model has a bar.
+ */
+export function everyScore(scores, models) {
+  const all = { ...Object.fromEntries(models.map((m) => [m, 0])), ...scores };
+  return Object.entries(all).sort((a, b) => b[1] - a[1] || a[0].localeCompare(b[0]));
 }
 
 // -- the filmstrip, counters, throughput -------------------------------------------------------
@@ -171,7 +180,7 @@ async function loadThresholds() {
     threshold = s.global_threshold;
     const auto = (s.chosen_by === "auto" && s.detail && s.detail.per_model) || {};
     perModel = Object.fromEntries(models.data.map((m) => [m.name, m.threshold ?? auto[m.name] ?? s.global_threshold]));
-    setText(q("#live-threshold-note"), "ticks: the threshold of each model");
+    setText(q("#live-threshold-note"), "every taught model; ticks: the threshold of each model");
   } catch (e) { /* the bars show without ticks */ }
 }
 
