@@ -77,13 +77,25 @@ def test_job_of_unwraps_the_envelope_and_names_a_bad_answer(capsys):
     assert "not a job" in capsys.readouterr().err
 
 
+def _banner_token(s: Server) -> str:
+    """The start-up token ``visioncell serve`` printed (as ``make run`` shows it)."""
+    lines = s.log.read_text().splitlines()
+    at = next(
+        i for i, line in enumerate(lines) if line.strip().endswith("(valid until the next start):")
+    )
+    assert lines[at].strip().startswith("engineer token")  # a loopback development cell
+    return lines[at + 1].strip()
+
+
 def test_teach_and_inspect_commands_follow_their_jobs(cell: Server):
-    token = cell.token("cli-engineer", "engineer")  # the last line of `visioncell user add`
+    # The token `make run` prints teaches; an operator's from `visioncell user add` inspects.
+    token = _banner_token(cell)
+    operator = cell.token("cli-operator", "operator")  # the last line of `visioncell user add`
     hdr = {"Authorization": f"Bearer {token}"}
     url = ["--url", cell.base]
 
     # Nothing taught yet: the command names the way to teach, without a traceback.
-    r = _cli(cell, "inspect", "once", "--token", token, *url, "--policy", "top-only")
+    r = _cli(cell, "inspect", "once", "--token", operator, *url, "--policy", "top-only")
     assert r.returncode == 2, r.stdout + r.stderr
     assert "Traceback" not in r.stderr and "teach a model first" in r.stderr
 
@@ -128,12 +140,12 @@ def test_teach_and_inspect_commands_follow_their_jobs(cell: Server):
     assert "('" not in out  # no Python tuple in the threshold's reason
 
     # The object is still at the station: inspect it once, then a run of one object.
-    r = _cli(cell, "inspect", "once", "--token", token, *url, "--policy", "top-only")
+    r = _cli(cell, "inspect", "once", "--token", operator, *url, "--policy", "top-only")
     assert r.returncode == 0, r.stdout + r.stderr
     last = r.stdout.strip().splitlines()[-1]
     assert last.startswith("#") and f"recognized {PART}" in last, r.stdout
 
-    r = _cli(cell, "inspect", "run", "--token", token, *url, "--policy", "top-only",
+    r = _cli(cell, "inspect", "run", "--token", operator, *url, "--policy", "top-only",
              "--count", "1")  # fmt: skip
     assert r.returncode == 0, r.stdout + r.stderr
     out = r.stdout.strip().splitlines()
