@@ -25,6 +25,7 @@ let perModel = {};         // model name -> the threshold that applies to it (ev
 let shownId = null;
 let generation = 0;
 let runJob = null;
+let thresholdsRead = Promise.resolve();  // the models and thresholds, read at mount
 
 const q = (sel) => (root ? $(sel, root) : null);
 
@@ -120,6 +121,7 @@ async function showInspection(id) {
   const gen = generation;
   let r;
   try { r = await api("GET", `/inspections/${id}`); } catch (e) { setText(q("#insp-message"), e.message); return; }
+  await thresholdsRead;  // every taught model's bar and tick
   if (gen !== generation || !root) return;
   shownId = r.id;
   const title = q("#live-label");
@@ -267,7 +269,7 @@ export default {
     listen(ctx.live, "job", (ev) => onJob(ev.detail));
     listen(ctx.live, "inspection", (ev) => { showInspection(ev.detail.id); refresh(); });
     listen(ctx.live, "open", (ev) => { if (ev.detail.reconnected) refresh(); });
-    loadThresholds();
+    thresholdsRead = loadThresholds();
     api("GET", "/jobs").then((jobs) => {
       const run = jobs.data.find((j) => j.kind === "inspection-run" && j.state === "running");
       if (run) onJob(run);
