@@ -34,7 +34,7 @@ POLL_S = 0.5
 #: One request's timeout, seconds (a loaded cell answers within it).
 REQUEST_TIMEOUT_S = 30.0
 #: The fields every job answer carries (ARCHITECTURE: ``{"id", "state", "progress", "result"}``).
-_JOB_FIELDS = ("id", "state", "progress", "message", "result")
+_JOB_FIELDS = ("id", "state", "progress", "message", "result", "created_at")
 
 
 def fail(message: str) -> typer.Exit:

@@ -68,7 +68,14 @@ def cell(tmp_path_factory):
 
 
 def test_job_of_unwraps_the_envelope_and_names_a_bad_answer(capsys):
-    job = {"id": "j1", "state": "running", "progress": 0.0, "message": "", "result": None}
+    job = {
+        "id": "j1",
+        "state": "running",
+        "progress": 0.0,
+        "message": "",
+        "result": None,
+        "created_at": "2026-12-06T00:00:00+00:00",
+    }
     assert job_of({"job": job}) is job
     import typer
 
