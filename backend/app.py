@@ -88,6 +88,15 @@ def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None 
     async def index() -> FileResponse:
         return FileResponse(WEB_DIR / "index.html", headers={"Cache-Control": "no-cache"})
 
+    @app.get("/favicon.ico", include_in_schema=False)
+    async def favicon() -> FileResponse:
+        # Browsers ask for it on their own; a 404 would fill every log with noise.
+        return FileResponse(
+            WEB_DIR / "favicon.ico",
+            media_type="image/x-icon",
+            headers={"Cache-Control": "public, max-age=86400"},
+        )
+
     @app.get("/console", include_in_schema=False)
     async def console() -> RedirectResponse:
         return RedirectResponse("/")

@@ -197,7 +197,8 @@ class Settings(BaseSettings):
     )
     bootstrap_operator: bool = Field(
         True,
-        description="At start-up, issue a fresh token for the built-in 'operator' user and print it.",
+        description="At start-up, issue a fresh token for a built-in user and print it: "
+        "'engineer' on a development cell listening on loopback only, 'operator' otherwise.",
     )
     view3d_enabled: bool = Field(True, description="Start the viser 3D view.")
     sim_demo: bool = Field(
@@ -429,6 +430,11 @@ class Settings(BaseSettings):
     def trusted_proxy_networks(self) -> tuple[Network, ...]:
         """``trusted_proxies`` as networks (an address is a network of one)."""
         return parse_trusted_proxies(self.trusted_proxies)
+
+    def loopback_only(self) -> bool:
+        """Whether the console, the REST API and the 3D view listen on the loopback
+        interface only (nobody else on the network can reach them)."""
+        return _is_loopback(self.http_host) and _is_loopback(self.viser_host)
 
     # -- derived paths ---------------------------------------------------------------------
     @property

@@ -80,3 +80,10 @@ class Conflict(VisionCellError):
 
     code = "conflict"
     http_status = 409
+
+
+class NothingTrained(Conflict):
+    """An inspection was asked for before any model was taught: there is nothing to
+    recognise yet (the console sends the user to its Models page on this code)."""
+
+    code = "nothing_trained"

@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import math
 import time
+import urllib.parse
 from typing import Annotated, Any
 
 import typer
 
-from backend.cli.models import _fail, _request, _settings
+from backend.cli.remote import POLL_S, cell_api, follow_job, job_failure, job_of, read_job, request
+from backend.cli.remote import fail as _fail
 
 __all__ = ["inspect_app", "register"]
 
@@ -25,13 +27,6 @@ POLICIES = ("naive", "top-only", "two-views", "best-next")
 def register(app: typer.Typer) -> None:
     """Add the ``inspect`` command group to the ``visioncell`` app."""
     app.add_typer(inspect_app, name="inspect")
-
-
-def _base(url: str | None) -> str:
-    if url is None:
-        s = _settings()
-        url = f"http://{s.http_host}:{s.http_port}"
-    return url.rstrip("/") + "/api"
 
 
 def _body(policy: str, sort: bool, wait: float) -> dict[str, Any]:
@@ -53,17 +48,6 @@ def _line(row: dict[str, Any]) -> str:
     return f"#{row['id']} {row['decision']} {row['model'] or '-'}{score} views [{vps}]{where}: {row['reason']}"
 
 
-def _follow(base: str, token: str, job: dict[str, Any]) -> dict[str, Any]:
-    last = ""
-    while job["state"] == "running":
-        if job["message"] != last:
-            last = job["message"]
-            print(f"{100 * job['progress']:5.1f} %  {last}", flush=True)
-        time.sleep(0.5)
-        job = _request(f"{base}/jobs/{job['id']}", token)
-    return job
-
-
 @inspect_app.command("once")
 def once(
     token: Annotated[str, typer.Option(help="Operator token", envvar="VISIONCELL_TOKEN")],
@@ -73,12 +57,11 @@ def once(
     wait: Annotated[float, typer.Option(help="Longest wait for the object, s")] = 60.0,
 ) -> None:
     """Inspect the object at the station and print the stored result."""
-    base = _base(url)
-    job = _request(f"{base}/inspections", token, "POST", _body(policy, sort, wait))["job"]
-    job = _follow(base, token, job)
+    base = cell_api(url)
+    job = job_of(request(f"{base}/inspections", token, "POST", _body(policy, sort, wait)))
+    job = follow_job(base, token, job)
     if job["state"] != "done":
-        err = job.get("error") or {}
-        raise _fail(f"the inspection {job['state']}: {err.get('detail', job['message'])}")
+        raise job_failure(job, "inspection")
     print(_line(job["result"]["inspection"]))
 
 
@@ -96,26 +79,35 @@ def run(
     """Continuous operation; prints each inspection as it is stored."""
     if count is not None and not 1 <= count <= 10_000:
         raise _fail(f"--count must be in 1..10000, got {count!r}")
-    base = _base(url)
+    base = cell_api(url)
     body = {**_body(policy, sort, wait), "count": count}
-    job = _request(f"{base}/inspection/run", token, "POST", body)["job"]
+    job = job_of(request(f"{base}/inspection/run", token, "POST", body))
+    # The run's own inspections: those started since the job was created, each printed once.
+    since = urllib.parse.urlencode({"since": job["created_at"], "limit": 50})
     seen: set[int] = set()
+
+    def show_new() -> None:
+        page = request(f"{base}/inspections?{since}", token)
+        for row in sorted(page["data"], key=lambda r: r["id"]):
+            if row["id"] not in seen:
+                seen.add(row["id"])
+                print(_line(row), flush=True)
+
     try:
         while True:
-            job = _request(f"{base}/jobs/{job['id']}", token)
-            page = _request(f"{base}/inspections?limit=20", token)
-            for row in sorted(page["data"], key=lambda r: r["id"]):
-                if row["id"] not in seen and row["started_at"] >= job["created_at"][:26]:
-                    seen.add(row["id"])
-                    print(_line(row), flush=True)
+            job = read_job(base, token, job["id"])
+            show_new()
             if job["state"] != "running":
                 break
-            time.sleep(0.5)
+            time.sleep(POLL_S)
     except KeyboardInterrupt:
-        _request(f"{base}/inspection/stop", token, "POST", {})
+        request(f"{base}/inspection/stop", token, "POST", {})
         print("stopping after the current object", flush=True)
-        job = _follow(base, token, job)
+        job = follow_job(base, token, job)
+        show_new()
     if job["state"] != "done":
-        err = job.get("error") or {}
-        raise _fail(f"the run {job['state']}: {err.get('detail', job['message'])}")
-    print(f"inspected {job['result']['inspected']}: {job['result']['decisions']}")
+        raise job_failure(job, "run")
+    result = job["result"] or {}
+    decisions = result.get("decisions") or {}
+    counts = ", ".join(f"{d} {n}" for d, n in sorted(decisions.items())) or "nothing"
+    print(f"inspected {result.get('inspected', len(seen))}: {counts}")

@@ -21,13 +21,13 @@ import asyncio
 import json
 import math
 import re
-import time
-import urllib.error
-import urllib.request
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+
+from backend.cli.remote import cell_api, follow_job, job_failure, job_of, request
+from backend.cli.remote import fail as _fail
 
 __all__ = ["models_app", "parse_viewpoint", "read_folder", "register"]
 
@@ -45,11 +45,6 @@ MAX_IMPORT_FILES = 500
 def register(app: typer.Typer) -> None:
     """Add the ``models`` command group to the ``visioncell`` app."""
     app.add_typer(models_app, name="models")
-
-
-def _fail(message: str) -> typer.Exit:
-    typer.echo(f"error: {message}", err=True)
-    return typer.Exit(2)
 
 
 def _settings() -> Any:
@@ -340,25 +335,6 @@ def reextract(
     print(f"re-extracted {_run(work)} views")
 
 
-def _request(url: str, token: str, method: str = "GET", body: Any = None) -> dict[str, Any]:
-    data = None if body is None else json.dumps(body).encode()
-    req = urllib.request.Request(url, data=data, method=method)
-    req.add_header("Authorization", f"Bearer {token}")
-    if data is not None:
-        req.add_header("Content-Type", "application/json")
-    try:
-        with urllib.request.urlopen(req, timeout=30) as resp:
-            return json.loads(resp.read() or b"{}")
-    except urllib.error.HTTPError as exc:
-        try:
-            detail = json.loads(exc.read()).get("detail", "")
-        except Exception:
-            detail = ""
-        raise _fail(f"{method} {url}: HTTP {exc.code} {detail}") from None
-    except urllib.error.URLError as exc:
-        raise _fail(f"cannot reach the cell at {url}: {exc.reason}") from None
-
-
 @models_app.command("teach")
 def teach(
     name: Annotated[str, typer.Argument(help="Model name")],
@@ -401,14 +377,11 @@ def teach(
             vps = [int(v) for v in viewpoints.split(",")]
         except ValueError:
             raise _fail(f"--viewpoints must be like 1,2,3, got {viewpoints!r}") from None
-    if url is None:
-        s = _settings()
-        url = f"http://{s.http_host}:{s.http_port}"
-    base = url.rstrip("/") + "/api"
-    found = _request(f"{base}/models?limit=1000", token)
+    base = cell_api(url)
+    found = request(f"{base}/models?limit=1000", token)
     model = next((m for m in found["data"] if m["name"] == name), None)
     if model is None:
-        raise _fail(f"no object model named {name!r} at {url}")
+        raise _fail(f"no object model named {name!r} at {base.removesuffix('/api')}")
     body: dict[str, Any] = {
         "background": background,
         "object_height_m": height,
@@ -418,17 +391,10 @@ def teach(
     }
     if vps is not None:
         body["viewpoints"] = vps
-    job = _request(f"{base}/models/{model['id']}/teach", token, "POST", body)["job"]
-    last = ""
-    while job["state"] == "running":
-        if job["message"] != last:
-            last = job["message"]
-            print(f"{100 * job['progress']:5.1f} %  {last}", flush=True)
-        time.sleep(0.5)
-        job = _request(f"{base}/jobs/{job['id']}", token)
+    job = job_of(request(f"{base}/models/{model['id']}/teach", token, "POST", body))
+    job = follow_job(base, token, job)
     if job["state"] != "done":
-        err = job.get("error") or {}
-        raise _fail(f"the teach {job['state']}: {err.get('detail', job['message'])}")
+        raise job_failure(job, "teach")
     res = job["result"]
     print(f"taught {len(res['views'])} views of {name!r}; threshold: {res['threshold']['reason']}")
     for p in res["confusable_from_top"]:

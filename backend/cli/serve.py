@@ -16,7 +16,7 @@ import typer
 
 from backend import __version__
 from backend.cli.common import err, load_settings, out
-from backend.cli.users import bootstrap_operator
+from backend.cli.users import bootstrap_user
 
 if TYPE_CHECKING:
     from backend.settings import Settings
@@ -59,10 +59,13 @@ def serve(
     out.print(f"  REST API  {base}/api   (docs: {base}/docs)")
     out.print(f"  3D view   http://{settings.viser_host}:{settings.viser_port}/")
     if settings.bootstrap_operator and settings.auth_enabled:
-        token = asyncio.run(bootstrap_operator(settings))
-        out.print("  operator token (valid until the next start):")
+        started = asyncio.run(bootstrap_user(settings))
+        out.print(f"  {started.role} token (user {started.user!r}, valid until the next start):")
         # On purpose, the one place a token is shown: standard output, never a log record.
-        print(f"  {token}", flush=True)
+        print(f"  {started.token}", flush=True)
+        if started.role == "engineer":
+            out.print("  (loopback demo: an engineer's; in production or on a network address,")
+            out.print("  the start-up token is an operator's)")
     out.print("Press Ctrl-C to stop.")
     sys.stdout.flush()
     from backend.eventloop import run

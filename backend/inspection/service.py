@@ -75,7 +75,7 @@ from backend.recognition.teach import plan_shots
 from backend.reports.scenes import SceneRecorder
 from robot.errors import Unreachable
 from robot.kinematics import T_base_ee
-from vision.errors import Conflict, InvalidInput, VisionCellError
+from vision.errors import Conflict, InvalidInput, NothingTrained, VisionCellError
 from vision.recognition import POLICIES, recognise_views
 from vision.recognition.light import apply_gain, light_gain, surround_colour
 from vision.recognition.recognise import verify_view
@@ -88,6 +88,12 @@ log = logging.getLogger(__name__)
 #: Longest wait for an object at the station, seconds; most objects in one run.
 MAX_WAIT_S = 600.0
 MAX_COUNT = 10_000
+#: Why an inspection cannot start before a teach (the console links its Models page on the
+#: error's code, ``nothing_trained``).
+NOT_TRAINED = (
+    "no trained views: teach a model first (the console's Models page, "
+    "`visioncell models teach NAME` or POST /api/models/{id}/teach)"
+)
 #: Aiming height of the viewpoints (as teaching's default), metres.
 AIM_HEIGHT_M = 0.1
 
@@ -192,7 +198,7 @@ def carried_point(found: NDArray[np.float64], ahead_m: float, end_y_m: float,
     return point
 
 
-class NotReady(Conflict):
+class NotReady(NothingTrained):
     """A setup step is missing (nothing trained, no empty-belt background of the top view):
     no inspection can start; a run ends with the reason."""
 
@@ -788,7 +794,7 @@ async def _plan_top(ctx: _Ctx) -> _TopPlan:
     empty-belt background (a setup step missing: no inspection, no row)."""
     rt = ctx.rt
     if len(rt.live_index) == 0:
-        raise NotReady("no trained views: teach a model first (POST /api/models/{id}/teach)")
+        raise NotReady(NOT_TRAINED)
     from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
 
     async with rt.database.session() as session:
@@ -1616,7 +1622,7 @@ def _check_ready(rt: Any) -> None:
     rt.cell.check_can_move()
     rt.jobs.check_arm_free()
     if len(rt.live_index) == 0:
-        raise Conflict("no trained views: teach a model first (POST /api/models/{id}/teach)")
+        raise NothingTrained(NOT_TRAINED)
 
 
 async def start_inspection(rt: Any, opts: InspectOptions) -> Any:

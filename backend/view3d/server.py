@@ -45,6 +45,11 @@ log = logging.getLogger(__name__)
 #: Where the frustum is drawn until a hand-eye calibration is active: the drawing's
 #: mounting, the same one the calibration planner starts from.
 T_EE_CAM_PLACEHOLDER = NOMINAL_T_EE_CAM
+#: Where a new view's camera stands and what it looks at, base frame, metres.
+INITIAL_CAMERA_M = (2.2, -1.9, 1.7)
+INITIAL_LOOK_AT_M = (0.45, 0.0, 0.75)
+#: Height of the console's embedded 3D view (web/style.css, 32rem), CSS pixels.
+EMBEDDED_VIEW_PX = 512.0
 
 
 def _wxyz(R: np.ndarray) -> np.ndarray:
@@ -200,9 +205,14 @@ class View3D:
             )
         self.server = server
         self._guard.install(server)
+        # The panel docked at the right edge, narrow: it takes its strip of the view instead
+        # of floating over the cell (in the console's embedded view at 1280 px a floating
+        # panel hid half of the scene); docked panels can still be collapsed by the user.
+        server.gui.configure_theme(control_width="small", show_share_button=False)
+        server.gui.main_panel.dock_right()
         server.scene.set_up_direction("+z")
-        server.initial_camera.position = (2.2, -1.9, 1.7)
-        server.initial_camera.look_at = (0.45, 0.0, 0.75)
+        server.initial_camera.position = INITIAL_CAMERA_M
+        server.initial_camera.look_at = INITIAL_LOOK_AT_M
         self._build_scene(server)
         self._build_panel(server)
         self._task = asyncio.create_task(self._update_loop(), name="view3d-update")
@@ -271,12 +281,15 @@ class View3D:
             server, self.cell.calibration_views, fov_rad=self._fov_rad, aspect=self._aspect
         )
         # The latest inspection and the sorting bins (backend.inspection).
-        from backend.view3d.inspections import InspectionScene
+        from backend.view3d.inspections import InspectionScene, LabelCamera
 
         bins = () if self.sim is None else self.sim.config.layout.bins
+        first_view = LabelCamera(INITIAL_CAMERA_M, INITIAL_LOOK_AT_M,
+                                 fov_rad=server.initial_camera.fov, height_px=EMBEDDED_VIEW_PX)  # fmt: skip
         self._inspection_scene = InspectionScene(
-            server, self.cell.bus, bins, fov_rad=self._fov_rad, aspect=self._aspect
-        )
+            server, self.cell.bus, bins, fov_rad=self._fov_rad, aspect=self._aspect,
+            labels_for=first_view,
+        )  # fmt: skip
 
     def _build_panel(self, server: viser.ViserServer) -> None:
         gui = server.gui

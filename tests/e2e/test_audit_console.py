@@ -30,7 +30,7 @@ def test_audit_page_shows_a_threshold_change(browser, server):
     row = page.wait_for_selector(sel)
     text = row.inner_text()
     assert "e2e-auditor (engineer)" in text and "set" in text and "0.42" in text
-    assert '"threshold":null' in text  # the old value
+    assert '"threshold": null' in text  # the old value (spaced between members, to wrap there)
     assert "<b>night</b> shift" in text  # the reason, as text, not markup
     assert row.query_selector("b") is None
 

@@ -267,7 +267,8 @@ def choose_threshold(
     target_far = _check_far(target_far)
     models = index.models
     if len(models) < 2:
-        raise ValueError(f"threshold selection needs at least two models, the index has {models}")
+        have = f"only {models[0]}" if models else "none"
+        raise ValueError(f"threshold selection needs at least two models, the index has {have}")
     negs = list(negatives or [])
     if len(negs) > MAX_NEGATIVES:
         raise ValueError(f"at most {MAX_NEGATIVES} negative images, got {len(negs)}")

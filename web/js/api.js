@@ -1,9 +1,28 @@
 // REST client: the bearer token on every call, the JSON error body surfaced as ApiError.
+//
+// A 401 to a call made with the current token means the session is over (the token was
+// revoked, expired, or the server restarted and revoked its start-up token): the token is
+// forgotten at once, so no later call sends it again (each would count as a failed sign-in
+// against this address and soon block everyone behind it), and the handler registered with
+// onTokenRefused() returns the console to the sign-in form.  Without a token no call is made.
 
 let token = "";
+let refusedHandler = null;
 
 /** Remember the token used by every later call. */
 export function setToken(value) { token = value || ""; }
+
+/** Call `fn(detail)` when the server refuses the token in use (once per token). */
+export function onTokenRefused(fn) { refusedHandler = fn; }
+
+/** The server answered `res` to a call made with `sent`: end the session on a 401. */
+export function checkRefused(res, sent) {
+  if (res.status !== 401 || !sent || sent !== token) return;
+  token = "";
+  if (refusedHandler) refusedHandler();
+}
+
+function signedOut() { return new ApiError(401, "signed_out", "signed out: sign in again"); }
 
 /** The current token ("" when signed out). */
 export function getToken() { return token; }
@@ -41,18 +60,22 @@ export async function api(method, path, body) {
     opts.headers["Content-Type"] = "application/json";
     opts.body = JSON.stringify(body);
   }
+  const sent = token;
+  if (!sent) throw signedOut();
   let res;
   try { res = await fetch(`/api${path}`, opts); }
   catch (e) { throw new ApiError(0, "network", "the cell does not answer"); }
-  if (!res.ok) throw await errorOf(res);
+  if (!res.ok) { checkRefused(res, sent); throw await errorOf(res); }
   const text = await res.text();
   return text ? JSON.parse(text) : {};
 }
 
 /** GET a binary resource (an image) with the token; resolves to a Blob. */
 export async function fetchBlob(url, { signal } = {}) {
+  const sent = token;
+  if (!sent) throw signedOut();
   const res = await fetch(url, { headers: headers(), signal });
-  if (!res.ok) throw await errorOf(res);
+  if (!res.ok) { checkRefused(res, sent); throw await errorOf(res); }
   return res.blob();
 }
 

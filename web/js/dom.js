@@ -46,9 +46,32 @@ export function fromTemplate(id) {
   return tpl.content.cloneNode(true);
 }
 
-/** Hide every `[data-min-role]` element under `root` that `role` may not use. */
+/**
+ * The next step for a user who lacks `need`: what it allows (`what`, e.g. "Teaching models"),
+ * the role the user holds (`have`) and how to sign in with a token of that role.
+ */
+export function roleHint(what, need, have) {
+  return el("p", { className: "role-hint", dataset: { needs: need } },
+    `${what} needs the ${need} role; you are signed in as ${have || "nobody"}. `,
+    "To do it, sign out and sign in with an ", el("strong", {}, need), " token: on the cell's computer ",
+    el("code", {}, `visioncell user add NAME --role ${need}`),
+    " prints one (an engineer can also issue one in the API, POST /api/users). On a demo cell "
+      + "started on this computer with make run, the token it prints is an engineer's.");
+}
+
+/**
+ * Hide every `[data-min-role]` element under `root` that `role` may not use; where such an
+ * element names what it is for (`data-role-hint`), a {@link roleHint} takes its place.
+ */
 export function applyRoles(root, role, rank) {
-  for (const node of $$("[data-min-role]", root)) node.hidden = rank(role) < rank(node.dataset.minRole);
+  for (const node of $$("[data-min-role]", root)) {
+    const denied = rank(role) < rank(node.dataset.minRole);
+    node.hidden = denied;
+    const next = node.nextElementSibling;
+    const hint = next && next.classList.contains("role-hint") ? next : null;
+    if (denied && node.dataset.roleHint && !hint) node.after(roleHint(node.dataset.roleHint, node.dataset.minRole, role));
+    else if (!denied && hint) hint.remove();
+  }
 }
 
 /**

@@ -4,7 +4,7 @@
 // the router mounts the page named by the URL hash (#cell, #inspection, #models, #reports, #calibration, #audit) into #page-root and
 // unmounts the previous one, which stops its timers and streams.
 
-import { api, ApiError, setToken } from "./api.js";
+import { api, ApiError, onTokenRefused, setToken } from "./api.js";
 import { $, el, setText } from "./dom.js";
 import { Live } from "./live.js";
 import cellPage from "./pages/cell.js";
@@ -101,10 +101,20 @@ function signOut() {
 
 live.addEventListener("open", () => { setText("#conn", "live"); $("#conn").className = "badge on"; });
 live.addEventListener("close", () => { setText("#conn", "offline"); $("#conn").className = "badge off"; });
-live.addEventListener("unauthorized", () => {
+/** The message of a session the server ended (shown on the sign-in form). */
+export const SESSION_ENDED = "Signed out: the cell no longer accepts this token (revoked, expired, "
+  + "or the cell restarted and issued a new one). Sign in with a current token: make run prints "
+  + "the built-in user's; visioncell user add NAME --role ROLE makes another.";
+
+/** The server refused the token in use: back to the sign-in form at once, every request stopped. */
+function sessionEnded() {
+  if (!user) return;  // a sign-in attempt: the form says why itself
   signOut();
-  setText("#login-error", "Signed out: the token was revoked.");
-});
+  setText("#login-error", SESSION_ENDED);
+}
+
+onTokenRefused(sessionEnded);
+live.addEventListener("unauthorized", sessionEnded);
 
 window.addEventListener("hashchange", route);
 $("#logout").addEventListener("click", signOut);
@@ -119,4 +129,10 @@ $("#login-form").addEventListener("submit", async (ev) => {
 });
 
 const saved = sessionStorage.getItem(TOKEN_KEY);
-if (saved) signIn(saved).catch(() => { sessionStorage.removeItem(TOKEN_KEY); setToken(""); });
+if (saved) {
+  signIn(saved).catch((e) => {
+    sessionStorage.removeItem(TOKEN_KEY);
+    setToken("");
+    if (e instanceof ApiError && e.status === 401) setText("#login-error", SESSION_ENDED);
+  });
+}

@@ -14,10 +14,22 @@ let generation = 0;
 
 const q = (sel) => (root ? $(sel, root) : null);
 
-/** A JSON value as short text for a table cell ("-" for none). */
+/** JSON text with a space after each comma and colon between members (strings untouched). */
+function spacedJson(v) {
+  if (Array.isArray(v)) return `[${v.map(spacedJson).join(", ")}]`;
+  if (v !== null && typeof v === "object") {
+    return `{${Object.entries(v).map(([k, x]) => `${JSON.stringify(k)}: ${spacedJson(x)}`).join(", ")}}`;
+  }
+  return JSON.stringify(v) ?? "null";
+}
+
+/**
+ * A JSON value as short text for a table cell ("-" for none), spaced between members so
+ * that a long value wraps between them, not inside a word or a number.
+ */
 function valueText(v) {
   if (v === null || v === undefined) return "-";
-  const text = JSON.stringify(v);
+  const text = spacedJson(v);
   return text.length > 300 ? `${text.slice(0, 297)}...` : text;
 }
 

@@ -58,10 +58,34 @@ function renderJob(job) {
     while (list.children.length > MAX_JOBS) list.lastElementChild.remove();
   }
   li.className = `state-${job.state}`;
-  let detail = job.error ? job.error.detail : (job.result && job.result.reason) || job.message || "";
+  let detail = jobDetail(job);
   if (detail === job.state) detail = "";
   const pct = job.state === "running" && job.progress > 0 ? ` ${Math.round(job.progress * 100)}%` : "";
   li.textContent = `${job.kind} ${job.id}: ${job.state}${pct}${detail ? ` (${detail})` : ""}`;
+}
+
+/**
+ * What a job line says after its state: the step while it runs, the error when it failed,
+ * and what came of it when it is done (never its last progress step: "done (viewpoint 2)").
+ */
+export function jobDetail(job) {
+  if (job.error) return job.error.detail || job.error.error || "";
+  if (job.state === "running") return job.message || "";
+  const r = job.result || {};
+  if (job.state !== "done") return job.message || "";
+  if (r.inspection) {
+    const i = r.inspection;
+    const score = typeof i.score === "number" ? ` ${i.score.toFixed(2)}` : "";
+    return `inspection #${i.id}: ${i.decision}${i.model ? ` ${i.model}` : ""}${score}`;
+  }
+  if (job.kind === "teach" && Array.isArray(r.views)) {
+    return `${r.views.length} view(s) stored${r.model && r.model.name ? ` for ${r.model.name}` : ""}`;
+  }
+  if (typeof r.inspected === "number") {
+    const counts = Object.entries(r.decisions || {}).map(([d, n]) => `${n} ${d}`).join(", ");
+    return `${r.inspected} inspected${counts ? `: ${counts}` : ""}`;
+  }
+  return typeof r.reason === "string" ? r.reason : "";
 }
 
 async function loadJobs() {

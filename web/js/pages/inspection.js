@@ -25,10 +25,11 @@ let ctx = null;
 let listeners = [];
 let timer = null;
 let threshold = null;      // the global threshold
-let perModel = {};         // model name -> the threshold that applies to it
+let perModel = {};         // model name -> the threshold that applies to it (every taught model)
 let shownId = null;
 let generation = 0;
 let runJob = null;
+let thresholdsRead = Promise.resolve();  // the models and thresholds, read at mount
 
 const q = (sel) => (root ? $(sel, root) : null);
 
@@ -52,10 +53,27 @@ function options() {
   return body;
 }
 
+/**
+ * A refusal in the page's words: with nothing taught yet, the way to the Models page (and,
+ * for a user who may not teach, the role it takes) rather than the API's own path.
+ */
+function refusal(code, detail) {
+  if (code !== "nothing_trained") return detail;
+  return el("span", {}, "Nothing to recognise yet: teach a model first on the ",
+    el("a", { id: "insp-teach-link", href: "#models" }, "Models page"),
+    ctx && ctx.can("engineer") ? "." : " (teaching needs the engineer role).");
+}
+
+function showRefusal(sel, code, detail) {
+  const box = q(sel);
+  if (!box) return;
+  box.replaceChildren(refusal(code, detail) || "");
+}
+
 async function command(method, path, body) {
   setText(q("#insp-message"), "");
   try { return await api(method, path, body); }
-  catch (e) { setText(q("#insp-message"), e.message); return null; }
+  catch (e) { showRefusal("#insp-message", e.code, e.message); return null; }
 }
 
 async function inspectOnce() {
@@ -128,6 +146,9 @@ function onJob(job) {
     setText(q("#insp-run-state"), job.state === "running" ? `inspecting: ${job.message || ""}`
       : `inspection ${job.state}${job.error ? ` (${job.error.detail})` : ""}`);
   }
+  if (job.state === "failed" && job.error && job.error.error === "nothing_trained") {
+    showRefusal("#insp-message", job.error.error, job.error.detail);
+  }
 }
 
 // -- the live result ---------------------------------------------------------------------------
@@ -148,6 +169,7 @@ async function showInspection(id) {
   const gen = generation;
   let r;
   try { r = await api("GET", `/inspections/${id}`); } catch (e) { setText(q("#insp-message"), e.message); return; }
+  await thresholdsRead;  // every taught model's bar and tick
   if (gen !== generation || !root) return;
   shownId = r.id;
   const title = q("#live-label");
@@ -163,7 +185,7 @@ async function showInspection(id) {
   if (!r.images.length) pics.append(el("p", { className: "small" }, "No image kept for this inspection."));
   setText(q("#live-viewpoints"), `Viewpoints visited: ${r.viewpoints_visited.join(" → ") || "none"} · policy ${r.policy}`
     + ` · ${r.duration_s === null ? "" : `${r.duration_s.toFixed(2)} s`}`);
-  const items = Object.entries(r.scores).sort((a, b) => b[1] - a[1])
+  const items = everyScore(r.scores, Object.keys(perModel))
     .map(([m, s]) => ({ label: m, value: s, color: m === r.model ? "#15803d" : "#9ca3af", mark: perModel[m] ?? threshold }));
   bars(q("#live-scores"), items, { max: 1 });
   const pose = r.pose && r.pose.T_base_obj;
@@ -171,6 +193,15 @@ async function showInspection(id) {
     ? `pose: x ${(pose[0][3] * 1000).toFixed(1)} mm, y ${(pose[1][3] * 1000).toFixed(1)} mm, yaw ${(Math.atan2(pose[1][0], pose[0][0]) * 180 / Math.PI).toFixed(1)}°`
     : "");
   for (const f of root.querySelectorAll("#filmstrip figure")) f.classList.toggle("selected", Number(f.dataset.id) === r.id);
+}
+
+/**
+ * Every model's score, best first: the inspection's scores plus each taught model it did not
+ * score (0: none of its views matched well enough to be verified), so every model has a bar.
+ */
+export function everyScore(scores, models) {
+  const all = { ...Object.fromEntries(models.map((m) => [m, 0])), ...scores };
+  return Object.entries(all).sort((a, b) => b[1] - a[1] || a[0].localeCompare(b[0]));
 }
 
 // -- the filmstrip, counters, throughput -------------------------------------------------------
@@ -200,7 +231,7 @@ async function loadThresholds() {
     threshold = s.global_threshold;
     const auto = (s.chosen_by === "auto" && s.detail && s.detail.per_model) || {};
     perModel = Object.fromEntries(models.data.map((m) => [m.name, m.threshold ?? auto[m.name] ?? s.global_threshold]));
-    setText(q("#live-threshold-note"), "ticks: the threshold of each model");
+    setText(q("#live-threshold-note"), "every taught model; ticks: the threshold of each model");
   } catch (e) { /* the bars show without ticks */ }
 }
 
@@ -245,7 +276,7 @@ function build() {
       el("label", { className: "inline" }, "Max views ", el("select", { id: "insp-max-views" },
         ...[3, 2, 1].map((v) => el("option", { value: v }, String(v))))),
       el("label", { className: "inline" }, el("input", { id: "insp-sort", type: "checkbox" }), " sort into bins")),
-    el("div", { className: "row", dataset: { minRole: "operator" } },
+    el("div", { className: "row", dataset: { minRole: "operator", roleHint: "Inspecting and running the cell" } },
       el("button", { id: "insp-once", type: "button", on: { click: inspectOnce } }, "Inspect once"),
       el("button", { id: "insp-run", type: "button", className: "go", on: { click: startRun } }, "Start"),
       el("button", { id: "insp-stop", type: "button", disabled: "", on: { click: stopRun } }, "Stop"),
@@ -297,7 +328,7 @@ export default {
     listen(ctx.live, "job", (ev) => onJob(ev.detail));
     listen(ctx.live, "inspection", (ev) => { showInspection(ev.detail.id); refresh(); });
     listen(ctx.live, "open", (ev) => { if (ev.detail.reconnected) refresh(); });
-    loadThresholds();
+    thresholdsRead = loadThresholds();
     api("GET", "/jobs").then((jobs) => {
       const run = jobs.data.find((j) => j.kind === "inspection-run" && j.state === "running");
       if (run) onJob(run);

@@ -4,7 +4,7 @@
 // score distributions and the ROC from GET /api/recognition/settings; by hand: engineer) and
 // the confusability warnings.  Viewers read; engineers change (the server enforces it too).
 
-import { api, ApiError, fetchBlob, getToken } from "../api.js";
+import { api, ApiError, checkRefused, fetchBlob, getToken } from "../api.js";
 import { $, applyRoles, el, lazyImage, releaseBlob, releaseImages, setText, showBlob } from "../dom.js";
 import { binCounts, bars, histogram, lines, rocPoints } from "../charts.js";
 
@@ -32,7 +32,13 @@ function listen(target, type, fn) {
   listeners.push(() => target.removeEventListener(type, fn));
 }
 
-function say(sel, text) { setText(q(sel), text || ""); }
+/** Show `text` in the message line `sel`: in red, or in green when `ok` (a success). */
+function say(sel, text, ok = false) {
+  const node = q(sel);
+  if (!node) return;
+  setText(node, text || "");
+  node.classList.toggle("ok", ok);
+}
 
 async function call(msgSel, method, path, body) {
   say(msgSel, "");
@@ -145,7 +151,9 @@ async function uploadViews(ev) {
   form.append("reason", "uploaded in the console");
   say("#upload-message", "uploading…");
   try {
+    const sent = getToken();
     const res = await fetch(`/api/models/${selected.id}/views`, { method: "POST", body: form, headers: authHeader() });
+    checkRefused(res, sent);
     const text = await res.text();
     const body = text ? JSON.parse(text) : {};
     if (!res.ok) throw new ApiError(res.status, body.error, typeof body.detail === "string" ? body.detail : JSON.stringify(body.detail));
@@ -235,7 +243,7 @@ async function clearStation() {
     await api("POST", "/sim/conveyor", { running: false, mode: "index", dwell_s: null });
     const objs = await api("GET", "/sim/objects?limit=100");
     for (const o of objs.data) await api("DELETE", `/sim/objects/${o.id}`);
-    say("#teach-message", `station cleared (${objs.count} object(s) taken off the belt, belt stopped)`);
+    say("#teach-message", `station cleared (${objs.count} object(s) taken off the belt, belt stopped)`, true);
   } catch (e) { say("#teach-message", e.message); }
 }
 
@@ -254,7 +262,7 @@ async function placeObject() {
   if (!Number.isFinite(yawDeg) || Math.abs(yawDeg) > 180) { say("#teach-message", `yaw must be within ±180°, got ${q("#place-yaw").value}`); return; }
   const r = await call("#teach-message", "POST", "/sim/objects",
     { name, position_along_belt_m: sim.station_s_m, lateral_m: 0, yaw_rad: (yawDeg * Math.PI) / 180 });
-  if (r) say("#teach-message", `${name} placed at the station (object ${r.object.id})`);
+  if (r) say("#teach-message", `${name} placed at the station (object ${r.object.id})`, true);
 }
 
 async function startTeach(ev) {
@@ -432,7 +440,8 @@ function build() {
     el("table", { id: "models-table" },
       el("thead", {}, el("tr", {}, ...["Name", "Kind", "Part", "Views", "Threshold"].map((h) => el("th", {}, h)))),
       el("tbody")),
-    engineer(el("form", { id: "new-model-form", className: "row", on: { submit: createModel } },
+    el("div", { dataset: { minRole: "engineer", roleHint: "Creating, teaching and changing models" } },
+      el("form", { id: "new-model-form", className: "row", on: { submit: createModel } },
       el("input", { id: "new-model-name", type: "text", placeholder: "new model name", required: "", maxlength: 64 }),
       el("select", { id: "new-model-kind" }, el("option", { value: "2d" }, "2d"), el("option", { value: "3d" }, "3d")),
       el("input", { id: "new-model-part", type: "text", placeholder: "part (default: name)", maxlength: 64 }),

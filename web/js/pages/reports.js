@@ -9,6 +9,7 @@
 import { api, ApiError, fetchBlob } from "../api.js";
 import { $, el, isoUtc, lazyImage, releaseImages, setText } from "../dom.js";
 import { COLORS, bars, columns, histogram } from "../charts.js";
+import { everyScore } from "./inspection.js";
 
 const TABLE_SIZE = 20;
 const GALLERY_SIZE = 12;
@@ -19,6 +20,7 @@ let ctx = null;
 let generation = 0;
 let offset = 0;
 let replayUrl = null;
+let modelNames = [];       // every taught model (each gets a score bar in the drill-down)
 
 const q = (sel) => (root ? $(sel, root) : null);
 const pct = (v) => (v === null || v === undefined ? "-" : `${(v * 100).toFixed(1)} %`);
@@ -147,6 +149,7 @@ async function openInspection(id) {
   try { r = await api("GET", `/inspections/${id}`); } catch (e) { say(e.message); return; }
   if (gen !== generation || !root) return;
   const box = q("#rep-detail");
+  const opening = box.hidden;
   box.hidden = false;
   for (const tr of root.querySelectorAll("#rep-table tbody tr")) tr.classList.toggle("selected", Number(tr.dataset.id) === r.id);
   setText(q("#rep-detail-title"), `Inspection #${r.id}: ${r.decision}${r.model ? ` ${r.model}` : ""}${r.score === null ? "" : ` (${r.score.toFixed(3)})`}`);
@@ -163,7 +166,7 @@ async function openInspection(id) {
     lazyImage(url, fetchBlob, { alt: `inspection ${r.id} view ${k}`, className: "detail-image" }),
     el("figcaption", { className: "small" }, `view ${k + 1}: viewpoint ${r.viewpoints_visited[k] ?? "?"}`))));
   if (!r.images.length) views.append(el("p", { className: "small" }, "No images kept (retention setting)."));
-  bars(q("#rep-detail-scores"), Object.entries(r.scores).sort((a, b) => b[1] - a[1])
+  bars(q("#rep-detail-scores"), everyScore(r.scores, modelNames)
     .map(([m, s]) => ({ label: m, value: s, color: m === r.model ? "#15803d" : "#9ca3af" })), { max: 1 });
   const durations = Object.entries(r.durations || {});
   q("#rep-detail-durations tbody").replaceChildren(...durations.map(([k, v]) => el("tr", {}, el("td", {}, k), el("td", {}, typeof v === "number" ? sec(v) : String(v)))));
@@ -172,7 +175,15 @@ async function openInspection(id) {
   const truth = r.truth && r.truth.T_base_obj
     ? ` · truth ${r.truth.name}: x ${(r.truth.T_base_obj[0][3] * 1000).toFixed(1)} mm, y ${(r.truth.T_base_obj[1][3] * 1000).toFixed(1)} mm` : "";
   setText(q("#rep-detail-pose"), `Pose: ${poseText}${truth}`);
+  // The drill-down sits below the long lists: bring it into view (it opened off screen).
+  if (opening || !inView(box)) box.scrollIntoView({ block: "start", behavior: "smooth" });
   await loadReplay(r.id, gen);
+}
+
+/** Whether the top of `node` is on screen. */
+function inView(node) {
+  const top = node.getBoundingClientRect().top;
+  return top >= 0 && top < window.innerHeight - 80;
 }
 
 /**
@@ -242,6 +253,7 @@ async function loadChoices() {
   try {
     const [cells, models] = await Promise.all([api("GET", "/cells?limit=100"), api("GET", "/models?limit=1000")]);
     if (!root) return;
+    modelNames = models.data.map((m) => m.name);
     q("#rep-cell").append(...cells.data.map((c) => el("option", { value: c.name }, c.name)));
     q("#rep-model").append(...models.data.map((m) => el("option", { value: m.name }, m.name)));
   } catch (e) { say(e.message); }
@@ -290,7 +302,7 @@ function build() {
     el("div", { id: "rep-detail-views", className: "live-images" }),
     el("p", { id: "rep-detail-pose", className: "small" }),
     el("div", { className: "chart-pair" },
-      el("div", {}, el("h3", {}, "Scores"), el("canvas", { id: "rep-detail-scores", className: "chart bars" })),
+      el("div", {}, el("h3", {}, "Scores ", el("span", { className: "small" }, "every taught model")), el("canvas", { id: "rep-detail-scores", className: "chart bars" })),
       el("div", {}, el("h3", {}, "Durations"), el("table", { id: "rep-detail-durations" }, el("tbody")))),
     el("h3", {}, "3D scene replay ", el("span", { id: "rep-replay-status", className: "small" })),
     el("iframe", { id: "rep-replay", title: "Replay of the recorded 3D scene", hidden: true }));
