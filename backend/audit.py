@@ -38,7 +38,7 @@ __all__ = [
 ]
 
 #: What can be changed, and so recorded.
-KINDS = ("threshold", "model", "view", "calibration", "user", "token")
+KINDS = ("threshold", "model", "view", "negative", "calibration", "user", "token")
 #: Longest reason a changing endpoint accepts (characters).
 MAX_REASON_LENGTH = 500
 #: Largest old or new value stored, bytes of JSON; a larger one is stored as a summary.

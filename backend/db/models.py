@@ -47,6 +47,7 @@ __all__ = [
     "InspectionInProgress",
     "InspectionScene",
     "InspectionStage",
+    "NegativeImage",
     "ObjectKind",
     "ObjectModel",
     "RecognitionSettings",
@@ -355,6 +356,9 @@ class Inspection(Base):
     pick: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
     #: Simulator only, for evaluation: catalogue name and true pose (the decision never reads it).
     truth: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
+    #: Where the images came from: ``cell`` (the arm's camera) or ``upload`` (an image sent
+    #: to ``POST /api/recognition/recognise``).
+    source: Mapped[str] = mapped_column(String(16), server_default="cell", default="cell")
 
     images: Mapped[list[InspectionImage]] = relationship(
         back_populates="inspection", cascade="all, delete-orphan"
@@ -423,6 +427,22 @@ class InspectionScene(Base):
     scene: Mapped[bytes] = mapped_column(LargeBinary)
     #: ``len(scene)``, kept so that the storage used is a sum over a small column.
     size_bytes: Mapped[int] = mapped_column(Integer)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class NegativeImage(Base):
+    """An image of no trained object (the empty belt, other things in the scene): an
+    impostor the automatic threshold is chosen against, shared by the plant as the models."""
+
+    __tablename__ = "negative_images"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    image_png: Mapped[bytes] = mapped_column(LargeBinary)
+    width: Mapped[int] = mapped_column(Integer)
+    height: Mapped[int] = mapped_column(Integer)
+    #: ``upload`` (sent by an engineer) or ``teach`` (an empty-belt background of a teach).
+    source: Mapped[str] = mapped_column(String(16), default="upload")
+    note: Mapped[str] = mapped_column(String(200), default="")
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 

@@ -15,11 +15,12 @@ from __future__ import annotations
 
 import asyncio
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from sqlalchemy import select
 from sqlalchemy.ext.asyncio import AsyncSession
 
@@ -68,6 +69,8 @@ class ThresholdOutcome:
     """What was done, in words."""
     confusable: tuple[dict[str, Any], ...]
     """Pairs of models alike from the top (viewpoint 1), most confused first."""
+    advice: tuple[str, ...] = ()
+    """What to add so that the data supports the target false-accept rate, in words."""
 
     def public(self) -> dict[str, Any]:
         return {
@@ -76,6 +79,7 @@ class ThresholdOutcome:
             "in_force": self.in_force,
             "reason": self.reason,
             "confusable_from_top": list(self.confusable),
+            "advice": list(self.advice),
         }
 
 
@@ -140,8 +144,13 @@ def confusable_pairs(
     return tuple(sorted(pairs, key=lambda p: (-p["rate"], p["model"], p["confused_with"])))
 
 
-def _detail(choice: ThresholdChoice, n_views: int) -> dict[str, Any]:
+def _detail(
+    choice: ThresholdChoice, n_views: int, *, n_negatives: int = 0, signature: str = ""
+) -> dict[str, Any]:
     return {
+        "advice": list(choice.advice),
+        "negatives": n_negatives,
+        "signature": signature,
         "rule": choice.rule,
         "rule_id": choice.rule_id,
         "target_far": choice.target_far,
@@ -203,6 +212,7 @@ def choice_from_detail(global_threshold: float, detail: Mapping[str, Any]) -> Th
             int(vp): {str(m): float(t) for m, t in row.items()}
             for vp, row in detail.get("own_viewpoint", {}).items()
         },
+        advice=tuple(str(a) for a in detail.get("advice", [])),
     )
 
 
@@ -245,9 +255,17 @@ async def current_choice(session: AsyncSession) -> ThresholdChoice:
     )
 
 
-def _choose(snapshot: bytes, target_far: float) -> tuple[ThresholdChoice, int]:
+def _choose(
+    snapshot: bytes,
+    target_far: float,
+    negatives: Sequence[NDArray[np.uint8]] = (),
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[ThresholdChoice, int]:
     index = ViewIndex.from_bytes(snapshot)
-    return choose_threshold(index, target_far=target_far), len(index)
+    choice = choose_threshold(
+        index, negatives=list(negatives), target_far=target_far, progress=progress
+    )
+    return choice, len(index)
 
 
 async def deferred(db: Database) -> ThresholdOutcome:
@@ -261,18 +279,33 @@ async def deferred(db: Database) -> ThresholdOutcome:
 
 
 async def recompute(
-    db: Database, live: LiveIndex, *, target_far: float = DEFAULT_TARGET_FAR
+    db: Database,
+    live: LiveIndex,
+    *,
+    target_far: float = DEFAULT_TARGET_FAR,
+    negatives: Sequence[NDArray[np.uint8]] = (),
+    signature: str = "",
+    progress: Callable[[int, int], None] | None = None,
 ) -> ThresholdOutcome:
-    """Choose the automatic threshold from the live index and store it (module docstring)."""
+    """Choose the automatic threshold from the live index and store it (module docstring).
+
+    ``negatives``: images of no trained object (RGB or grey uint8), impostors too (a single
+    model gets a threshold from them).  ``signature`` is stored with the choice: what it
+    was chosen from (:mod:`backend.recognition.autothreshold` skips a recomputation from
+    the same data).  ``progress(done, total)`` is called from the worker thread.
+    """
     with live.reading() as index:
         snapshot = index.to_bytes()  # a copy: the choice runs without the lock
     try:
-        choice, n_views = await asyncio.to_thread(_choose, snapshot, target_far)
+        choice, n_views = await asyncio.to_thread(
+            _choose, snapshot, target_far, negatives, progress
+        )
     except ValueError as exc:
         async with db.session() as session:
             row = await latest_settings(session)
         in_force = DEFAULT_THRESHOLD if row is None else row.global_threshold
-        return ThresholdOutcome(False, None, in_force, f"not chosen: {exc}", ())
+        advice = _not_chosen_advice(str(exc))
+        return ThresholdOutcome(False, None, in_force, f"not chosen: {exc}", (), advice)
     confusable = confusable_pairs(choice)
     async with db.session() as session:
         row = await latest_settings(session)
@@ -284,12 +317,15 @@ async def recompute(
                 f"the manual threshold {row.global_threshold:.3f} stays in force; the "
                 f"automatic rule would choose {choice.threshold:.3f} ({choice.rule})",
                 confusable,
+                choice.advice,
             )
         session.add(
             RecognitionSettings(
                 global_threshold=float(choice.threshold),
                 chosen_by="auto",
-                detail=_detail(choice, n_views),
+                detail=_detail(
+                    choice, n_views, n_negatives=len(negatives), signature=signature
+                ),
             )
         )
         audit.record(
@@ -306,4 +342,19 @@ async def recompute(
             },
             reason=choice.rule[: audit.MAX_REASON_LENGTH],
         )
-    return ThresholdOutcome(True, choice.threshold, choice.threshold, choice.rule, confusable)
+    return ThresholdOutcome(
+        True, choice.threshold, choice.threshold, choice.rule, confusable, choice.advice
+    )
+
+
+def _not_chosen_advice(reason: str) -> tuple[str, ...]:
+    """What to add when no threshold could be chosen at all, in plain words."""
+    if "at least two models" in reason:
+        return (
+            "Add a second model, or negative images (the empty belt, other things in the "
+            "scene): with one model and nothing else there is no impostor to measure the "
+            "false accepts against.",
+        )
+    if "two trained views" in reason:
+        return ("Add at least two views of a model at the same viewpoint.",)
+    return ()

@@ -25,9 +25,10 @@ from vision.errors import InvalidInput
 __all__ = ["FIELDS", "MAX_EXPORT_ROWS", "PAGE_ROWS", "check_export", "export_csv", "export_jsonl",
            "export_rows"]  # fmt: skip
 
-#: Columns of the export, in order (the API contract), then ``viewpoints`` (added).
+#: Columns of the export, in order (the API contract), then ``viewpoints`` and ``source``
+#: (``cell`` or ``upload``: an image sent to the recognise endpoint), added.
 FIELDS = ("id", "cell", "started_at", "finished_at", "decision", "model", "score", "policy",
-          "views", "duration_s", "reason", "x_mm", "y_mm", "yaw_deg", "truth_name", "viewpoints")  # fmt: skip
+          "views", "duration_s", "reason", "x_mm", "y_mm", "yaw_deg", "truth_name", "viewpoints", "source")  # fmt: skip
 PAGE_ROWS = 1000
 MAX_EXPORT_ROWS = 1_000_000
 
@@ -59,6 +60,7 @@ def _row(r: Any) -> dict[str, Any]:
         "yaw_deg": round(math.degrees(float(yaw)), 3) if isinstance(yaw, int | float) else None,
         "truth_name": truth.get("name"),
         "viewpoints": vps,
+        "source": getattr(r, "source", "cell"),
     }
 
 
@@ -97,6 +99,7 @@ async def export_rows(db: Database, f: ReportFilters) -> AsyncIterator[dict[str,
                     _I.reason,
                     _I.pose,
                     _I.truth,
+                    _I.source,
                 )
                 .join(Cell, Cell.id == _I.cell_id)
                 .where(*conds, _I.id > last)

@@ -15,7 +15,7 @@ from backend.api.types import Limit, Offset
 
 router = APIRouter(prefix="/audit", tags=["audit"])
 
-Kind = Literal["threshold", "model", "view", "calibration", "user", "token"]
+Kind = Literal["threshold", "model", "view", "negative", "calibration", "user", "token"]
 
 
 class AuditPublic(BaseModel):

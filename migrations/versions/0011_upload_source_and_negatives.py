@@ -1,0 +1,47 @@
+"""recognition of uploaded images: inspections.source, negative_images
+
+Revision ID: 0011
+Revises: 0010
+Create Date: 2026-12-06 21:40:00
+
+``inspections.source`` says where an inspection's images came from: ``cell`` (the arm's
+camera; every row stored so far) or ``upload`` (an image sent to ``POST
+/api/recognition/recognise`` with ``store=true``).  ``negative_images`` holds images of no
+trained object, impostors for the automatic threshold.
+"""
+
+from __future__ import annotations
+
+import sqlalchemy as sa
+from alembic import op
+
+from backend.db.types import UTCDateTime
+
+revision = "0011"
+down_revision = "0010"
+branch_labels = None
+depends_on = None
+
+
+def upgrade() -> None:
+    with op.batch_alter_table("inspections") as batch:
+        batch.add_column(
+            sa.Column("source", sa.String(length=16), server_default="cell", nullable=False)
+        )
+    op.create_table(
+        "negative_images",
+        sa.Column("id", sa.Integer(), nullable=False),
+        sa.Column("image_png", sa.LargeBinary(), nullable=False),
+        sa.Column("width", sa.Integer(), nullable=False),
+        sa.Column("height", sa.Integer(), nullable=False),
+        sa.Column("source", sa.String(length=16), nullable=False),
+        sa.Column("note", sa.String(length=200), nullable=False),
+        sa.Column("created_at", UTCDateTime(), nullable=False),
+        sa.PrimaryKeyConstraint("id", name=op.f("pk_negative_images")),
+    )
+
+
+def downgrade() -> None:
+    op.drop_table("negative_images")
+    with op.batch_alter_table("inspections") as batch:
+        batch.drop_column("source")
