@@ -486,7 +486,8 @@ class AuditEntry(Base):
     __table_args__ = (
         Index("ix_audit_log_kind_entity", "kind", "entity_id"),
         CheckConstraint(
-            "kind IN ('threshold', 'model', 'view', 'calibration', 'user', 'token')", name="kind"
+            "kind IN ('threshold', 'model', 'view', 'negative', 'calibration', 'user', 'token')",
+            name="kind",
         ),
     )
 

@@ -7,7 +7,8 @@ Create Date: 2026-12-06 21:40:00
 ``inspections.source`` says where an inspection's images came from: ``cell`` (the arm's
 camera; every row stored so far) or ``upload`` (an image sent to ``POST
 /api/recognition/recognise`` with ``store=true``).  ``negative_images`` holds images of no
-trained object, impostors for the automatic threshold.
+trained object, impostors for the automatic threshold; the audit trail records their
+changes (kind ``negative``).
 """
 
 from __future__ import annotations
@@ -23,7 +24,20 @@ branch_labels = None
 depends_on = None
 
 
+_KINDS_BEFORE = "kind IN ('threshold', 'model', 'view', 'calibration', 'user', 'token')"
+_KINDS_AFTER = (
+    "kind IN ('threshold', 'model', 'view', 'negative', 'calibration', 'user', 'token')"
+)
+
+
+def _audit_kinds(check: str) -> None:
+    with op.batch_alter_table("audit_log") as batch:
+        batch.drop_constraint(op.f("ck_audit_log_kind"), type_="check")
+        batch.create_check_constraint(op.f("ck_audit_log_kind"), check)
+
+
 def upgrade() -> None:
+    _audit_kinds(_KINDS_AFTER)
     with op.batch_alter_table("inspections") as batch:
         batch.add_column(
             sa.Column("source", sa.String(length=16), server_default="cell", nullable=False)
@@ -42,6 +56,8 @@ def upgrade() -> None:
 
 
 def downgrade() -> None:
+    op.execute("DELETE FROM audit_log WHERE kind = 'negative'")
+    _audit_kinds(_KINDS_BEFORE)
     op.drop_table("negative_images")
     with op.batch_alter_table("inspections") as batch:
         batch.drop_column("source")
