@@ -273,8 +273,11 @@ def run(data_dir: Path, *, plan: Plan = FULL, workdir: Path | None = None) -> di
     endpoint_ms = 1e3 * statistics.median(t_endpoint)
     library_ms = 1e3 * statistics.median(t_library)
     return {
-        "plan": {"train_step_deg": 5 * plan.train_step, "known_step": plan.known_step,
-                 "unknown_step": plan.unknown_step},
+        "plan": {
+            "train_step_deg": 5 * plan.train_step,
+            "known_step": plan.known_step,
+            "unknown_step": plan.unknown_step,
+        },
         "trained_views": len(TRAINED) * sum(plan.trained(k) for k in range(N_VIEWS)),
         "threshold": status["settings"]["global_threshold"],
         "rule": d.get("rule"),

@@ -164,8 +164,9 @@ def _csv_row(r: dict[str, Any]) -> dict[str, Any]:
 
 def recognise(
     paths: Annotated[list[Path], typer.Argument(help="Images and folders of images")],
-    token: Annotated[str, typer.Option(help="Viewer token (operator with --store)",
-                                       envvar="VISIONCELL_TOKEN")],
+    token: Annotated[
+        str, typer.Option(help="Viewer token (operator with --store)", envvar="VISIONCELL_TOKEN")
+    ],
     url: Annotated[str | None, typer.Option(help="Cell URL (default: from the settings)")] = None,
     viewpoint: Annotated[int, typer.Option(min=1, max=3, help="1 top, 2 or 3 sides")] = 1,
     region: Annotated[

@@ -221,4 +221,3 @@ class ThresholdKeeper:
 async def wait_settled(keeper: ThresholdKeeper, timeout_s: float) -> None:
     """:meth:`ThresholdKeeper.settled` bounded by ``timeout_s`` (raises ``TimeoutError``)."""
     await asyncio.wait_for(keeper.settled(), timeout_s)
-

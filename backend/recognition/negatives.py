@@ -136,7 +136,9 @@ async def delete_negative(db: Database, negative_id: int, *, by: audit.By | None
     """Delete one stored negative, or :class:`NotFound`."""
     by = by or audit.By()
     async with db.session() as session:
-        row = await session.get(NegativeImage, negative_id, options=[defer(NegativeImage.image_png)])
+        row = await session.get(
+            NegativeImage, negative_id, options=[defer(NegativeImage.image_png)]
+        )
         if row is None:
             raise NotFound(f"no negative image with id {negative_id}")
         audit.record(

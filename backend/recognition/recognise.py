@@ -58,7 +58,9 @@ class Region:
         for k in ("x", "y", "width", "height"):
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= im.MAX_IMAGE_SIDE:
-                raise InvalidInput(f"region {k} must be an int in 0..{im.MAX_IMAGE_SIDE}, got {v!r}")
+                raise InvalidInput(
+                    f"region {k} must be an int in 0..{im.MAX_IMAGE_SIDE}, got {v!r}"
+                )
         if self.width < 16 or self.height < 16:
             raise InvalidInput(
                 f"the region must be at least 16 x 16 px, got {self.width} x {self.height}"
@@ -147,8 +149,12 @@ class ImageRecognition:
             "score": round(self.score, 5),
             "threshold": round(self.threshold, 5),
             "scores": [
-                {"model": s.model, "score": round(s.score, 5),
-                 "threshold": round(s.threshold, 5), "passed": s.passed}
+                {
+                    "model": s.model,
+                    "score": round(s.score, 5),
+                    "threshold": round(s.threshold, 5),
+                    "passed": s.passed,
+                }
                 for s in self.scores
             ],
             "contenders": list(self.contenders),

@@ -323,9 +323,7 @@ async def recompute(
             RecognitionSettings(
                 global_threshold=float(choice.threshold),
                 chosen_by="auto",
-                detail=_detail(
-                    choice, n_views, n_negatives=len(negatives), signature=signature
-                ),
+                detail=_detail(choice, n_views, n_negatives=len(negatives), signature=signature),
             )
         )
         audit.record(

@@ -25,9 +25,7 @@ depends_on = None
 
 
 _KINDS_BEFORE = "kind IN ('threshold', 'model', 'view', 'calibration', 'user', 'token')"
-_KINDS_AFTER = (
-    "kind IN ('threshold', 'model', 'view', 'negative', 'calibration', 'user', 'token')"
-)
+_KINDS_AFTER = "kind IN ('threshold', 'model', 'view', 'negative', 'calibration', 'user', 'token')"
 
 
 def _audit_kinds(check: str) -> None:

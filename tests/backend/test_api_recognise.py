@@ -40,7 +40,9 @@ def cell(tmp_path_factory):
             img = textured_rgb(seed)
             files = [("images", (f"{name}{k}.png", png_bytes(_turned(img, 8 * k)), "image/png"))
                      for k in range(2)]  # fmt: skip
-            r = client.post(f"/api/models/{m['id']}/views", files=files, headers=headers["engineer"])
+            r = client.post(
+                f"/api/models/{m['id']}/views", files=files, headers=headers["engineer"]
+            )
             assert r.status_code == 201, r.text
         yield settings, client, headers
 
@@ -127,7 +129,12 @@ def test_store_needs_the_operator_and_writes_upload_rows(cell):
     [
         ([("bomb.png", png_bomb())], {}, 413, "60000 x 60000"),
         ([("a.png", b"GIF89a" + b"\0" * 100)], {}, 415, "not a PNG or JPEG"),
-        ([("a.png", png_bytes(textured_rgb(1, size=(1100, 1000))))] * 2, {}, 413, "at most 2000000"),
+        (
+            [("a.png", png_bytes(textured_rgb(1, size=(1100, 1000))))] * 2,
+            {},
+            413,
+            "at most 2000000",
+        ),
         ([("a.png", png_bytes(textured_rgb(1)))] * 5, {}, 422, "at most 4 images"),
         ([("a.png", png_bytes(textured_rgb(1)))], {"viewpoint": "4"}, 422, "viewpoint"),
         ([("a.png", png_bytes(textured_rgb(1)))], {"region": "1,2,3"}, 422, "region"),

@@ -44,7 +44,9 @@ def test_many_changes_in_a_row_give_one_recomputation(tmp_path):
         keeper.start()
         try:
             vid = 0
-            models = [IndexedModel(k + 1, f"m{k}", f"m{k}", "default", "2d", None) for k in range(3)]
+            models = [
+                IndexedModel(k + 1, f"m{k}", f"m{k}", "default", "2d", None) for k in range(3)
+            ]
             for m in models:  # nine views added one after the other, in one go
                 base = textured_rgb(20 + m.id)
                 for a in (-10, 0, 10):
@@ -134,13 +136,21 @@ def test_one_model_gets_a_threshold_from_negatives(follow_client):
     assert listed["count"] == 5 and listed["data"][0]["note"] == "belt and clutter"
     # The known object is recognised against that threshold; the clutter is not.
     q = png_bytes(_turned(base, 6))
-    res = client.post("/api/recognition/recognise", headers=headers["viewer"],
-                      files=[("images", ("q.png", q, "image/png")),
-                             ("images", ("o.png", png_bytes(textured_rgb(77)), "image/png"))])
+    res = client.post(
+        "/api/recognition/recognise",
+        headers=headers["viewer"],
+        files=[
+            ("images", ("q.png", q, "image/png")),
+            ("images", ("o.png", png_bytes(textured_rgb(77)), "image/png")),
+        ],
+    )
     assert [d["decision"] for d in res.json()["data"]] == ["recognized", "unknown"]  # fmt: skip
     # Deleting a negative recomputes too; viewers may not delete.
     nid = listed["data"][0]["id"]
-    assert client.delete(f"/api/recognition/negatives/{nid}", headers=headers["viewer"]).status_code == 403
+    assert (
+        client.delete(f"/api/recognition/negatives/{nid}", headers=headers["viewer"]).status_code
+        == 403
+    )
     assert client.delete(f"/api/recognition/negatives/{nid}", headers=eng).status_code == 204
     s = _settled(client, headers["viewer"], 3)
     assert s["settings"]["detail"]["negatives"] == 4

@@ -205,7 +205,9 @@ def _region(text: str | None) -> Region | None:
     try:
         values = json.loads(raw) if raw.startswith("[") else [int(v) for v in raw.split(",")]
     except (ValueError, json.JSONDecodeError):
-        raise InvalidInput(f"region must be x,y,width,height in pixels, got {text[:80]!r}") from None
+        raise InvalidInput(
+            f"region must be x,y,width,height in pixels, got {text[:80]!r}"
+        ) from None
     if not isinstance(values, list) or len(values) != 4:
         raise InvalidInput(f"region must be four numbers x,y,width,height, got {text[:80]!r}")
     if any(isinstance(v, bool) or not isinstance(v, int) for v in values):
