@@ -7,7 +7,8 @@ recomputes the automatic threshold (:func:`backend.recognition.thresholds.recomp
 
 * coalesced: it waits until nothing has changed for ``quiet_s`` (at most
   :data:`MAX_DELAY_FACTOR` times that after the first change), so a hundred uploads in a row
-  give one recomputation; changes made while a recomputation runs give one more after it;
+  give one recomputation; a change made while a recomputation runs supersedes it (it stops
+  at its next held-out query, stores nothing) and one more follows after the quiet period;
 * bounded: one recomputation at a time, over at most the index's views and
   :data:`~backend.recognition.negatives.MAX_NEGATIVES` stored negatives plus the cell's
   teach backgrounds;
@@ -37,7 +38,7 @@ from backend.recognition import thresholds
 from backend.recognition.index import LiveIndex
 from backend.taskutil import cancel_and_wait
 
-__all__ = ["MAX_DELAY_FACTOR", "ThresholdKeeper", "signature"]
+__all__ = ["MAX_DELAY_FACTOR", "Superseded", "ThresholdKeeper", "signature"]
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +46,10 @@ log = logging.getLogger(__name__)
 MAX_DELAY_FACTOR = 10.0
 
 Backgrounds = Callable[[], Sequence[NDArray[np.uint8]]]
+
+
+class Superseded(Exception):
+    """A recomputation stopped because the views changed while it ran."""
 
 
 def signature(live: LiveIndex, negative_ids: Sequence[int], n_backgrounds: int) -> str:
@@ -93,9 +98,12 @@ class ThresholdKeeper:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._task: asyncio.Task[None] | None = None
         self._pending = False
+        self._superseded = False
         self._job: Job | None = None
-        #: Recomputations run (skipped ones included), for the console and the tests.
+        #: Recomputations finished (skipped ones included), for the console and the tests.
         self.runs = 0
+        #: Recomputations stopped by a change while they ran.
+        self.superseded = 0
         #: The last recomputation's outcome (``ThresholdOutcome.public()`` plus ``skipped``).
         self.last: dict[str, Any] | None = None
 
@@ -129,18 +137,25 @@ class ThresholdKeeper:
     def changed(self) -> None:
         """Note a change (on the event loop): a recomputation follows after the quiet period."""
         self._pending = True
+        if self._running():
+            self._superseded = True  # read by the running choice's progress callback
         self._event.set()
+
+    def _running(self) -> bool:
+        job = self._job
+        return job is not None and job.task is not None and not job.task.done()
 
     def status(self) -> dict[str, Any]:
         """``state`` (``idle``, ``waiting``: changes seen, quiet period running; ``running``),
         the running job's id, the number of runs and the last outcome."""
         job = self._job
-        running = job is not None and job.task is not None and not job.task.done()
+        running = self._running()
         state = "running" if running else "waiting" if self._pending else "idle"
         return {
             "state": state,
             "job": None if job is None else job.id,
             "runs": self.runs,
+            "superseded": self.superseded,
             "quiet_s": self.quiet_s,
             "last": self.last,
         }
@@ -178,6 +193,7 @@ class ThresholdKeeper:
             try:
                 await self._quiet()
                 self._pending = False
+                self._superseded = False
                 job = self.jobs.start("threshold", self._body, params={"trigger": "change"})
                 self._job = job
                 assert job.task is not None
@@ -194,30 +210,32 @@ class ThresholdKeeper:
         sig = signature(self.live, ids, len(backgrounds))
         async with self.db.session() as session:
             row = await thresholds.latest_settings(session)
-        self.runs += 1
         if row is not None and row.chosen_by == "auto" and row.detail.get("signature") == sig:
             out = {"skipped": True, "reason": "chosen from the same views and negatives already",
                    "threshold": row.global_threshold, "in_force": row.global_threshold,
                    "advice": list(row.detail.get("advice", []))}  # fmt: skip
+            self.runs += 1
             self.last = out
             return out
         images = await neg.load_negatives(self.db) + backgrounds
         loop = asyncio.get_running_loop()
 
         def progress(done: int, total: int) -> None:  # called from the worker thread
+            if self._superseded:
+                raise Superseded
             loop.call_soon_threadsafe(
                 job.report, 0.05 + 0.9 * done / max(total, 1), f"held-out query {done}/{total}"
             )
 
-        outcome = await thresholds.recompute(
-            self.db, self.live, target_far=self.target_far, negatives=images, signature=sig,
-            progress=progress,
-        )  # fmt: skip
+        try:
+            outcome = await thresholds.recompute(
+                self.db, self.live, target_far=self.target_far, negatives=images,
+                signature=sig, progress=progress,
+            )  # fmt: skip
+        except Superseded:
+            self.superseded += 1
+            return {"superseded": True, "reason": "the views changed meanwhile: chosen again"}
+        self.runs += 1
         out = {"skipped": False, **outcome.public(), "negatives": len(images)}
         self.last = out
         return out
-
-
-async def wait_settled(keeper: ThresholdKeeper, timeout_s: float) -> None:
-    """:meth:`ThresholdKeeper.settled` bounded by ``timeout_s`` (raises ``TimeoutError``)."""
-    await asyncio.wait_for(keeper.settled(), timeout_s)

@@ -26,6 +26,7 @@ from backend.api.deps import (
     SessionDep,
     SettingsDep,
     ViewerUser,
+    read_through,
 )
 from backend.api.errors import ApiError
 from backend.api.types import bounded_float
@@ -52,6 +53,8 @@ from vision.errors import InvalidInput
 
 #: Database integer keys are 32-bit signed on PostgreSQL.
 DB_ID_MAX = 2**31 - 1
+#: What the thresholds in force are read from (the read cache drops them on a write).
+CHOICE_TABLES = ("recognition_settings", "object_models")
 
 router = APIRouter(prefix="/recognition", tags=["recognition"])
 
@@ -270,9 +273,17 @@ async def recognise_images(
             )
     db = runtime.database
     live = runtime.live_index
-    async with db.session() as session:
-        choice = await current_choice(session)
+
+    async def read_choice(session: Any) -> tuple[Any, str]:
         row = await latest_settings(session)
+        return await current_choice(session), "default" if row is None else row.chosen_by
+
+    # The thresholds in force change with a settings row or a model's own threshold: read
+    # through the cache, which a commit to either table clears.
+    choice, chosen_by = await read_through(
+        runtime.read_cache, db, user, ("recognise-thresholds",), tables=CHOICE_TABLES,
+        read=read_choice,
+    )  # fmt: skip
     started = utcnow()
 
     async def one(k: int) -> Any:
@@ -303,7 +314,7 @@ async def recognise_images(
         "data": out,
         "count": len(out),
         "threshold": {
-            "chosen_by": "default" if row is None else row.chosen_by,
+            "chosen_by": chosen_by,
             "global_threshold": choice.at(viewpoint).threshold,
             "rule": choice.rule,
         },
@@ -318,7 +329,8 @@ class ThresholdStatusOut(BaseModel):
     follow: bool = Field(description="Recomputed after every change of the views (setting)")
     state: str = Field(description="idle, waiting (changes seen) or running")
     job: str | None
-    runs: int
+    runs: int = Field(description="Recomputations finished")
+    superseded: int = Field(description="Recomputations stopped by a change while they ran")
     last: dict[str, Any] | None = Field(description="The last recomputation's outcome")
     settings: RecognitionSettingsOut
 
@@ -335,13 +347,14 @@ async def read_threshold_status(
     state = (
         keeper.status()
         if keeper is not None
-        else {"state": "idle", "job": None, "runs": 0, "last": None}
+        else {"state": "idle", "job": None, "runs": 0, "superseded": 0, "last": None}
     )
     return {
         "follow": keeper is not None,
         "state": state["state"],
         "job": state["job"],
         "runs": state["runs"],
+        "superseded": state["superseded"],
         "last": state["last"],
         "settings": _public(await latest_settings(session)),
     }
