@@ -213,9 +213,11 @@ def recognise_upload(
     mask_data: bytes | None = None,
     region: Region | None = None,
     max_pixels: int = im.MAX_IMAGE_PIXELS,
-) -> tuple[ImageRecognition, NDArray[np.uint8]]:
+    annotate: bool = False,
+) -> tuple[ImageRecognition, bytes | None]:
     """Decode one uploaded image and recognise it (module docstring); CPU work for a worker
-    thread.  Returns the result and the decoded RGB image.
+    thread.  Returns the result and, with ``annotate``, the image as JPEG with the matched
+    outline drawn (what a stored inspection keeps; the decoded pixels are not kept).
 
     Parameters
     ----------
@@ -284,7 +286,7 @@ def recognise_upload(
             "decide": decide_s,
         },
     )
-    return result, rgb
+    return result, _annotated_jpeg(rgb, result) if annotate else None
 
 
 def _annotated_jpeg(rgb: NDArray[np.uint8], result: ImageRecognition) -> bytes:
@@ -311,13 +313,14 @@ def _stages(durations: Mapping[str, float]) -> dict[str, float]:
 
 def inspection_record(
     result: ImageRecognition,
-    rgb: NDArray[np.uint8],
+    jpeg: bytes,
     *,
     started_at: datetime,
     finished_at: datetime,
     model_ids: Mapping[str, int],
 ) -> InspectionRecord:
-    """The inspection row of one uploaded image (source ``upload``, policy ``image``)."""
+    """The inspection row of one uploaded image (source ``upload``, policy ``image``);
+    ``jpeg`` is the image with the outline drawn (:func:`recognise_upload`, ``annotate``)."""
     reason = {
         "recognized": f"uploaded image {result.name!r}: {result.model} scored "
         f"{result.score:.3f} > {result.threshold:.3f}",
@@ -353,6 +356,6 @@ def inspection_record(
         scores=scores,
         pose=pose,
         durations=_stages(result.durations),
-        views=(ViewRecord(result.viewpoint, _annotated_jpeg(rgb, result), scores),),
+        views=(ViewRecord(result.viewpoint, jpeg, scores),),
         source="upload",
     )

@@ -40,7 +40,8 @@ def test_many_changes_in_a_row_give_one_recomputation(tmp_path):
         db = Database(settings.database_url)
         live = LiveIndex()
         jobs = JobManager()
-        keeper = ThresholdKeeper(db, live, jobs, quiet_s=0.0)
+        belt = np.full((240, 320, 3), 90, np.uint8)  # a teach's empty-belt background
+        keeper = ThresholdKeeper(db, live, jobs, quiet_s=0.0, backgrounds=lambda: [belt])
         keeper.start()
         try:
             vid = 0
@@ -60,6 +61,7 @@ def test_many_changes_in_a_row_give_one_recomputation(tmp_path):
             assert first is not None and first.chosen_by == "auto"
             assert first.global_threshold >= THRESHOLD_FLOOR
             assert first.detail["views"] == 9 and first.detail["signature"]
+            assert first.detail["negatives"] == 1  # the teach background is an impostor too
             # Nothing changed: a poke is a quick skip, not a second choice.
             keeper.changed()
             await asyncio.wait_for(keeper.settled(), TIMEOUT_S)

@@ -291,21 +291,21 @@ async def recognise_images(
             return await asyncio.to_thread(
                 recognise_upload, live, datas[k], name=names[k], viewpoint=viewpoint,
                 choice=choice, mask_data=mask_datas[k] if mask_datas else None, region=box,
+                annotate=store,
             )  # fmt: skip
 
     results = await asyncio.gather(*(one(k) for k in range(n)))
-    out = [r.public() for r, _rgb in results]
+    out = [r.public() for r, _jpeg in results]
     t_store = 0.0
     if store:
         t1 = time.perf_counter()
         finished = utcnow()
         ids = {m.name: m.id for m in live.models().values()}
-        records = await asyncio.to_thread(
-            lambda: [
-                inspection_record(r, rgb, started_at=started, finished_at=finished, model_ids=ids)
-                for r, rgb in results
-            ]
-        )
+        records = [
+            inspection_record(r, jpeg, started_at=started, finished_at=finished, model_ids=ids)
+            for r, jpeg in results
+            if jpeg is not None
+        ]
         stored = await store_all(db, runtime.cell_id, records, retention=settings.image_retention)
         for o, iid in zip(out, stored, strict=True):
             o["inspection_id"] = iid
