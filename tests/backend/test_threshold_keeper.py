@@ -157,3 +157,44 @@ def test_one_model_gets_a_threshold_from_negatives(follow_client):
     s = _settled(client, headers["viewer"], 3)
     assert s["settings"]["detail"]["negatives"] == 4
     assert client.delete(f"/api/recognition/negatives/{nid}", headers=eng).status_code == 404
+
+
+def test_views_imported_by_the_cli_are_followed_by_the_running_cell(tmp_path):
+    """``visioncell models import`` writes to the database from another process; the cell's
+    index sync picks the views up and the threshold follows them."""
+    import os
+    import subprocess
+    import sys
+
+    import httpx
+
+    from tests.utils.factories import TEST_SECRET
+    from tests.utils.servers import run_uvicorn
+
+    settings = make_settings(tmp_path, threshold_follow=True, threshold_quiet_s=0.0,
+                             index_poll_s=0.2)  # fmt: skip
+    migrate(settings)
+    viewer = make_tokens(settings)["viewer"]
+    env = {**os.environ, "VISIONCELL_DATABASE_URL": settings.database_url,
+           "VISIONCELL_SECRET_KEY": TEST_SECRET}  # fmt: skip
+    with run_uvicorn(create_app(settings)) as srv:
+        for name, seed in (("left", 51), ("right", 52)):
+            folder = tmp_path / name
+            folder.mkdir()
+            for a in (-12, 0, 12):
+                img = _turned(textured_rgb(seed), a)
+                cv2.imwrite(str(folder / f"top_{a + 20}.png"), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
+            r = subprocess.run(
+                [sys.executable, "-m", "backend.cli", "models", "import", name, str(folder),
+                 "--kind", "2d"], capture_output=True, text=True, env=env, timeout=TIMEOUT_S,
+            )  # fmt: skip
+            assert r.returncode == 0, r.stderr
+        headers = {"Authorization": f"Bearer {viewer}"}
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < TIMEOUT_S:
+            s = httpx.get(f"{srv.base}/api/recognition/threshold", headers=headers).json()
+            if s["state"] == "idle" and s["settings"]["detail"].get("views") == 6:
+                break
+            time.sleep(0.1)
+        assert s["settings"]["chosen_by"] == "auto", s
+        assert set(s["settings"]["detail"]["per_model"]) == {"left", "right"}
