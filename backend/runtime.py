@@ -314,6 +314,7 @@ class CellRuntime:
         stack.push_async_callback(cell.stop)
         self.sim = hardware.sim
         self._cell = cell
+        self.recognise_slots = asyncio.Semaphore(s.recognise_workers)  # on this loop
         if s.threshold_follow:
             from backend.recognition.autothreshold import ThresholdKeeper
 
