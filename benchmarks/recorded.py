@@ -11,7 +11,8 @@ Protocol (one process, a real uvicorn server on 127.0.0.1, SQLite):
    view of objects 11-15 (unknown objects) are sent to the endpoint one image per request
    with ``store=true`` (decoding and storage included in its time);
 4. baseline, same run, same images, same index and thresholds: the library's
-   :func:`vision.recognition.recognise` on the decoded images.
+   :func:`vision.recognition.recognise` on the decoded images; and every 4th query through
+   the endpoint again without ``store`` (what storing the row costs).
 
 Figures: known top-1 (the best model is the right one), false rejects (a known image not
 ``recognized``), false accepts (an unknown image ``recognized``), misrecognitions (a known
@@ -241,6 +242,17 @@ def run(data_dir: Path, *, plan: Plan = FULL, workdir: Path | None = None) -> di
                 rows.append((_truth(o), r.json()["data"][0]))
                 t_server.append(r.json()["durations"]["total"])
                 _progress("recognising through the endpoint", n, len(queries))
+            # The endpoint without storing (every 4th query): what storage costs.
+            t_nostore: list[float] = []
+            for o, k in queries[::4]:
+                name = f"obj{o}__{k}.png"
+                data = _png(folder / name)
+                t1 = time.perf_counter()
+                r = client.post("/api/recognition/recognise",
+                                files=[("images", (name, data, "image/png"))],
+                                data={"viewpoint": "1", "store": "false"})  # fmt: skip
+                t_nostore.append(time.perf_counter() - t1)
+                r.raise_for_status()
             # The library on the same images, index and thresholds, in the same process.
             rt = runtime_of(app)
             assert rt is not None
@@ -293,6 +305,7 @@ def run(data_dir: Path, *, plan: Plan = FULL, workdir: Path | None = None) -> di
         "endpoint_ms_per_image": round(endpoint_ms, 2),
         "library_ms_per_image": round(library_ms, 2),
         "server_ms_per_image": round(1e3 * statistics.median(t_server), 2),
+        "endpoint_nostore_ms_per_image": round(1e3 * statistics.median(t_nostore), 2),
         "time_ratio": round(endpoint_ms / library_ms, 3),
         "stored_rows": stored["count"],
         "targets": TARGETS,
@@ -320,6 +333,7 @@ def table(res: dict[str, Any]) -> str:
         f"{'time per image, ms (median)':28s}{res['endpoint_ms_per_image']:>12.1f}"
         f"{res['library_ms_per_image']:>12.1f}",
         f"{'  of which in the handler':28s}{res['server_ms_per_image']:>12.1f}",
+        f"{'  without storing the row':28s}{res['endpoint_nostore_ms_per_image']:>12.1f}",
         f"{'endpoint / library':28s}{res['time_ratio']:>12.2f}{'':>12s}{'<= 1.5':>10s}",
         f"stored inspection rows: {res['stored_rows']}",
     ]
