@@ -39,7 +39,7 @@ __all__ = [
 
 #: What can be changed, and so recorded (``estop``: a press or reset of the emergency stop,
 #: recorded after the stop itself by :class:`backend.estoplog.EStopLog`).
-KINDS = ("threshold", "model", "view", "calibration", "user", "token", "estop")
+KINDS = ("threshold", "model", "view", "negative", "calibration", "user", "token", "estop")
 #: Longest reason a changing endpoint accepts (characters).
 MAX_REASON_LENGTH = 500
 #: Largest old or new value stored, bytes of JSON; a larger one is stored as a summary.

@@ -52,6 +52,7 @@ from backend.throttle import SignInThrottle
 
 if TYPE_CHECKING:
     from backend.authsync import AuthSync
+    from backend.recognition.autothreshold import ThresholdKeeper
     from backend.recognition.sync import IndexSync
     from backend.view3d import View3D
     from robot.sim import SimEngine
@@ -182,6 +183,11 @@ class CellRuntime:
         #: report plots (``backend.heavy``).
         #: A fresh pool each time the runtime is entered; closed at exit.
         self.heavy = self._new_heavy_pool()
+        #: Recomputes the automatic threshold after changes (after entering, when
+        #: ``threshold_follow``; ``backend.recognition.autothreshold``).
+        self.threshold_keeper: ThresholdKeeper | None = None
+        #: Uploaded images decoded and recognised at once (``recognise_workers``).
+        self.recognise_slots = asyncio.Semaphore(settings.recognise_workers)
         self._stack: contextlib.AsyncExitStack | None = None
 
     def _new_heavy_pool(self) -> HeavyPool:
@@ -256,6 +262,7 @@ class CellRuntime:
             self._clear()
 
     def _clear(self) -> None:
+        self.threshold_keeper = None
         self._cell = None
         self._database = None
         self._live_index = None
@@ -351,6 +358,19 @@ class CellRuntime:
         stack.push_async_callback(cell.stop)
         self.sim = hardware.sim
         self._cell = cell
+        self.recognise_slots = asyncio.Semaphore(s.recognise_workers)  # on this loop
+        if s.threshold_follow:
+            from backend.recognition.autothreshold import ThresholdKeeper
+
+            keeper = ThresholdKeeper(
+                db, self._live_index, cell.jobs, quiet_s=s.threshold_quiet_s,
+                backgrounds=lambda: list(self.teach_backgrounds.images.values()),
+            )  # fmt: skip
+            keeper.start()
+            stack.push_async_callback(keeper.stop)
+            self.threshold_keeper = keeper
+            if len(self._live_index):  # views stored before: a choice from them, if none was
+                keeper.changed()
 
         if self._want_view:
             from backend.view3d import View3D, ViewAccess

@@ -245,6 +245,32 @@ class Settings(BaseSettings):
     recognition_max_features: int = Field(
         1000, ge=50, le=4000, description="Strongest keypoints kept per trained view."
     )
+    recognise_max_images: int = Field(
+        16, ge=1, le=64, description="Most images one POST /api/recognition/recognise takes."
+    )
+    recognise_max_pixels: int = Field(
+        48_000_000,
+        ge=1_000_000,
+        le=200_000_000,
+        description="Most decoded pixels (width x height, summed over the images) of one "
+        "recognise request, checked from the file headers before anything is decoded.",
+    )
+    recognise_workers: int = Field(
+        2, ge=1, le=16, description="Uploaded images decoded and recognised at once."
+    )
+    threshold_follow: bool = Field(
+        True,
+        description="Recompute the automatic threshold as a job after every change of the "
+        "trained views or negatives (off: only teaches recompute it).",
+    )
+    threshold_quiet_s: float = Field(
+        2.0,
+        ge=0.0,
+        le=600.0,
+        allow_inf_nan=False,
+        description="The automatic threshold is recomputed once the trained views have not "
+        "changed for this long, seconds (many uploads in a row: one recomputation).",
+    )
     image_retention: Literal["all", "failures"] = Field(
         "all",
         description="Inspection images (and 3D scene recordings) kept: of every inspection, or "

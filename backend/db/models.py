@@ -48,6 +48,7 @@ __all__ = [
     "InspectionScene",
     "InspectionStage",
     "JobInProgress",
+    "NegativeImage",
     "ObjectKind",
     "ObjectModel",
     "RecognitionSettings",
@@ -356,6 +357,9 @@ class Inspection(Base):
     pick: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
     #: Simulator only, for evaluation: catalogue name and true pose (the decision never reads it).
     truth: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
+    #: Where the images came from: ``cell`` (the arm's camera) or ``upload`` (an image sent
+    #: to ``POST /api/recognition/recognise``).
+    source: Mapped[str] = mapped_column(String(16), server_default="cell", default="cell")
 
     images: Mapped[list[InspectionImage]] = relationship(
         back_populates="inspection", cascade="all, delete-orphan"
@@ -427,6 +431,22 @@ class InspectionScene(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
+class NegativeImage(Base):
+    """An image of no trained object (the empty belt, other things in the scene): an
+    impostor the automatic threshold is chosen against, shared by the plant as the models."""
+
+    __tablename__ = "negative_images"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    image_png: Mapped[bytes] = mapped_column(LargeBinary)
+    width: Mapped[int] = mapped_column(Integer)
+    height: Mapped[int] = mapped_column(Integer)
+    #: ``upload`` (sent by an engineer) or ``teach`` (an empty-belt background of a teach).
+    source: Mapped[str] = mapped_column(String(16), default="upload")
+    note: Mapped[str] = mapped_column(String(200), default="")
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
 class RecognitionSettings(Base):
     """The global recognition threshold and how it was chosen (one row per change; the latest applies)."""
 
@@ -467,7 +487,7 @@ class AuditEntry(Base):
     __table_args__ = (
         Index("ix_audit_log_kind_entity", "kind", "entity_id"),
         CheckConstraint(
-            "kind IN ('threshold', 'model', 'view', 'calibration', 'user', 'token', 'estop')",
+            "kind IN ('threshold', 'model', 'view', 'negative', 'calibration', 'user', 'token', 'estop')",
             name="kind",
         ),
     )

@@ -26,12 +26,14 @@ from backend.db.session import Database
 from vision.errors import InvalidInput, NotFound
 
 __all__ = ["PICK_OUTCOMES", "InspectionRecord", "ViewRecord", "get_image", "get_inspection",
-           "inspection_public", "list_inspections", "pick_outcome", "store"]  # fmt: skip
+           "inspection_public", "list_inspections", "pick_outcome", "store", "store_all"]  # fmt: skip
 
 #: What happened to the object after the decision (:func:`pick_outcome`).
 PICK_OUTCOMES = ("placed", "rejected", "not_placed", "approach", "not_picked", "not_sorted")
 
 DECISIONS = tuple(d.value for d in Decision)
+#: Where an inspection's images came from: the cell's camera, or an uploaded image.
+SOURCES = ("cell", "upload")
 
 
 @dataclass(frozen=True)
@@ -65,6 +67,7 @@ class InspectionRecord:
     """Wall time from the inspection's start to its end, seconds (the cycle time); None:
     the sum of ``durations``."""
     views: tuple[ViewRecord, ...] = ()
+    source: str = "cell"
 
     def __post_init__(self) -> None:
         if self.decision not in DECISIONS:
@@ -74,6 +77,8 @@ class InspectionRecord:
             isinstance(d, bool) or not isinstance(d, int | float) or not 0.0 <= d <= 1e6
         ):
             raise InvalidInput(f"duration_s must be in [0, 1e6] s, got {d!r}")
+        if self.source not in SOURCES:
+            raise InvalidInput(f"source must be one of {SOURCES}, got {self.source!r}")
 
 
 async def store(
@@ -95,11 +100,6 @@ async def store(
     transaction, so either the result is there or the marker is, never both and never
     neither.
     """
-    from backend.reports.blocks import append as append_records
-    from backend.reports.retention import keeps_images
-    from backend.reports.stages import stage_rows
-
-    keep = keeps_images(retention, rec.decision)
     async with db.session() as session:
         if marker_id is not None:
             gone = await session.execute(
@@ -115,49 +115,76 @@ async def store(
                 )
                 if earlier is not None:
                     return int(earlier)
-        row = Inspection(
-            cell_id=cell_id,
-            started_at=rec.started_at,
-            finished_at=rec.finished_at,
-            decision=Decision(rec.decision),
-            model_id=rec.model_id,
-            model_name=rec.model_name,
-            score=rec.score,
-            viewpoints_visited=list(rec.viewpoints),
-            object_pose=None if rec.pose is None else rec.pose.get("T_base_obj"),
-            duration_s=round(
-                sum(rec.durations.values()) if rec.duration_s is None else rec.duration_s, 4
-            ),
-            note=rec.reason[:2000],
-            policy=rec.policy,
-            reason=rec.reason,
-            durations=rec.durations,
-            scores=rec.scores,
-            pose=rec.pose,
-            pick=rec.pick,
-            truth=rec.truth,
+        return await _write(session, cell_id, rec, retention=retention, scene=scene)
+
+
+async def store_all(
+    db: Database, cell_id: int, records: list[InspectionRecord], *, retention: str = "all"
+) -> list[int]:
+    """Write several records (with their stage rows, report records and images) in one
+    transaction: all or none; returns their ids in order."""
+    async with db.session() as session:
+        return [await _write(session, cell_id, rec, retention=retention) for rec in records]
+
+
+async def _write(
+    session: AsyncSession,
+    cell_id: int,
+    rec: InspectionRecord,
+    *,
+    retention: str,
+    scene: bytes | None = None,
+) -> int:
+    """Add one record's rows in ``session`` (the caller's transaction); its id."""
+    from backend.reports.blocks import append as append_records
+    from backend.reports.retention import keeps_images
+    from backend.reports.stages import stage_rows
+
+    keep = keeps_images(retention, rec.decision)
+    row = Inspection(
+        cell_id=cell_id,
+        started_at=rec.started_at,
+        finished_at=rec.finished_at,
+        decision=Decision(rec.decision),
+        model_id=rec.model_id,
+        model_name=rec.model_name,
+        score=rec.score,
+        viewpoints_visited=list(rec.viewpoints),
+        object_pose=None if rec.pose is None else rec.pose.get("T_base_obj"),
+        duration_s=round(
+            sum(rec.durations.values()) if rec.duration_s is None else rec.duration_s, 4
+        ),
+        note=rec.reason[:2000],
+        policy=rec.policy,
+        reason=rec.reason,
+        durations=rec.durations,
+        scores=rec.scores,
+        pose=rec.pose,
+        pick=rec.pick,
+        truth=rec.truth,
+        source=rec.source,
+    )
+    for v in rec.views if keep else ():
+        row.images.append(
+            InspectionImage(viewpoint=v.viewpoint, image_jpeg=v.jpeg, scores=v.scores)
         )
-        for v in rec.views if keep else ():
-            row.images.append(
-                InspectionImage(viewpoint=v.viewpoint, image_jpeg=v.jpeg, scores=v.scores)
-            )
-        session.add(row)
+    session.add(row)
+    await session.flush()
+    stages = stage_rows(row.id, {"cell_id": cell_id, "started_at": rec.started_at,
+                                 "decision": rec.decision, "model_name": rec.model_name,
+                                 "policy": rec.policy, "durations": rec.durations})  # fmt: skip
+    if stages:
+        await session.execute(insert(InspectionStage), stages)
+    await append_records(session, [{
+        "cell_id": cell_id, "started_at": rec.started_at, "decision": rec.decision,
+        "model_name": rec.model_name, "policy": rec.policy, "duration_s": row.duration_s,
+        "score": rec.score, "durations": rec.durations,
+        "viewpoints_visited": row.viewpoints_visited, "truth": rec.truth,
+    }])  # fmt: skip
+    if keep and scene:
+        session.add(InspectionScene(inspection_id=row.id, scene=scene, size_bytes=len(scene)))
         await session.flush()
-        stages = stage_rows(row.id, {"cell_id": cell_id, "started_at": rec.started_at,
-                                     "decision": rec.decision, "model_name": rec.model_name,
-                                     "policy": rec.policy, "durations": rec.durations})  # fmt: skip
-        if stages:
-            await session.execute(insert(InspectionStage), stages)
-        await append_records(session, [{
-            "cell_id": cell_id, "started_at": rec.started_at, "decision": rec.decision,
-            "model_name": rec.model_name, "policy": rec.policy, "duration_s": row.duration_s,
-            "score": rec.score, "durations": rec.durations,
-            "viewpoints_visited": row.viewpoints_visited, "truth": rec.truth,
-        }])  # fmt: skip
-        if keep and scene:
-            session.add(InspectionScene(inspection_id=row.id, scene=scene, size_bytes=len(scene)))
-            await session.flush()
-        return int(row.id)
+    return int(row.id)
 
 
 def pick_outcome(pick: Any, decision: str) -> dict[str, Any]:
@@ -217,6 +244,7 @@ def inspection_public(row: Inspection, n_images: int | None = None) -> dict[str,
         "pick": row.pick,
         "pick_outcome": pick_outcome(row.pick, row.decision.value),
         "truth": row.truth,
+        "source": row.source,
         "images": [f"/api/inspections/{row.id}/images/{k}.jpg" for k in range(n)],
     }
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -234,6 +234,8 @@ class LiveIndex:
         self._generation = 0
         #: When this process added each recent view (``time.monotonic()``), see :meth:`diff`.
         self._added_at: dict[int, float] = {}
+        #: Called (from whichever thread made it) after every change, lock released.
+        self._listeners: list[Callable[[], None]] = []
         # The descriptor version this build extracts (changes with OpenCV, a PCA basis...),
         # with the extraction options that change what is extracted (stored per view).
         probe = _probe_image()
@@ -247,6 +249,25 @@ class LiveIndex:
         self.version = self.feature_version + (f";{tag}" if tag else "")
         if len(self.version) > 32:  # the database column
             raise ValueError(f"descriptor version tag {self.version!r} is over 32 characters")
+
+    # -- change listeners ---------------------------------------------------------------
+    def add_listener(self, fn: Callable[[], None]) -> None:
+        """Call ``fn()`` after every change of the index (a view added, removed or
+        re-indexed, a model put or dropped, a sync applied), from the thread that made it;
+        ``fn`` must be quick and thread-safe (hand the news to an event loop)."""
+        self._listeners.append(fn)
+
+    def remove_listener(self, fn: Callable[[], None]) -> None:
+        """Stop calling ``fn``."""
+        if fn in self._listeners:
+            self._listeners.remove(fn)
+
+    def _changed(self) -> None:
+        for fn in list(self._listeners):
+            try:
+                fn()
+            except Exception:  # a broken listener must not break a change
+                log.exception("live index listener failed")
 
     # -- reading ------------------------------------------------------------------------
     @property
@@ -350,6 +371,7 @@ class LiveIndex:
                 with self._lock:
                     for vid, png, mask_png in part:
                         self._colour_from_png(vid, png, mask_png)
+        self._changed()
         with self._lock:
             self._generation += 1
             report = LoadReport(
@@ -493,7 +515,8 @@ class LiveIndex:
                 if self._index_row(model, row) and images and row[0] in images:
                     self._colour_from_png(row[0], *images[row[0]])
             self._generation += 1
-            return True
+        self._changed()
+        return True
 
     # -- changes (call after the database accepted them) ----------------------------------
     def put_model(self, model: IndexedModel) -> None:
@@ -502,11 +525,8 @@ class LiveIndex:
             self._generation += 1
             old = self._models.get(model.id)
             self._models[model.id] = model
-            if old is None or (old.name, old.part, old.sitting_base) == (
-                model.name,
-                model.part,
-                model.sitting_base,
-            ):
+            same = (model.name, model.part, model.sitting_base)
+            if old is None or (old.name, old.part, old.sitting_base) == same:
                 return
             for vid in self.views_of(model.id):
                 view = self._index.view(vid)
@@ -521,6 +541,7 @@ class LiveIndex:
                     colour=view.colour,
                     outline=view.outline,
                 )
+        self._changed()
 
     def drop_model(self, model_id: int) -> int:
         """Forget a model and its views; return how many views left the index."""
@@ -536,7 +557,8 @@ class LiveIndex:
                 del self._stale[vid]
             if model is not None:
                 assert not self._index.views_of(model.name)
-            return len(gone)
+        self._changed()
+        return len(gone)
 
     def add_view(
         self,
@@ -582,6 +604,7 @@ class LiveIndex:
             self._stale.pop(view_id, None)
             if viewpoint == 1:
                 self._set_belt(view_id, image, mask)
+        self._changed()
 
     def remove_view(self, view_id: int) -> bool:
         """Take one view out of the index; False if it was not in it."""
@@ -593,7 +616,8 @@ class LiveIndex:
                 return False
             self._index.remove_view(view_id)
             del self._view_model[view_id]
-            return True
+        self._changed()
+        return True
 
 
 async def load_live_index(db: Database, settings: Any) -> LiveIndex:

@@ -22,11 +22,12 @@ from __future__ import annotations
 
 import asyncio
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from sqlalchemy import func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
@@ -167,8 +168,13 @@ def confusable_pairs(
     return tuple(sorted(pairs, key=lambda p: (-p["rate"], p["model"], p["confused_with"])))
 
 
-def _detail(choice: ThresholdChoice, n_views: int) -> dict[str, Any]:
+def _detail(
+    choice: ThresholdChoice, n_views: int, *, n_negatives: int = 0, signature: str = ""
+) -> dict[str, Any]:
     return {
+        "advice": list(choice.advice),
+        "negatives": n_negatives,
+        "signature": signature,
         "rule": choice.rule,
         "rule_id": choice.rule_id,
         "target_far": choice.target_far,
@@ -230,6 +236,7 @@ def choice_from_detail(global_threshold: float, detail: Mapping[str, Any]) -> Th
             int(vp): {str(m): float(t) for m, t in row.items()}
             for vp, row in detail.get("own_viewpoint", {}).items()
         },
+        advice=tuple(str(a) for a in detail.get("advice", [])),
     )
 
 
@@ -374,9 +381,17 @@ async def teach_rounds(session: AsyncSession) -> dict[str, int]:
     return {str(n): int(c) for n, c in rows}
 
 
-def _choose(snapshot: bytes, target_far: float) -> tuple[ThresholdChoice, int]:
+def _choose(
+    snapshot: bytes,
+    target_far: float,
+    negatives: Sequence[NDArray[np.uint8]] = (),
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[ThresholdChoice, int]:
     index = ViewIndex.from_bytes(snapshot)
-    return choose_threshold(index, target_far=target_far), len(index)
+    choice = choose_threshold(
+        index, negatives=list(negatives), target_far=target_far, progress=progress
+    )
+    return choice, len(index)
 
 
 async def deferred(db: Database) -> ThresholdOutcome:
@@ -395,31 +410,41 @@ async def recompute(
     *,
     target_far: float = DEFAULT_TARGET_FAR,
     heavy: HeavyPool | None = None,
+    negatives: Sequence[NDArray[np.uint8]] = (),
+    signature: str = "",
+    progress: Callable[[int, int], None] | None = None,
 ) -> ThresholdOutcome:
     """Choose the automatic threshold from the live index and store it (module docstring).
 
     The choice runs in ``heavy``, the runtime's heavy-work pool, taking one of its job
     slots for as long as it waits (a background job: no admission limit); without one, in
-    ``asyncio.to_thread``."""
+    ``asyncio.to_thread``.  ``negatives``: images of no trained object (RGB or grey
+    uint8), impostors too (a single model gets a threshold from them).  ``signature`` is
+    stored with the choice: what it was chosen from (:mod:`backend.recognition.autothreshold`
+    skips a recomputation from the same data).  ``progress(done, total)`` is called from
+    the worker thread.
+    """
     with live.reading() as index:
         snapshot = index.to_bytes()  # a copy: the choice runs without the lock
     async with db.session() as session:
         rounds = await teach_rounds(session)
     try:
         if heavy is None:
-            raw, n_views = await asyncio.to_thread(_choose, snapshot, target_far)
+            raw, n_views = await asyncio.to_thread(
+                _choose, snapshot, target_far, negatives, progress
+            )
         else:
             async with heavy.job(wait_s=None) as work:
-                raw, n_views = await work.run(_choose, snapshot, target_far)
+                raw, n_views = await work.run(_choose, snapshot, target_far, negatives, progress)
     except ValueError as exc:
         async with db.session() as session:
             row = await latest_settings(session)
         in_force = DEFAULT_THRESHOLD if row is None else row.global_threshold
-        return ThresholdOutcome(False, None, in_force, f"not chosen: {exc}", (),
-                                advice(rounds, target_far=target_far))  # fmt: skip
+        tips = _not_chosen_advice(str(exc)) + advice(rounds, target_far=target_far)
+        return ThresholdOutcome(False, None, in_force, f"not chosen: {exc}", (), _unique(tips))
     choice, raised = floored(raw)
-    tips = advice(rounds, impostors=len(raw.impostor), target_far=target_far,
-                  reachable=raw.far_bound is not None)  # fmt: skip
+    tips = _unique(raw.advice + advice(rounds, impostors=len(raw.impostor), target_far=target_far,
+                                       reachable=raw.far_bound is not None))  # fmt: skip
     floor = MIN_AUTO_THRESHOLD if raised else None
     confusable = confusable_pairs(choice)
     async with db.session() as session:
@@ -435,7 +460,7 @@ async def recompute(
                 tips,
                 floor,
             )
-        detail = _detail(choice, n_views)
+        detail = _detail(choice, n_views, n_negatives=len(negatives), signature=signature)
         detail.update(advice=list(tips), floor=floor, rounds=rounds)
         session.add(
             RecognitionSettings(
@@ -460,3 +485,21 @@ async def recompute(
         )
     return ThresholdOutcome(True, choice.threshold, choice.threshold, choice.rule, confusable,
                             tips, floor)  # fmt: skip
+
+
+def _not_chosen_advice(reason: str) -> tuple[str, ...]:
+    """What to add when no threshold could be chosen at all, in plain words."""
+    if "at least two models" in reason:
+        return (
+            "Add a second model, or negative images (the empty belt, other things in the "
+            "scene): with one model and nothing else there is no impostor to measure the "
+            "false accepts against.",
+        )
+    if "two trained views" in reason:
+        return ("Add at least two views of a model at the same viewpoint.",)
+    return ()
+
+
+def _unique(lines: Sequence[str]) -> tuple[str, ...]:
+    """``lines`` without repeats, in order."""
+    return tuple(dict.fromkeys(lines))

@@ -26,13 +26,14 @@ from vision.errors import InvalidInput
 __all__ = ["FIELDS", "MAX_EXPORT_ROWS", "PAGE_ROWS", "check_export", "export_csv", "export_jsonl",
            "export_rows"]  # fmt: skip
 
-#: Columns of the export, in order (the API contract), then ``viewpoints`` and the pick's
-#: ``bin``, ``pick`` (its outcome, :data:`backend.inspection.results.PICK_OUTCOMES`) and
-#: ``pick_detail`` (the sentence the console shows), added at the end so that consumers
-#: reading the columns by position keep working.
+#: Columns of the export, in order (the API contract), then ``viewpoints``, the pick's
+#: ``bin``, ``pick`` (its outcome, :data:`backend.inspection.results.PICK_OUTCOMES`),
+#: ``pick_detail`` (the sentence the console shows) and ``source`` (``cell`` or ``upload``:
+#: an image sent to the recognise endpoint), added at the end so that consumers reading the
+#: columns by position keep working.
 FIELDS = ("id", "cell", "started_at", "finished_at", "decision", "model", "score", "policy",
           "views", "duration_s", "reason", "x_mm", "y_mm", "yaw_deg", "truth_name", "viewpoints",
-          "bin", "pick", "pick_detail")  # fmt: skip
+          "bin", "pick", "pick_detail", "source")  # fmt: skip
 PAGE_ROWS = 1000
 MAX_EXPORT_ROWS = 1_000_000
 
@@ -69,6 +70,7 @@ def _row(r: Any) -> dict[str, Any]:
         "bin": picked["bin"],
         "pick": picked["outcome"],
         "pick_detail": picked["text"],
+        "source": getattr(r, "source", "cell"),
     }
 
 
@@ -108,6 +110,7 @@ async def export_rows(db: Database, f: ReportFilters) -> AsyncIterator[dict[str,
                     _I.pose,
                     _I.truth,
                     _I.pick,
+                    _I.source,
                 )
                 .join(Cell, Cell.id == _I.cell_id)
                 .where(*conds, _I.id > last)

@@ -90,6 +90,10 @@ def _check(case, response) -> None:
 def test_every_operation_is_fuzzed():
     assert len(OPERATIONS) >= 45
     assert ("POST", "/api/robot/move") in OPERATIONS
+    for op in (("POST", "/api/recognition/recognise"), ("GET", "/api/recognition/threshold"),
+               ("GET", "/api/recognition/negatives"), ("POST", "/api/recognition/negatives"),
+               ("DELETE", "/api/recognition/negatives/{negative_id}")):  # fmt: skip
+        assert op in OPERATIONS, op
 
 
 @pytest.mark.parametrize(("method", "path"), OPERATIONS, ids=[f"{m} {p}" for m, p in OPERATIONS])

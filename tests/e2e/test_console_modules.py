@@ -39,6 +39,7 @@ def test_back_and_forward_move_between_pages_and_unmount_stops_polling(browser, 
         "Cell",
         "Inspection",
         "Models",
+        "Recognise",
         "Reports",
         "Calibration",
     ]

@@ -57,7 +57,7 @@ def test_docs_load_without_csp_violation(browser, server, path):
         context.close()
 
 
-@pytest.mark.parametrize("page_id", ["inspection", "models", "reports"])
+@pytest.mark.parametrize("page_id", ["inspection", "models", "recognise", "reports"])
 def test_operation_pages_load_without_csp_violation(browser, server, page_id):
     token = server.token(f"csp-{page_id}", "engineer")
     context = browser.new_context()

@@ -38,7 +38,8 @@ def make_image_folder(folder: Path, n: int = 3, *, size: tuple[int, int] = (160,
 
 def make_settings(tmp_path: Path, **overrides: object) -> Settings:
     """Settings for a test: SQLite in ``tmp_path``, ideal driver running 20x real time,
-    a folder camera on generated images, no 3D view (unless overridden)."""
+    a folder camera on generated images, no 3D view, the automatic threshold recomputed
+    by teaches only (unless overridden)."""
     values: dict[str, object] = {
         "database_url": f"sqlite+aiosqlite:///{tmp_path / 'test.db'}",
         "var_dir": tmp_path / "var",
@@ -51,6 +52,9 @@ def make_settings(tmp_path: Path, **overrides: object) -> Settings:
         "bootstrap_operator": False,
         "http_port": free_port(),
         "viser_port": free_port(),
+        # Off unless a test is about it: a recomputation after every upload would add
+        # threshold rows and jobs at times the other tests do not control.
+        "threshold_follow": False,
     }
     values.update(overrides)
     return Settings(**values)  # type: ignore[arg-type]

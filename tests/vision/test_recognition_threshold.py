@@ -10,6 +10,7 @@ import pytest
 
 from tests.vision.recognition_utils import noise, rotated, textured
 from vision.recognition import (
+    THRESHOLD_FLOOR,
     ThresholdChoice,
     ViewIndex,
     choose_threshold,
@@ -87,7 +88,9 @@ def test_choose_threshold_on_a_synthetic_index(index, choice):
     assert choice.genuine.min() > choice.impostor.max()  # the synthetic models are distinct
     # 13 impostor scores cannot certify 5 % (needs 19): the maximum is taken and said so
     assert choice.far_bound is None and "not reachable" in choice.rule
-    assert choice.threshold == pytest.approx(choice.impostor.max())
+    # ... raised to the floor when that maximum is below it (an automatic threshold is never
+    # a chance-match level)
+    assert choice.threshold == pytest.approx(max(choice.impostor.max(), THRESHOLD_FLOOR))
     assert choice.far == 0.0 and choice.frr == 0.0
     assert set(choice.per_model) == {"m0", "m1", "m2"}
     assert all(t >= choice.threshold for t in choice.per_model.values())
@@ -181,3 +184,26 @@ def test_own_bar_of_a_model_that_verified_nothing_is_the_pooled_bar_not_zero():
     assert got["plain"] == pooled[k - 1] > 0.0
     assert got["wheel"] == 0.3 and got["few"] == 0.3
     assert _own_bars(imp, list(imp), 0.3, rule="youden", target_far=0.05) == dict.fromkeys(imp, 0.3)
+
+
+def test_one_model_with_negatives_gets_a_floored_threshold_and_advice():
+    ix = ViewIndex("sift")
+    for a in (-15, 0, 15):
+        ix.add("only", rotated(textured(3), a))
+    with pytest.raises(ValueError, match="two models, or one model and negative images"):
+        choose_threshold(ix)
+    ch = choose_threshold(ix, negatives=[noise(s) for s in range(3)] + [textured(9)])
+    assert len(ch.genuine) == 3 and len(ch.impostor) == 4  # the negatives alone
+    assert ch.threshold >= THRESHOLD_FLOOR and ch.per_model["only"] >= ch.threshold
+    assert ch.genuine.min() > ch.threshold
+    text = " ".join(ch.advice)
+    assert "Add impostors" in text and "Only one model" in text
+    r = recognise(ix, rotated(textured(3), 7), threshold=ch)
+    assert r.model == "only"
+    assert recognise(ix, textured(10), threshold=ch).decision == "unknown"
+
+
+def test_no_advice_when_the_data_supports_the_target(index):
+    negs = [noise(s) for s in range(120)]
+    ch = choose_threshold(index, negatives=negs, target_far=0.05)
+    assert ch.far_bound is not None and not any("Add impostors" in a for a in ch.advice)

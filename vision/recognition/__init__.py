@@ -23,9 +23,11 @@ from vision.recognition.recognise import (
 )
 from vision.recognition.threshold import (
     RULES,
+    THRESHOLD_FLOOR,
     ThresholdChoice,
     choose_threshold,
     conformal_threshold,
+    floor_threshold,
     youden_threshold,
 )
 from vision.recognition.views import POLICIES, ViewsRecognition, recognise_views
@@ -37,6 +39,7 @@ __all__ = [
     "FORMAT_VERSION",
     "POLICIES",
     "RULES",
+    "THRESHOLD_FLOOR",
     "VIEWPOINTS",
     "Candidate",
     "IndexFormatError",
@@ -48,6 +51,7 @@ __all__ = [
     "choose_threshold",
     "conformal_threshold",
     "decide",
+    "floor_threshold",
     "plot_threshold",
     "recognise",
     "recognise_views",

@@ -59,6 +59,9 @@ class ThresholdChoice:
         raised to the viewpoint's threshold (each <= it); the global one where the model
         has too few scores (:func:`vision.recognition.choose_threshold`, "Own bars"). The
         multi-view policies apply them on side views and to shortlist from the top.
+    advice : tuple of str
+        What to add (views, models, negative images) when the data cannot support the
+        target false-accept rate, in plain words; empty when it can.
     """
 
     threshold: float
@@ -78,6 +81,7 @@ class ThresholdChoice:
     per_model_viewpoint: Mapping[int, Mapping[str, float]] = field(default_factory=dict)
     candidate_viewpoint: Mapping[int, float] = field(default_factory=dict)
     own_viewpoint: Mapping[int, Mapping[str, float]] = field(default_factory=dict)
+    advice: tuple[str, ...] = ()
 
     def at(self, viewpoint: int) -> ThresholdChoice:
         """The choice for one viewpoint (itself when that viewpoint has no thresholds)."""

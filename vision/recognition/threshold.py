@@ -68,6 +68,23 @@ Per viewpoint
     must decide. ``candidate`` is the bar for *considering* a model worth a side view (the
     same rule on the twin-free scores, so now equal to ``threshold``; kept for the policies).
 
+One model
+    With a single model there is no other model to hold out, so its impostor scores come
+    from negative images alone (the empty belt, other things in the scene): each scores
+    against the model as an untrained object would.  Without negatives there is nothing
+    to bound the false accepts with, and the choice is refused with that advice.
+
+Floor and advice
+    An automatic threshold is never below :data:`THRESHOLD_FLOOR`: when no impostor
+    verified at all (few or featureless negatives, models unlike each other) the rule
+    would give 0, which accepts any verification of a handful of chance matches.  The
+    floor is applied by :func:`floor_threshold`, the one place that decides it, to every
+    acceptance bar (global, per model, per viewpoint, candidate); own bars are not
+    acceptance bars on their own and keep their pooled floor.  When the scores cannot support the target false-accept
+    rate (too few impostor scores for the bound, the floor taken, views without a genuine
+    score, many trained views rejected) :attr:`ThresholdChoice.advice` says in plain words
+    what to add: more views, more models or negative images.
+
 Confusability
     ``confusion[viewpoint][a][b]``: share of model ``a``'s held-out views of that viewpoint on
     which model ``b`` scores above the viewpoint's ``candidate`` bar (would be considered). Models alike from the top (viewpoint 1) need a
@@ -91,9 +108,11 @@ from vision.recognition.recognise import DEFAULT_MARGIN, evaluate, search_of
 
 __all__ = [
     "RULES",
+    "THRESHOLD_FLOOR",
     "ThresholdChoice",
     "choose_threshold",
     "conformal_threshold",
+    "floor_threshold",
     "youden_threshold",
 ]
 
@@ -102,6 +121,12 @@ MAX_NEGATIVES = 10_000
 #: Fewest impostor scores of a model at a viewpoint for its own bar (module docstring):
 #: the largest of 20 is beaten by a new exchangeable score with probability 1/21 < 5 %.
 MIN_OWN_IMPOSTORS = 20
+#: Lowest automatic threshold (module docstring, "Floor and advice").  A verification
+#: passes it with about six inliers beyond the minimal sample, half of the tentative
+#: matches explained and a tenth of the view's feature area covered (saturation 0.26 x
+#: sqrt(0.5 x 0.1) = 0.058 > 0.03): chance matches between unrelated images rarely reach
+#: that, while genuine COIL-20 views 10 degrees apart score 0.2-0.8.
+THRESHOLD_FLOOR = 0.03
 
 
 def _check_scores(x: object, name: str, *, allow_empty: bool = False) -> np.ndarray:
@@ -137,6 +162,11 @@ def youden_threshold(genuine: ArrayLike, impostor: ArrayLike) -> float:
     j = tpr - far
     best = np.flatnonzero(j >= j.max() - 1e-12)
     return float(t[best[-1]])
+
+
+def floor_threshold(threshold: float) -> float:
+    """An automatic threshold raised to :data:`THRESHOLD_FLOOR` (module docstring)."""
+    return float(max(float(threshold), THRESHOLD_FLOOR))
 
 
 def _check_far(value: object) -> float:
@@ -176,6 +206,9 @@ def _rule(
     else:
         t, bound = youden_threshold(g, i), None
         text = f"Youden's J over {len(g)} genuine and {n} impostor scores"
+    if t < THRESHOLD_FLOOR:
+        text += f"; raised to the floor {THRESHOLD_FLOOR:g} (the rule gave {t:.3f})"
+        t = floor_threshold(t)
     per_model: dict[str, float] = {}
     for m in models:
         imp = per_model_imp.get(m, [])
@@ -192,7 +225,7 @@ def _candidate(
         c = conformal_threshold(distinct, target_far)[0]
     else:
         c = youden_threshold(genuine, distinct)
-    return float(min(c, cap))
+    return float(min(floor_threshold(c), cap))
 
 
 def _own_bars(
@@ -235,7 +268,8 @@ def choose_threshold(
     Parameters
     ----------
     index : ViewIndex
-        At least two models, and at least two views of one model in some viewpoint.
+        At least two models (or one model and ``negatives``), and at least two views of
+        one model in some viewpoint.
     negatives : sequence of images or Features, optional
         Images of things that are none of the models (empty belt, other parts); each gives
         one impostor score per viewpoint (its best model) and per-model scores.
@@ -255,8 +289,8 @@ def choose_threshold(
     Raises
     ------
     ValueError
-        Fewer than two models, no model with two views of a viewpoint, a bad rule, target or
-        negative image.
+        No model, one model without negatives, no model with two views of a viewpoint, a
+        bad rule, target or negative image.
     """
     if not isinstance(index, ViewIndex):
         raise ValueError(f"index must be a ViewIndex, got {type(index).__name__}")
@@ -266,10 +300,12 @@ def choose_threshold(
         raise ValueError(f"exclude_twins must be true or false, got {exclude_twins!r}")
     target_far = _check_far(target_far)
     models = index.models
-    if len(models) < 2:
-        have = f"only {models[0]}" if models else "none"
-        raise ValueError(f"threshold selection needs at least two models, the index has {have}")
     negs = list(negatives or [])
+    if not models or (len(models) < 2 and not negs):
+        raise ValueError(
+            f"threshold selection needs at least two models, or one model and negative images "
+            f"(the empty belt, other things in the scene); the index has {models}"
+        )
     if len(negs) > MAX_NEGATIVES:
         raise ValueError(f"at most {MAX_NEGATIVES} negative images, got {len(negs)}")
     neg_feats = [index.features(x) for x in negs]
@@ -332,10 +368,12 @@ def choose_threshold(
             per_model_imp_vp[m].append((s, vp))
 
     for v in views:
-        scores, *_ = evaluate(
-            index, v.features, viewpoint=search_of(v.viewpoint), exclude_models=[v.model]
-        )
-        add_impostor(scores, v.viewpoint, twins.get(v.view_id, set()) if exclude_twins else set())
+        if len(models) > 1:  # one model: nothing is left when it is held out
+            scores, *_ = evaluate(
+                index, v.features, viewpoint=search_of(v.viewpoint), exclude_models=[v.model]
+            )
+            twin = twins.get(v.view_id, set()) if exclude_twins else set()
+            add_impostor(scores, v.viewpoint, twin)
         tick()
     for f in neg_feats:
         for vp in viewpoints:
@@ -366,6 +404,10 @@ def choose_threshold(
         own_vp[vp] = _own_bars(imp_vp, models, tv, rule=rule, target_far=target_far)
     g = np.asarray(genuine)
     i = np.asarray(impostor)
+    advice = _advice(
+        index, n_impostor=len(distinct), bound=bound, rule=rule, target_far=target_far,
+        raw=float(t), frr=float(np.mean(g <= t)), n_negatives=len(neg_feats),
+    )  # fmt: skip
     confusion: dict[int, dict[str, dict[str, float]]] = {}
     counts: dict[tuple[int, str], int] = {}
     for vp, a, scores in lovo:
@@ -396,4 +438,61 @@ def choose_threshold(
         per_model_viewpoint=per_model_vp,
         candidate_viewpoint=cand_vp,
         own_viewpoint=own_vp,
+        advice=advice,
     )
+
+
+#: Share of rejected trained views above which the advice asks for more views.
+ADVICE_FRR = 0.05
+
+
+def _advice(
+    index: ViewIndex,
+    *,
+    n_impostor: int,
+    bound: float | None,
+    rule: str,
+    target_far: float,
+    raw: float,
+    frr: float,
+    n_negatives: int,
+) -> tuple[str, ...]:
+    """What to add so that the scores support the target (module docstring), in words."""
+    out: list[str] = []
+    models = index.models
+    if rule == "conformal-far" and bound is None:
+        need = math.ceil(1 / target_far - 1)
+        out.append(
+            f"Add impostors: a false-accept rate of at most {target_far:.0%} needs at least "
+            f"{need} impostor scores and there are {n_impostor}. Each view of another model "
+            "gives one and each negative image one per viewpoint: add more models, more "
+            "views of them, or negative images (the empty belt, other things in the scene)."
+        )
+    if raw <= THRESHOLD_FLOOR:
+        out.append(
+            f"No impostor scored above {THRESHOLD_FLOOR:g}, so the threshold is the floor "
+            f"{THRESHOLD_FLOOR:g} rather than a measured value: add negative images (the "
+            "empty belt, other things in the scene) or more models so that it rests on data."
+        )
+    if len(models) == 1 and n_negatives < 20:
+        out.append(
+            f"Only one model ({models[0]}) and {n_negatives} negative images: add a second "
+            "model or more negative images."
+        )
+    for m in models:
+        per_vp: dict[int, int] = {}
+        for v in index.views_of(m):
+            per_vp[v.viewpoint] = per_vp.get(v.viewpoint, 0) + 1
+        lone = sorted(vp for vp, c in per_vp.items() if c < 2)
+        if lone:
+            out.append(
+                f"Model {m} has a single view of viewpoint {', '.join(map(str, lone))}: add "
+                "more views there so that its own scores can be measured."
+            )
+    if frr > ADVICE_FRR:
+        out.append(
+            f"{frr:.0%} of the trained views score at or below the threshold against the "
+            "other views of their model: add more views of the models (smaller turns between "
+            "them) so that known objects are not rejected."
+        )
+    return tuple(out)

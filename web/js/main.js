@@ -13,6 +13,7 @@ import auditPage from "./pages/audit.js";
 import modelsPage from "./pages/models.js";
 import inspectionPage from "./pages/inspection.js";
 import reportsPage from "./pages/reports.js";
+import recognisePage from "./pages/recognise.js";
 
 const TOKEN_KEY = "visioncell-token";
 const RANKS = { viewer: 1, operator: 2, engineer: 3 };
@@ -21,7 +22,7 @@ const RANKS = { viewer: 1, operator: 2, engineer: 3 };
 export const rank = (role) => RANKS[role] || 0;
 
 /** The pages, in menu order. */
-export const PAGES = [cellPage, inspectionPage, modelsPage, reportsPage, calibrationPage, auditPage];
+export const PAGES = [cellPage, inspectionPage, modelsPage, recognisePage, reportsPage, calibrationPage, auditPage];
 
 const live = new Live();
 let user = null;

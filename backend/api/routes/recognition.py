@@ -1,22 +1,60 @@
-"""Recognition settings: the global score threshold and how it was chosen."""
+"""Recognition: recognising uploaded images, the global score threshold and how it was
+chosen (kept up to date after every change of the trained views), and the negative images
+the automatic threshold is chosen against.
+
+Recognising needs the viewer role; storing the results as inspection rows
+(``store=true``) the operator role; setting the threshold and changing the negatives the
+engineer role.
+"""
 
 from __future__ import annotations
 
+import asyncio
+import json
+import time
 from typing import Annotated, Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, File, Form, Path, Query, UploadFile, status
+from fastapi.responses import Response
 from pydantic import BaseModel, Field
 
 from backend import audit
-from backend.api.deps import EngineerUser, SessionDep, ViewerUser
+from backend.api.deps import (
+    DatabaseDep,
+    EngineerUser,
+    RuntimeDep,
+    SessionDep,
+    SettingsDep,
+    ViewerUser,
+    read_through,
+)
+from backend.api.errors import ApiError
 from backend.api.types import bounded_float
-from backend.db.models import RecognitionSettings
+from backend.api.uploads import read_capped
+from backend.db.models import RecognitionSettings, Role
+from backend.db.types import utcnow
+from backend.inspection.results import store_all
+from backend.recognition import images as im
+from backend.recognition import negatives as neg
+from backend.recognition.recognise import (
+    Region,
+    check_request_pixels,
+    inspection_record,
+    recognise_upload,
+)
 from backend.recognition.thresholds import (
     DEFAULT_THRESHOLD,
     back_to_automatic,
+    current_choice,
     latest_settings,
     settings_audit_value,
 )
+from vision.errors import InvalidInput
+
+#: Database integer keys are 32-bit signed on PostgreSQL.
+DB_ID_MAX = 2**31 - 1
+#: What the thresholds in force are read from (the read cache drops them on a write).
+CHOICE_TABLES = ("recognition_settings", "object_models")
 
 router = APIRouter(prefix="/recognition", tags=["recognition"])
 
@@ -114,3 +152,300 @@ def _audit_threshold(
         new=settings_audit_value(after),
         reason=body.reason or body.note or None,
     )
+
+
+# -- recognising uploaded images ---------------------------------------------------------
+
+
+class ModelScoreOut(BaseModel):
+    model: str
+    score: float = Field(description="Registration score in [0, 1]")
+    threshold: float = Field(description="The bar this model must pass at the viewpoint")
+    passed: bool
+
+
+class ImagePoseOut(BaseModel):
+    x_px: float = Field(description="Image column of the matched view's centre, pixels")
+    y_px: float = Field(description="Image row of the matched view's centre, pixels")
+    angle_rad: float = Field(description="Turn from the trained view to the image, radians")
+    scale: float = Field(description="Size in the image over size in the trained view")
+
+
+class ImageResultOut(BaseModel):
+    name: str
+    width: int
+    height: int
+    viewpoint: int
+    decision: str = Field(description="recognized, ambiguous or unknown")
+    model: str | None
+    best_model: str | None
+    score: float
+    threshold: float
+    scores: list[ModelScoreOut] = Field(description="Every model, best first")
+    contenders: list[str]
+    view_id: int | None = Field(description="The trained view that matched best")
+    outline_px: list[list[float]] = Field(description="Matched view's outline in the image")
+    pose: ImagePoseOut | None
+    n_features: int
+    durations: dict[str, float] = Field(
+        description="Seconds per stage: decode, features, retrieve, verify, decide"
+    )
+    inspection_id: int | None = Field(None, description="The stored row (store=true)")
+
+
+class RecogniseOut(BaseModel):
+    data: list[ImageResultOut]
+    count: int
+    threshold: dict[str, Any] = Field(description="The thresholds applied: how they were chosen")
+    durations: dict[str, float] = Field(description="Seconds of the request: total, store")
+
+
+def _region(text: str | None) -> Region | None:
+    """``x,y,width,height`` in pixels (or a JSON list of the four), or None."""
+    if text is None or not text.strip():
+        return None
+    raw = text.strip()
+    try:
+        values = json.loads(raw) if raw.startswith("[") else [int(v) for v in raw.split(",")]
+    except (ValueError, json.JSONDecodeError):
+        raise InvalidInput(
+            f"region must be x,y,width,height in pixels, got {text[:80]!r}"
+        ) from None
+    if not isinstance(values, list) or len(values) != 4:
+        raise InvalidInput(f"region must be four numbers x,y,width,height, got {text[:80]!r}")
+    if any(isinstance(v, bool) or not isinstance(v, int) for v in values):
+        raise InvalidInput(f"region must be four integers, got {text[:80]!r}")
+    return Region(*values)
+
+
+@router.post(
+    "/recognise",
+    summary="Recognise uploaded images against every trained model (viewer; store=true: operator)",
+    response_model=RecogniseOut,
+)
+async def recognise_images(
+    user: ViewerUser,
+    runtime: RuntimeDep,
+    settings: SettingsDep,
+    images: Annotated[list[UploadFile], File(description="PNG or JPEG images")],
+    masks: Annotated[
+        list[UploadFile] | None,
+        File(description="Optional masks, one per image (white = where to look)"),
+    ] = None,
+    viewpoint: Annotated[
+        int, Form(ge=1, le=3, description="Trained viewpoint to compare with: 1 top, 2, 3 sides")
+    ] = 1,
+    region: Annotated[
+        str | None, Form(max_length=64, description="x,y,width,height in pixels to look in")
+    ] = None,
+    store: Annotated[
+        bool, Form(description="Store each result as an inspection (source upload; operator)")
+    ] = False,
+) -> dict[str, Any]:
+    """For each image: the decision, the model, every model's score against its threshold,
+    the outline of the matched view and the 2D pose in the image, and the time per stage.
+    Images are checked (count, bytes, pixels from their headers) before any is decoded;
+    decoding and recognition run in worker threads, ``recognise_workers`` at a time."""
+    t0 = time.perf_counter()
+    if store and Role[user.role] < Role.operator:
+        raise ApiError(
+            403, "forbidden",
+            f"storing results needs the operator role; user {user.name!r} is {user.role}",
+        )  # fmt: skip
+    n = len(images)
+    if n > settings.recognise_max_images:
+        raise InvalidInput(f"at most {settings.recognise_max_images} images at once, got {n}")
+    masks = masks or []
+    if masks and len(masks) != n:
+        raise InvalidInput(f"give one mask per image ({n}) or none, got {len(masks)}")
+    box = _region(region)
+    names = [f.filename or f"image {k}" for k, f in enumerate(images)]
+    datas = [await read_capped(f, im.MAX_IMAGE_BYTES) for f in images]
+    mask_datas = [await read_capped(m, im.MAX_IMAGE_BYTES) for m in masks]
+    heads = [im.check_header(d, name=nm) for d, nm in zip(datas, names, strict=True)]
+    check_request_pixels([(h.width, h.height) for h in heads], settings.recognise_max_pixels)
+    for k, m in enumerate(mask_datas):
+        head = im.check_header(m, name=f"mask of {names[k]}")
+        if (head.width, head.height) != (heads[k].width, heads[k].height):
+            raise InvalidInput(
+                f"the mask of {names[k]!r} is {head.width} x {head.height} px, the image "
+                f"{heads[k].width} x {heads[k].height} px"
+            )
+    db = runtime.database
+    live = runtime.live_index
+
+    async def read_choice(session: Any) -> tuple[Any, str]:
+        row = await latest_settings(session)
+        return await current_choice(session), "default" if row is None else row.chosen_by
+
+    # The thresholds in force change with a settings row or a model's own threshold: read
+    # through the cache, which a commit to either table clears.
+    choice, chosen_by = await read_through(
+        runtime.read_cache, db, user, ("recognise-thresholds",), tables=CHOICE_TABLES,
+        read=read_choice,
+    )  # fmt: skip
+    started = utcnow()
+
+    async def one(k: int) -> Any:
+        async with runtime.recognise_slots:
+            return await asyncio.to_thread(
+                recognise_upload, live, datas[k], name=names[k], viewpoint=viewpoint,
+                choice=choice, mask_data=mask_datas[k] if mask_datas else None, region=box,
+                annotate=store,
+            )  # fmt: skip
+
+    results = await asyncio.gather(*(one(k) for k in range(n)))
+    out = [r.public() for r, _jpeg in results]
+    t_store = 0.0
+    if store:
+        t1 = time.perf_counter()
+        finished = utcnow()
+        ids = {m.name: m.id for m in live.models().values()}
+        records = [
+            inspection_record(r, jpeg, started_at=started, finished_at=finished, model_ids=ids)
+            for r, jpeg in results
+            if jpeg is not None
+        ]
+        stored = await store_all(db, runtime.cell_id, records, retention=settings.image_retention)
+        for o, iid in zip(out, stored, strict=True):
+            o["inspection_id"] = iid
+        t_store = time.perf_counter() - t1
+    return {
+        "data": out,
+        "count": len(out),
+        "threshold": {
+            "chosen_by": chosen_by,
+            "global_threshold": choice.at(viewpoint).threshold,
+            "rule": choice.rule,
+        },
+        "durations": {"total": time.perf_counter() - t0, "store": t_store},
+    }
+
+
+# -- the automatic threshold ----------------------------------------------------------------
+
+
+class ThresholdStatusOut(BaseModel):
+    follow: bool = Field(description="Recomputed after every change of the views (setting)")
+    state: str = Field(description="idle, waiting (changes seen) or running")
+    job: str | None
+    runs: int = Field(description="Recomputations finished")
+    superseded: int = Field(description="Recomputations stopped by a change while they ran")
+    last: dict[str, Any] | None = Field(description="The last recomputation's outcome")
+    settings: RecognitionSettingsOut
+
+
+@router.get(
+    "/threshold",
+    summary="The automatic threshold: its state, the last recomputation and the settings in force",
+    response_model=ThresholdStatusOut,
+)
+async def read_threshold_status(
+    _: ViewerUser, runtime: RuntimeDep, session: SessionDep
+) -> dict[str, Any]:
+    keeper = runtime.threshold_keeper
+    state = (
+        keeper.status()
+        if keeper is not None
+        else {"state": "idle", "job": None, "runs": 0, "superseded": 0, "last": None}
+    )
+    return {
+        "follow": keeper is not None,
+        "state": state["state"],
+        "job": state["job"],
+        "runs": state["runs"],
+        "superseded": state["superseded"],
+        "last": state["last"],
+        "settings": _public(await latest_settings(session)),
+    }
+
+
+# -- negative images ------------------------------------------------------------------------
+
+
+class NegativePublic(BaseModel):
+    id: int
+    width: int
+    height: int
+    source: str
+    note: str
+    created_at: str
+
+
+class NegativeList(BaseModel):
+    data: list[NegativePublic]
+    count: int
+
+
+def _keeper_changed(runtime: Any) -> None:
+    keeper = runtime.threshold_keeper
+    if keeper is not None:
+        keeper.changed()
+
+
+@router.get("/negatives", response_model=NegativeList, summary="Negative images (no image data)")
+async def read_negatives(
+    _: ViewerUser,
+    db: DatabaseDep,
+    limit: Annotated[int, Query(ge=1, le=500)] = 100,
+    offset: Annotated[int, Query(ge=0, le=DB_ID_MAX)] = 0,
+) -> dict[str, Any]:
+    rows, total = await neg.list_negatives(db, limit=limit, offset=offset)
+    return {"data": [neg.negative_public(r) for r in rows], "count": total}
+
+
+@router.post(
+    "/negatives",
+    response_model=NegativeList,
+    status_code=status.HTTP_201_CREATED,
+    summary="Upload negative images: the empty belt, other things in the scene (engineer)",
+)
+async def create_negatives(
+    user: EngineerUser,
+    runtime: RuntimeDep,
+    settings: SettingsDep,
+    images: Annotated[list[UploadFile], File(description="PNG or JPEG images of no model")],
+    note: Annotated[str, Form(max_length=200, description="What they show")] = "",
+    reason: Annotated[
+        str | None, Form(max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)")
+    ] = None,
+) -> dict[str, Any]:
+    n = len(images)
+    if n > neg.MAX_NEGATIVES_PER_REQUEST:
+        raise InvalidInput(f"at most {neg.MAX_NEGATIVES_PER_REQUEST} images at once, got {n}")
+    names = [f.filename or f"image {k}" for k, f in enumerate(images)]
+    datas = [await read_capped(f, im.MAX_IMAGE_BYTES) for f in images]
+    heads = [im.check_header(d, name=nm) for d, nm in zip(datas, names, strict=True)]
+    check_request_pixels([(h.width, h.height) for h in heads], settings.recognise_max_pixels)
+
+    def decode_all() -> list[tuple[bytes, int, int]]:
+        rgbs = [im.decode_image(d, name=nm) for d, nm in zip(datas, names, strict=True)]
+        return neg.encode_negatives(rgbs)
+
+    async with runtime.recognise_slots:
+        encoded = await asyncio.to_thread(decode_all)
+    rows = await neg.add_negatives(
+        runtime.database, encoded, note=note, by=audit.By(audit.Actor.of(user), reason)
+    )
+    _keeper_changed(runtime)
+    return {"data": [neg.negative_public(r) for r in rows], "count": len(rows)}
+
+
+@router.delete(
+    "/negatives/{negative_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    summary="Delete a negative image (engineer)",
+)
+async def delete_negative(
+    user: EngineerUser,
+    runtime: RuntimeDep,
+    negative_id: Annotated[int, Path(ge=1, le=DB_ID_MAX, description="Negative image id")],
+    reason: Annotated[
+        str | None, Query(max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)")
+    ] = None,
+) -> Response:
+    await neg.delete_negative(
+        runtime.database, negative_id, by=audit.By(audit.Actor.of(user), reason)
+    )
+    _keeper_changed(runtime)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)

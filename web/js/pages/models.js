@@ -397,7 +397,7 @@ async function loadThresholds() {
   const impostor = d.impostor || [];
   const hasScores = genuine.length + impostor.length > 0;
   q("#threshold-plots").hidden = !hasScores;
-  setText(q("#threshold-none"), hasScores ? "" : "No score distributions yet: they are computed after a teach, from the trained views (at least two models).");
+  setText(q("#threshold-none"), hasScores ? "" : "No score distributions yet: they are computed after every change of the trained views (two models, or one model and negative images; see the Recognise page).");
   if (hasScores) {
     histogram(q("#score-hist"), SCORE_EDGES, [
       { label: `genuine (${genuine.length})`, counts: binCounts(genuine, SCORE_EDGES), color: "#15803d" },

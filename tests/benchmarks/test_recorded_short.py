@@ -1,0 +1,35 @@
+"""``benchmarks/recorded.py`` in its short form: COIL-20 trained through the product at 20
+degree spacing, a subsample of queries through the endpoint and through the library, one
+table and one JSON line."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from benchmarks import recorded
+from benchmarks.recognition_data import coil_folder
+
+
+def test_recorded_benchmark_short(data_dir, capsys) -> None:
+    try:
+        coil_folder(data_dir)
+    except FileNotFoundError as exc:
+        pytest.skip(str(exc))
+    recorded.main(["--short", "--json", "--data-dir", str(data_dir)])
+    out = capsys.readouterr()
+    lines = out.out.strip().splitlines()
+    res = json.loads(lines[-1])
+    assert "known top-1" in out.out and "endpoint / library" in out.out
+    assert "recognising through the endpoint" in out.err  # progress shown
+    e, lib = res["endpoint"], res["library"]
+    assert res["trained_views"] == 180 and e["known"] == lib["known"] == 60
+    assert e["unknown"] == 15 and res["stored_rows"] == e["known"] + e["unknown"]
+    assert res["threshold"] >= 0.03 and res["threshold_runs"] >= 1
+    # The endpoint decides as the library does on the same images and thresholds (up to
+    # the approximate search's randomness, which another part of the product removes).
+    assert abs(e["top1"] - lib["top1"]) <= 2 / e["known"]
+    assert abs(e["false_accept_count"] - lib["false_accept_count"]) <= 1
+    assert e["top1"] >= 0.9
+    assert res["endpoint_ms_per_image"] > 0 and res["library_ms_per_image"] > 0
