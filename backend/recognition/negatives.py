@@ -10,7 +10,7 @@ empty-belt backgrounds a teach grabs are negatives of the cell that grabbed them
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -62,8 +62,8 @@ def _shrink(rgb: NDArray[np.uint8]) -> NDArray[np.uint8]:
     if side <= NEGATIVE_SIDE_PX:
         return rgb
     f = NEGATIVE_SIDE_PX / side
-    out: NDArray[np.uint8] = cv2.resize(rgb, None, fx=f, fy=f, interpolation=cv2.INTER_AREA)
-    return out
+    # uint8 in, uint8 out (the OpenCV stubs only say "array").
+    return cast(NDArray[np.uint8], cv2.resize(rgb, None, fx=f, fy=f, interpolation=cv2.INTER_AREA))
 
 
 def encode_negatives(images: Sequence[NDArray[np.uint8]]) -> list[tuple[bytes, int, int]]:

@@ -254,7 +254,8 @@ def recognise_upload(
         if r.best is not None and r.best.H is not None:
             outline = view_outline(index.view(r.best.view_id).features)
     t3 = time.perf_counter()
-    pts, pose = ((), None)
+    pts: tuple[tuple[float, float], ...] = ()
+    pose: ImagePose | None = None
     if r.best is not None and r.best.H is not None:
         pts, pose = _pose_and_outline(np.asarray(r.best.H, dtype=np.float64), outline)
     scores = tuple(
