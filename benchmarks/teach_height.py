@@ -120,7 +120,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if not 1 <= args.objects <= 12 or not 1 <= args.yaws <= 8:
         ap.error(f"--objects must be in 1..12 and --yaws in 1..8, got {args.objects}, {args.yaws}")
     out = run(objects=args.objects, yaws=args.yaws)
-    print(f"\nHeight measured at teach (features, else silhouettes), {out['measurements']} placements")
+    print(
+        f"\nHeight measured at teach (features, else silhouettes), {out['measurements']} placements"
+    )
     print(f"{'part':24s} {'yaw':>6s} {'truth mm':>9s} {'measured':>9s} {'error':>7s}  method")
     for r in out["rows"]:
         m = "-" if r["measured_mm"] is None else f"{r['measured_mm']:.1f}"
