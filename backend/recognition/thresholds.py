@@ -10,10 +10,14 @@ reported until the engineer hands the choice back (:func:`back_to_automatic`, ``
 /api/recognition/settings`` with ``{"global_threshold": null}``).  A model's own
 ``threshold`` overrides the automatic per-model one.
 
-An automatic threshold never falls below :data:`MIN_AUTO_THRESHOLD` (:func:`floored`): with
-few trained views the conformal rule cannot reach its target and takes the largest impostor
-score, which is 0 when the few impostors all scored 0 (two models taught once each), and a
-threshold of 0 names any object as some model.  When the data cannot support the target
+An automatic threshold never falls to 0.  :func:`vision.recognition.choose_threshold` keeps
+every automatic bar above its own small floor; and when the scores cannot support the
+target false-accept rate (the conformal bound is not reached: too few impostor scores), the
+choice rests on the largest of a handful of impostor scores, which may all be near 0 (two
+models taught once each), so :func:`unsupported_floored` raises it to
+:data:`MIN_AUTO_THRESHOLD`, the cell's conservative bar, until the data can carry a
+measured one.  With enough impostors (many views, several models, negative images) the
+measured threshold stands as chosen.  When the data cannot support the target
 false-accept rate, :func:`advice` says in plain words what to add (teach rounds at other
 yaws, more models); the teach wizard shows it.
 """
@@ -56,6 +60,7 @@ __all__ = [
     "recompute",
     "settings_audit_value",
     "teach_rounds",
+    "unsupported_floored",
 ]
 
 #: Global threshold before anything was chosen.
@@ -249,7 +254,7 @@ async def current_choice(session: AsyncSession) -> ThresholdChoice:
         choice = choice_from_detail(DEFAULT_THRESHOLD, {"rule": "default"})
     elif row.chosen_by == "auto":
         # Floored again: a row stored before the floor existed may hold 0.
-        choice = floored(choice_from_detail(row.global_threshold, row.detail))[0]
+        choice = unsupported_floored(choice_from_detail(row.global_threshold, row.detail))[0]
     else:
         choice = choice_from_detail(row.global_threshold, {"rule": row.chosen_by})
     rows = (
@@ -278,6 +283,15 @@ async def current_choice(session: AsyncSession) -> ThresholdChoice:
         per_model_viewpoint=per_vp,
         own_viewpoint=own_vp,
     )
+
+
+def unsupported_floored(choice: ThresholdChoice) -> tuple[ThresholdChoice, bool]:
+    """:func:`floored` to :data:`MIN_AUTO_THRESHOLD` when the choice could not bound its
+    false-accept rate (no conformal bound: too few impostor scores), else ``choice`` as
+    measured; and whether any bar was raised."""
+    if choice.far_bound is not None:
+        return choice, False
+    return floored(choice)
 
 
 def floored(
@@ -442,7 +456,7 @@ async def recompute(
         in_force = DEFAULT_THRESHOLD if row is None else row.global_threshold
         tips = _not_chosen_advice(str(exc)) + advice(rounds, target_far=target_far)
         return ThresholdOutcome(False, None, in_force, f"not chosen: {exc}", (), _unique(tips))
-    choice, raised = floored(raw)
+    choice, raised = unsupported_floored(raw)
     tips = _unique(raw.advice + advice(rounds, impostors=len(raw.impostor), target_far=target_far,
                                        reachable=raw.far_bound is not None))  # fmt: skip
     floor = MIN_AUTO_THRESHOLD if raised else None

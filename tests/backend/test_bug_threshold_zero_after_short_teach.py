@@ -28,6 +28,7 @@ from backend.recognition.thresholds import (
     RECOMMENDED_ROUNDS,
     advice,
     floored,
+    unsupported_floored,
 )
 from tests.utils.factories import TEST_SECRET, make_settings, migrate
 from vision.recognition import ThresholdChoice
@@ -57,6 +58,18 @@ def test_every_automatic_threshold_is_raised_to_the_floor():
     assert same.threshold == 0.4 and raised and same.per_viewpoint[2] == MIN_AUTO_THRESHOLD
     with pytest.raises(ValueError, match="floor"):
         floored(_choice(0.2), float("nan"))
+
+
+def test_a_measured_threshold_stands_and_an_unsupported_one_is_floored():
+    """The cell's floor stands in only where the scores could not bound the false accepts;
+    a choice with a conformal bound (enough impostors) keeps its measured bars."""
+    from dataclasses import replace
+
+    bounded = replace(_choice(0.07), far_bound=0.009, rule="conformal FAR <= 0.01")
+    same, raised = unsupported_floored(bounded)
+    assert same is bounded and not raised
+    got, raised = unsupported_floored(_choice(0.07))
+    assert raised and got.threshold == MIN_AUTO_THRESHOLD
 
 
 def test_the_advice_names_what_to_add():
