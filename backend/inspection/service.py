@@ -460,6 +460,14 @@ class Waiting:
     forever: bool = False
 
 
+def _indexing(rt: Any) -> bool:
+    """Whether an indexing belt is carrying its parts to the station now (it runs and holds
+    none there): two alike frames then mean only that the camera saw the belt at one
+    instant twice, not a part at rest."""
+    st = belt_status(rt)
+    return st is not None and st.mode == "index" and st.running and not st.holding
+
+
 def _station_px(ctx: _Ctx, T_cam: NDArray[np.float64], z_m: float) -> NDArray[np.float64]:
     p = ctx.station.copy()
     p[2] = z_m
@@ -529,7 +537,7 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
         elif mask is None:
             if tracker is not None:
                 tracker.station_empty()
-        elif last is not None and iou(mask, last) > 0.97:
+        elif last is not None and iou(mask, last) > 0.97 and not _indexing(ctx.rt):
             travel = _travel_of(frame, ctx.rt)
             u = _belt_coordinate(ctx, mask, T_cam, z_mid, travel)
             # a neighbour cut by the image's edge along the belt is not at the station

@@ -31,7 +31,14 @@ from robot.drivers.conveyor import BeltStatus, ControlledConveyor
 from vision.errors import Conflict
 from vision.segmentation import iou
 
-__all__ = ["PartTracker", "belt_status", "conveyor_of", "waiting_message"]
+__all__ = [
+    "PartTracker",
+    "belt_status",
+    "conveyor_of",
+    "describe",
+    "require_conveyor",
+    "waiting_message",
+]
 
 #: Two parts seen at the station are one and the same when their belt coordinates are
 #: closer than this, metres (parts on a belt are never this close: they would touch) ...
