@@ -162,6 +162,17 @@ def pose_errors(T: Any, T_true: Any, symmetric: bool = False) -> tuple[float, fl
     return pos, abs(math.degrees(math.remainder(d, 2 * math.pi)))
 
 
+async def _inspect(service: Any, ctx: Any, opts: Any) -> dict[str, Any]:
+    """One inspection's row; an object the search never found counts as a failed one here
+    (the product stores no row for a wait that ends without a part)."""
+    try:
+        return dict(await service.inspect_object(ctx, opts))
+    except service.NoObject as exc:
+        return {"decision": "failed", "model": None, "score": None, "scores": {},
+                "viewpoints_visited": [], "durations": {}, "pose": None, "pick": None,
+                "truth": None, "reason": f"no_object: {exc.detail}"}  # fmt: skip
+
+
 def _record(
     cond: str, policy: str, name: str, row: dict[str, Any], extra: dict[str, Any]
 ) -> dict[str, Any]:
@@ -293,7 +304,7 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
                 opts = service.InspectOptions(
                     policy=policy, sort=sort, wait_s=20.0, balance_light=balance
                 )
-                row = await service.inspect_object(ctx, opts)
+                row = await _inspect(service, ctx, opts)
                 extra: dict[str, Any] = {}
                 if sort:
                     landed = engine.landings()[-1] if engine.landings() else None
@@ -338,8 +349,8 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
                 yaw_rad=float(rng.uniform(-math.pi, math.pi)),
             )
             engine.configure_conveyor(running=True, speed_m_s=args.belt_speed, mode="continuous")
-            row = await service.inspect_object(
-                ctx, service.InspectOptions(policy="two-views", wait_s=20.0)
+            row = await _inspect(
+                service, ctx, service.InspectOptions(policy="two-views", wait_s=20.0)
             )
             engine.configure_conveyor(running=False)
             # How far from the station the top view saw it (the truth at the exposure): the
