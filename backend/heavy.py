@@ -14,8 +14,9 @@ E-STOP while an upload is decoded.  Three bounds hold at once:
 * **pixels** -- a job may decode at most ``max_pixels`` pixels in all
   (:meth:`HeavyJob.take_pixels`, called with the size read from each file's header before
   it is decoded): a request of many large images is refused with 413 before the first
-  decode that would pass the budget; an image whose features are to be extracted may have
-  at most ``max_feature_pixels`` (SIFT's scale space takes about 230 bytes per pixel).
+  decode that would pass the budget; an image whose features are to be extracted, or in
+  which a calibration board is searched, may have at most ``max_analysed_pixels`` (SIFT's
+  scale space takes about 230 bytes per pixel).
 
 A job is cancellable: given the request's "client gone" event, work still queued when the
 client leaves is dropped and the job stops with :class:`ClientGone` before its next unit
@@ -34,7 +35,7 @@ from vision.errors import VisionCellError
 
 __all__ = [
     "DEFAULT_ADMIT_WAIT_S",
-    "DEFAULT_MAX_FEATURE_PIXELS",
+    "DEFAULT_MAX_ANALYSED_PIXELS",
     "DEFAULT_MAX_JOBS",
     "DEFAULT_MAX_PIXELS",
     "DEFAULT_WORKERS",
@@ -48,16 +49,17 @@ __all__ = [
 T = TypeVar("T")
 
 #: Threads of the pool.
-DEFAULT_WORKERS = 2
+DEFAULT_WORKERS = 1
 #: Requests doing heavy work at once.
 DEFAULT_MAX_JOBS = 2
 #: Longest wait for a job slot before the request is refused (503), seconds.
 DEFAULT_ADMIT_WAIT_S = 10.0
 #: Decoded pixels one request may take in all (images and masks): 64 MP, about 192 MB as RGB.
 DEFAULT_MAX_PIXELS = 64_000_000
-#: Largest image features are extracted from: 4 MP (2048 x 2048; SIFT peaks near 1 GB on
-#: it, and near 2.8 GB on 12 MP).
-DEFAULT_MAX_FEATURE_PIXELS = 4_194_304
+#: Largest image features are extracted from or a calibration board searched in: 4 MP
+#: (2048 x 2048; SIFT peaks near 1 GB on it; on 12 MP, SIFT near 2.8 GB and the board
+#: search near 3 GB and two minutes).
+DEFAULT_MAX_ANALYSED_PIXELS = 4_194_304
 
 
 class Busy(VisionCellError):
@@ -119,20 +121,20 @@ class HeavyJob:
             raise ClientGone("the client disconnected; its queued work was dropped")
 
     def take_pixels(
-        self, width: int, height: int, *, name: str = "image", features: bool = False
+        self, width: int, height: int, *, name: str = "image", analysed: bool = False
     ) -> None:
         """Count an image of ``width`` x ``height`` px about to be decoded against the job's
         pixel budget; :class:`PixelBudgetExceeded` (413) if it would pass it, or if
-        ``features`` (its features will be extracted) and it has more than the pool's
-        ``max_feature_pixels``."""
+        ``analysed`` (features will be extracted from it, or a board searched in it) and it
+        has more than the pool's ``max_analysed_pixels``."""
         n = int(width) * int(height)
         if n < 0:
             raise ValueError(f"{name!r}: negative size {width} x {height}")
-        if features and n > self._pool.max_feature_pixels:
+        if analysed and n > self._pool.max_analysed_pixels:
             raise PixelBudgetExceeded(
-                f"{name!r} is {width} x {height} = {n} px; features are extracted from "
-                f"images of at most {self._pool.max_feature_pixels} px (SIFT takes about "
-                "230 bytes per pixel): send a smaller image"
+                f"{name!r} is {width} x {height} = {n} px; features are extracted and "
+                f"boards searched in images of at most {self._pool.max_analysed_pixels} px "
+                "(SIFT takes about 230 bytes per pixel): send a smaller image"
             )
         limit = self._pool.max_pixels
         if self.pixels + n > limit:
@@ -198,8 +200,8 @@ class HeavyPool:
         Longest wait for a job slot, seconds, in [0, 600] (0: refuse at once when full).
     max_pixels : int
         Decoded pixels one job may take in all, in [1, 10**9].
-    max_feature_pixels : int
-        Pixels of the largest image features are extracted from, in [1, 10**9].
+    max_analysed_pixels : int
+        Pixels of the largest image analysed (features, board search), in [1, 10**9].
     """
 
     def __init__(
@@ -209,13 +211,13 @@ class HeavyPool:
         max_jobs: int = DEFAULT_MAX_JOBS,
         admit_wait_s: float = DEFAULT_ADMIT_WAIT_S,
         max_pixels: int = DEFAULT_MAX_PIXELS,
-        max_feature_pixels: int = DEFAULT_MAX_FEATURE_PIXELS,
+        max_analysed_pixels: int = DEFAULT_MAX_ANALYSED_PIXELS,
     ) -> None:
         for name, value, lo, hi in (
             ("workers", workers, 1, 64),
             ("max_jobs", max_jobs, 1, 256),
             ("max_pixels", max_pixels, 1, 10**9),
-            ("max_feature_pixels", max_feature_pixels, 1, 10**9),
+            ("max_analysed_pixels", max_analysed_pixels, 1, 10**9),
         ):
             if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
                 raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
@@ -229,7 +231,7 @@ class HeavyPool:
         self.max_jobs = max_jobs
         self.admit_wait_s = float(admit_wait_s)
         self.max_pixels = max_pixels
-        self.max_feature_pixels = max_feature_pixels
+        self.max_analysed_pixels = max_analysed_pixels
         self._executor = concurrent.futures.ThreadPoolExecutor(
             max_workers=workers, thread_name_prefix="visioncell-heavy"
         )

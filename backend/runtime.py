@@ -197,7 +197,7 @@ class CellRuntime:
             max_jobs=s.heavy_jobs,
             admit_wait_s=s.heavy_admit_wait_s,
             max_pixels=s.max_request_pixels,
-            max_feature_pixels=s.max_feature_pixels,
+            max_analysed_pixels=s.max_analysed_pixels,
         )
 
     # -- accessors (raise a clear error before start) -----------------------------------------

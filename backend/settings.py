@@ -332,15 +332,20 @@ class Settings(BaseSettings):
         description="Decoded pixels one request's images and masks may take in all (413 "
         "beyond, read from each file's header before it is decoded; backend/heavy.py).",
     )
-    max_feature_pixels: int = Field(
+    max_analysed_pixels: int = Field(
         4_194_304,
         ge=100_000,
         le=100_000_000,
-        description="Largest uploaded image features are extracted from (trained views), "
-        "pixels (413 beyond, from its header; SIFT takes about 230 bytes per pixel).",
+        description="Largest uploaded image that is analysed (a trained view's features, a "
+        "calibration sample's board search), pixels (413 beyond, from its header; SIFT "
+        "takes about 230 bytes per pixel).",
     )
     heavy_workers: int = Field(
-        2, ge=1, le=64, description="Threads decoding and analysing uploads."
+        1,
+        ge=1,
+        le=64,
+        description="Threads decoding and analysing uploads (one leaves the other cores to "
+        "the event loop and the cell; more where there are cores to spare).",
     )
     heavy_jobs: int = Field(
         2,

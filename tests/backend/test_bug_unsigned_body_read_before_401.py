@@ -194,6 +194,7 @@ def test_every_body_route_is_planned(served):
     ("name", "value"),
     [("max_json_body_bytes", 100), ("max_json_body_bytes", 1 << 30),
      ("max_upload_body_bytes", 10), ("max_request_pixels", 0), ("heavy_workers", 0),
+     ("max_analysed_pixels", 10),
      ("heavy_jobs", 1000), ("heavy_admit_wait_s", float("inf")), ("heavy_admit_wait_s", -1)],
 )  # fmt: skip
 def test_the_edge_settings_are_bounded(name, value):

@@ -174,13 +174,13 @@ def test_bad_pool_sizes_are_refused(kwargs):
 
 def test_an_image_for_feature_extraction_has_a_smaller_cap():
     async def main():
-        pool = HeavyPool(max_pixels=64_000_000, max_feature_pixels=4_194_304)
+        pool = HeavyPool(max_pixels=64_000_000, max_analysed_pixels=4_194_304)
         try:
             async with pool.job() as job:
                 job.take_pixels(4000, 3000, name="cal.png")  # decoded only: within the budget
                 with pytest.raises(PixelBudgetExceeded, match="at most 4194304 px"):
-                    job.take_pixels(4000, 3000, name="view.png", features=True)
-                job.take_pixels(2048, 2048, name="view.png", features=True)
+                    job.take_pixels(4000, 3000, name="view.png", analysed=True)
+                job.take_pixels(2048, 2048, name="view.png", analysed=True)
         finally:
             pool.close()
 

@@ -380,7 +380,7 @@ async def create_calibration_samples(
             name = PurePath(f.filename or "image").name
             data = await read_capped(f, MAX_IMAGE_BYTES)
             w, h = _check_upload(name, data)
-            job.take_pixels(w, h, name=name)
+            job.take_pixels(w, h, name=name, analysed=True)
             decoded.append((name, await job.run(_decode, name, data)))
         return await _store_samples(session, cal, decoded, poses, poses_unit, joints, job)
 

@@ -551,7 +551,7 @@ async def create_views(
             name = f.filename or f"image {k}"
             data = await read_capped(f, im.MAX_IMAGE_BYTES)
             head = im.check_header(data, name=name)
-            job.take_pixels(head.width, head.height, name=name, features=True)
+            job.take_pixels(head.width, head.height, name=name, analysed=True)
             rgb = await job.run(im.decode_image, data, name=name)
             mask = None
             if masks:
