@@ -186,8 +186,6 @@ class CellRuntime:
         #: Recomputes the automatic threshold after changes (after entering, when
         #: ``threshold_follow``; ``backend.recognition.autothreshold``).
         self.threshold_keeper: ThresholdKeeper | None = None
-        #: Uploaded images decoded and recognised at once (``recognise_workers``).
-        self.recognise_slots = asyncio.Semaphore(settings.recognise_workers)
         self._stack: contextlib.AsyncExitStack | None = None
 
     def _new_heavy_pool(self) -> HeavyPool:
@@ -358,7 +356,6 @@ class CellRuntime:
         stack.push_async_callback(cell.stop)
         self.sim = hardware.sim
         self._cell = cell
-        self.recognise_slots = asyncio.Semaphore(s.recognise_workers)  # on this loop
         if s.threshold_follow:
             from backend.recognition.autothreshold import ThresholdKeeper
 

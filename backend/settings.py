@@ -248,16 +248,6 @@ class Settings(BaseSettings):
     recognise_max_images: int = Field(
         16, ge=1, le=64, description="Most images one POST /api/recognition/recognise takes."
     )
-    recognise_max_pixels: int = Field(
-        48_000_000,
-        ge=1_000_000,
-        le=200_000_000,
-        description="Most decoded pixels (width x height, summed over the images) of one "
-        "recognise request, checked from the file headers before anything is decoded.",
-    )
-    recognise_workers: int = Field(
-        2, ge=1, le=16, description="Uploaded images decoded and recognised at once."
-    )
     threshold_follow: bool = Field(
         True,
         description="Recompute the automatic threshold as a job after every change of the "

@@ -36,7 +36,6 @@ __all__ = [
     "ImageRecognition",
     "ModelScore",
     "Region",
-    "check_request_pixels",
     "inspection_record",
     "recognise_upload",
 ]
@@ -171,15 +170,6 @@ class ImageRecognition:
             "n_features": self.n_features,
             "durations": {k: round(v, 5) for k, v in self.durations.items()},
         }
-
-
-def check_request_pixels(sizes: list[tuple[int, int]], max_pixels: int) -> None:
-    """Refuse (413) a request whose images' header sizes sum to more than ``max_pixels``."""
-    total = sum(w * h for w, h in sizes)
-    if total > max_pixels:
-        raise im.ImageTooLarge(
-            f"the images declare {total} px together; one request takes at most {max_pixels} px"
-        )
 
 
 def _pose_and_outline(

@@ -543,8 +543,6 @@ async def start_teach(
     point: NDArray[np.float64] | None = None,
     by: audit.By | None = None,
     heavy: HeavyPool | None = None,
-
-
     camera: PinholeCamera | None = None,
     mounting: NDArray[np.float64] | None = None,
 ) -> Any:

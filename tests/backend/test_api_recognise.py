@@ -29,7 +29,7 @@ URL = "/api/recognition/recognise"
 def cell(tmp_path_factory):
     """A cell with two models (a, b) of two views each, and a token per role."""
     tmp = tmp_path_factory.mktemp("recognise")
-    settings = make_settings(tmp, recognise_max_images=4, recognise_max_pixels=2_000_000)
+    settings = make_settings(tmp, recognise_max_images=4, max_request_pixels=2_000_000)
     migrate(settings)
     tokens = make_tokens(settings)
     headers = {r: {"Authorization": f"Bearer {t}"} for r, t in tokens.items()}

@@ -9,7 +9,6 @@ engineer role.
 
 from __future__ import annotations
 
-import asyncio
 import json
 import time
 from typing import Annotated, Any
@@ -31,6 +30,7 @@ from backend.api.deps import (
 from backend.api.errors import ApiError
 from backend.api.types import bounded_float
 from backend.api.uploads import read_capped
+from backend.api.work import HeavyWorkDep
 from backend.db.models import RecognitionSettings, Role
 from backend.db.types import utcnow
 from backend.inspection.results import store_all
@@ -38,7 +38,6 @@ from backend.recognition import images as im
 from backend.recognition import negatives as neg
 from backend.recognition.recognise import (
     Region,
-    check_request_pixels,
     inspection_record,
     recognise_upload,
 )
@@ -227,6 +226,7 @@ async def recognise_images(
     user: ViewerUser,
     runtime: RuntimeDep,
     settings: SettingsDep,
+    work: HeavyWorkDep,
     images: Annotated[list[UploadFile], File(description="PNG or JPEG images")],
     masks: Annotated[
         list[UploadFile] | None,
@@ -245,7 +245,8 @@ async def recognise_images(
     """For each image: the decision, the model, every model's score against its threshold,
     the outline of the matched view and the 2D pose in the image, and the time per stage.
     Images are checked (count, bytes, pixels from their headers) before any is decoded;
-    decoding and recognition run in worker threads, ``recognise_workers`` at a time."""
+    decoding and recognition run in the runtime's heavy-work pool, within the request's
+    pixel budget (:mod:`backend.heavy`); a client that leaves drops what is still queued."""
     t0 = time.perf_counter()
     if store and Role[user.role] < Role.operator:
         raise ApiError(
@@ -263,7 +264,6 @@ async def recognise_images(
     datas = [await read_capped(f, im.MAX_IMAGE_BYTES) for f in images]
     mask_datas = [await read_capped(m, im.MAX_IMAGE_BYTES) for m in masks]
     heads = [im.check_header(d, name=nm) for d, nm in zip(datas, names, strict=True)]
-    check_request_pixels([(h.width, h.height) for h in heads], settings.recognise_max_pixels)
     for k, m in enumerate(mask_datas):
         head = im.check_header(m, name=f"mask of {names[k]}")
         if (head.width, head.height) != (heads[k].width, heads[k].height):
@@ -286,15 +286,19 @@ async def recognise_images(
     )  # fmt: skip
     started = utcnow()
 
-    async def one(k: int) -> Any:
-        async with runtime.recognise_slots:
-            return await asyncio.to_thread(
-                recognise_upload, live, datas[k], name=names[k], viewpoint=viewpoint,
-                choice=choice, mask_data=mask_datas[k] if mask_datas else None, region=box,
-                annotate=store,
-            )  # fmt: skip
-
-    results = await asyncio.gather(*(one(k) for k in range(n)))
+    async with work.job() as job:
+        # The whole request's pixels are counted before the first decode (413 past the
+        # budget, or an image too large to extract features from).
+        for k, h in enumerate(heads):
+            job.take_pixels(h.width, h.height, name=names[k], analysed=True)
+            if mask_datas:
+                job.take_pixels(h.width, h.height, name=f"mask of {names[k]}")
+        results = []
+        for k in range(n):
+            mask = mask_datas[k] if mask_datas else None
+            got = await job.run(recognise_upload, live, datas[k], name=names[k], viewpoint=viewpoint,
+                                choice=choice, mask_data=mask, region=box, annotate=store)  # fmt: skip
+            results.append(got)
     out = [r.public() for r, _jpeg in results]
     t_store = 0.0
     if store:
@@ -403,7 +407,7 @@ async def read_negatives(
 async def create_negatives(
     user: EngineerUser,
     runtime: RuntimeDep,
-    settings: SettingsDep,
+    work: HeavyWorkDep,
     images: Annotated[list[UploadFile], File(description="PNG or JPEG images of no model")],
     note: Annotated[str, Form(max_length=200, description="What they show")] = "",
     reason: Annotated[
@@ -416,14 +420,15 @@ async def create_negatives(
     names = [f.filename or f"image {k}" for k, f in enumerate(images)]
     datas = [await read_capped(f, im.MAX_IMAGE_BYTES) for f in images]
     heads = [im.check_header(d, name=nm) for d, nm in zip(datas, names, strict=True)]
-    check_request_pixels([(h.width, h.height) for h in heads], settings.recognise_max_pixels)
 
     def decode_all() -> list[tuple[bytes, int, int]]:
         rgbs = [im.decode_image(d, name=nm) for d, nm in zip(datas, names, strict=True)]
         return neg.encode_negatives(rgbs)
 
-    async with runtime.recognise_slots:
-        encoded = await asyncio.to_thread(decode_all)
+    async with work.job() as job:
+        for h, nm in zip(heads, names, strict=True):
+            job.take_pixels(h.width, h.height, name=nm, analysed=True)
+        encoded = await job.run(decode_all)
     rows = await neg.add_negatives(
         runtime.database, encoded, note=note, by=audit.By(audit.Actor.of(user), reason)
     )
