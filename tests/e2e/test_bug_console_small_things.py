@@ -24,8 +24,17 @@ import pytest
 from backend.db.session import Database
 from backend.inspection.results import InspectionRecord, ViewRecord, store
 from benchmarks.reports_data import ensure_cells
+from tests.e2e.conftest import start_server
 
 pytestmark = pytest.mark.e2e
+
+
+@pytest.fixture
+def ui_server(tmp_path):
+    s = start_server(tmp_path, ready_s=300.0)  # a start on a loaded machine (a bound only)
+    yield s
+    s.stop()
+
 
 TIMEOUT = 30.0
 MODELS = ("a-wheel", "b-gear", "c-valve")
@@ -64,7 +73,8 @@ def _seed(url: str) -> None:
     asyncio.run(run())
 
 
-def test_the_small_things(browser, server):
+def test_the_small_things(browser, ui_server):
+    server = ui_server
     # -- the favicon ---------------------------------------------------------------------
     r = httpx.get(f"{server.base}/favicon.ico", timeout=TIMEOUT)
     assert r.status_code == 200 and r.headers["content-type"] == "image/x-icon"
