@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import asyncio
+import threading
 from datetime import UTC, datetime, timedelta
 
 import httpx
@@ -70,7 +71,21 @@ def _seed(url: str) -> None:
         finally:
             await db.dispose()
 
-    asyncio.run(run())
+    # Playwright's sync API runs an event loop in this thread: the seeding gets its own.
+    errors: list[BaseException] = []
+
+    def seed() -> None:
+        try:
+            asyncio.run(run())
+        except BaseException as exc:  # re-raised below, in the test's thread
+            errors.append(exc)
+
+    worker = threading.Thread(target=seed)
+    worker.start()
+    worker.join(TIMEOUT * 4)
+    assert not worker.is_alive(), "seeding the inspections hung"
+    if errors:
+        raise errors[0]
 
 
 def test_the_small_things(browser, ui_server):
