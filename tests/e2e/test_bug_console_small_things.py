@@ -136,7 +136,7 @@ def test_the_small_things(browser, ui_server):
     page.wait_for_selector("#rep-detail:not([hidden])")
     page.wait_for_function(
         "() => { const t = document.querySelector('#rep-detail').getBoundingClientRect().top;"
-        " return t >= 0 && t < window.innerHeight / 2; }"
+        " return t >= 0 && t < window.innerHeight - 100; }"  # its start on screen
     )
     page.wait_for_function(
         f"() => document.querySelector('#rep-detail-scores').style.height === '{bars_px}'"
