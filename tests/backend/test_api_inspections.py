@@ -34,8 +34,9 @@ def test_nothing_trained_and_no_run_are_conflicts(client, headers):
     op = headers["operator"]
     r = client.post("/api/inspections", json={}, headers=op)
     assert r.status_code == 409 and "teach" in r.json()["detail"], r.text
+    assert r.json()["error"] == "nothing_trained"  # the console links its Models page on it
     r = client.post("/api/inspection/run", json={"count": 2}, headers=op)
-    assert r.status_code == 409, r.text
+    assert r.status_code == 409 and r.json()["error"] == "nothing_trained", r.text
     r = client.post("/api/inspection/stop", headers=op)
     assert r.status_code == 409 and "no inspection run" in r.json()["detail"]
 

@@ -88,7 +88,7 @@ def _banner_token(s: Server) -> str:
     """The start-up token ``visioncell serve`` printed (as ``make run`` shows it)."""
     lines = s.log.read_text().splitlines()
     at = next(
-        i for i, line in enumerate(lines) if line.strip().endswith("(valid until the next start):")
+        i for i, line in enumerate(lines) if line.strip().endswith("valid until the next start):")
     )
     assert lines[at].strip().startswith("engineer token")  # a loopback development cell
     return lines[at + 1].strip()
