@@ -38,6 +38,7 @@ import functools
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -410,12 +411,13 @@ async def _next_frame(cell: Any, prev: Any) -> Any:
 
 
 async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg: NDArray[np.uint8],
-                durations: dict[str, float], clear_first: bool = False
+                durations: dict[str, float], clear_first: bool = False, *,
+                clock: Callable[[], float] = time.monotonic,
                 ) -> tuple[Any, float, NDArray[np.uint8]]:  # fmt: skip
     """The top-view frame of an object at the station, the belt travel at its exposure and
-    the background it was found against."""
+    the background it was found against; ``clock`` (seconds) measures ``opts.wait_s``."""
     cell = ctx.rt.cell
-    deadline = time.monotonic() + opts.wait_s
+    deadline = clock() + opts.wait_s
     last = None
     approach = Approach(start_m=_belt(ctx.rt)[2])
     z_mid = ctx.surface_z + AIM_HEIGHT_M / 2
@@ -427,7 +429,7 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
             await asyncio.to_thread(foreground_mask, frame.rgb, _background_for(ctx, frame, bg))
         except SegmentationFailed:
             break
-        if time.monotonic() >= deadline:
+        if clock() >= deadline:
             raise NoObject(
                 f"the previous object did not leave the station within {opts.wait_s:g} s"
             )
@@ -453,7 +455,7 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
         elif mask is not None and last is not None and iou(mask, last) > 0.97:
             break
         last = mask
-        if time.monotonic() >= deadline:
+        if clock() >= deadline:
             raise NoObject(f"no object came to the station within {opts.wait_s:g} s")
         if mode == "continuous":
             frame = await _next_frame(cell, frame)
