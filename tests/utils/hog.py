@@ -6,8 +6,7 @@ Usage, beside a test run in another shell::
     .venv/bin/python -m tests.utils.hog --procs 16 --seconds 600 &
     .venv/bin/python -m pytest -q -p no:cacheprovider tests/...
 
-The tests must pass with it: they never assume an idle machine (see the README's
-"Tests on a busy machine").  ``--procs`` is bounded to 64 and ``--seconds`` to one hour, so
+The tests must pass with it: they never assume an idle machine (``docs/testing.md``).  ``--procs`` is bounded to 64 and ``--seconds`` to one hour, so
 a forgotten hog stops on its own.
 """
 
