@@ -41,6 +41,7 @@ import functools
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import timedelta
 from typing import Any
@@ -485,7 +486,8 @@ def _belt_coordinate(ctx: _Ctx, mask: NDArray[np.bool_], T_cam: NDArray[np.float
 
 async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg: NDArray[np.uint8],
                 durations: dict[str, float], *, tracker: Any = None,
-                waiting: Waiting | None = None) -> Found | None:  # fmt: skip
+                waiting: Waiting | None = None,
+                clock: Callable[[], float] = time.monotonic) -> Found | None:  # fmt: skip
     """The top-view frame of a part at the station (:class:`Found`), or None when
     ``waiting.stopped()`` ended the wait.
 
@@ -494,10 +496,11 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
     the part inspected last by its belt coordinate.  Constant speed: :class:`Approach`.
     While nothing is there, the wait is reported and never counted as an inspection: the
     stage times of a search that had to wait start when the part came.  :class:`NoObject`
-    when ``opts.wait_s`` passes first (unless ``waiting.forever``)."""
+    when ``opts.wait_s`` passes first (unless ``waiting.forever``), measured on
+    ``clock`` (seconds)."""
     w = waiting or Waiting()
     cell = ctx.rt.cell
-    deadline = None if w.forever else time.monotonic() + opts.wait_s
+    deadline = None if w.forever else clock() + opts.wait_s
     last = None
     last_t = 0.0
     approach = Approach(start_m=_belt(ctx.rt)[2])
@@ -555,7 +558,7 @@ async def _find(ctx: _Ctx, opts: InspectOptions, q_top: NDArray[np.float64], bg:
             if msg != said and w.report is not None:
                 w.report(msg)
             said = msg
-        if deadline is not None and time.monotonic() >= deadline:
+        if deadline is not None and clock() >= deadline:
             raise NoObject(f"no object came to the station within {opts.wait_s:g} s")
         if mode == "continuous":
             frame = await _next_frame(cell, frame)

@@ -119,7 +119,9 @@ def _find(belt, cell: _Cell):
     ctx = _ctx(belt, cell)
     opts = service.InspectOptions(wait_s=2.0)
     still = _render(0.0)
-    found = asyncio.run(service._find(ctx, opts, Q, still, {}))
+    # The wait is measured on the synthetic cell's own clock (0.1 s a frame), not the
+    # wall clock: a loaded machine segments each frame slower, the belt moves no faster.
+    found = asyncio.run(service._find(ctx, opts, Q, still, {}, clock=lambda: cell.t))
     return found.frame, found.travel_m, found.bg
 
 

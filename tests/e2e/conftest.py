@@ -70,7 +70,9 @@ class Server:
         return time.monotonic() - t0
 
 
-def start_server(tmp_path: Path, *, ready_s: float = 90.0, **extra_env: str) -> Server:
+def start_server(tmp_path: Path, *, ready_s: float = 300.0, **extra_env: str) -> Server:
+    """``visioncell serve`` on free ports; ``ready_s`` only bounds a hang (a loaded machine
+    takes long to start it)."""
     http_port, viser_port = free_port(), free_port()
     env = {
         **os.environ,
