@@ -108,13 +108,17 @@ async def test_estop_holds_at_once_and_refuses_moves_until_reset(
     task = asyncio.create_task(driver.move(traj))
     await asyncio.sleep(0.1)
     await driver.estop()
-    report = await asyncio.wait_for(task, 1.0)
+    report = await asyncio.wait_for(task, 30.0)  # bounds a hang only: it ends with the stop
     assert report.reason == "estop" and not report.completed
     assert driver.state.estopped
     with pytest.raises(RobotBusy, match="emergency stop"):
         await driver.move(plan_joint_move(engine.arm_state().q, CFG["top"]))
-    await asyncio.sleep(0.3)
-    assert np.abs(engine.arm_state().qd).max() < 1e-2  # braked
+    # Braked: the joints come to rest under the hold (however slowly a loaded machine
+    # steps the simulation), and stay held.
+    deadline = time.monotonic() + 30.0
+    while np.abs(engine.arm_state().qd).max() >= 1e-2:
+        assert time.monotonic() < deadline, "the arm did not brake under the E-STOP hold"
+        await asyncio.sleep(0.02)
     await driver.reset()
     assert not driver.state.estopped
     report = await driver.move(plan_joint_move(engine.arm_state().q, ASEA.q_home))
