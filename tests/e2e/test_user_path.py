@@ -324,11 +324,28 @@ def test_the_same_through_the_cli(cell, token, auth):
     r = _cli(cell, "models", "add", CLI_PART, "--kind", "3d", timeout=300)
     assert r.stdout.strip().splitlines()[-1].isdigit(), r.stdout
 
-    # The stored empty-station backgrounds of the console's teach; the part at the station.
+    # As the README says: the first teach grabs the empty station's backgrounds and then
+    # waits for the object, which the user puts there when the command says so.
     _clear_belt(cell, auth)
-    _put(cell, auth, CLI_PART, _station_m(cell, auth))
-    r = _cli(cell, "models", "teach", CLI_PART, "--background", "stored", *url)
-    assert "Traceback" not in r.stderr, r.stderr
+    cmd = [sys.executable, "-m", "backend.cli", "models", "teach", CLI_PART, "--wait", "600", *url]
+    err_log = cell.log.with_name("cli-teach.err")
+    placed = False
+    with (
+        err_log.open("w") as err_file,
+        subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stderr=err_file, text=True, env=cell.env
+        ) as proc,
+    ):
+        out: list[str] = []
+        for line in proc.stdout:  # the test's timeout bounds a hang
+            out.append(line)
+            if "waiting for an object" in line and not placed:
+                _put(cell, auth, CLI_PART, _station_m(cell, auth))
+                placed = True
+        code = proc.wait()
+    err = err_log.read_text()
+    assert code == 0, ("".join(out), err)
+    assert placed and "Traceback" not in err, ("".join(out), err)
     m = next(m for m in _get(cell, auth, "/models?limit=100")["data"] if m["name"] == CLI_PART)
     assert m["views"] > 0 and m["height_m"] is not None, m
 
