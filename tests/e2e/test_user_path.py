@@ -149,7 +149,14 @@ def _teach_in_wizard(page, name: str, kind: str) -> dict:
     page.fill("#new-model-name", name)
     page.select_option("#new-model-kind", kind)
     page.click("#new-model")
-    page.wait_for_selector(f'#models-table tr[data-name="{name}"].selected')
+    # The user picks the new model's row (the list may still be refreshing after a teach).
+    row = f'#models-table tr[data-name="{name}"]'
+    page.wait_for_selector(row)
+    page.click(row)
+    page.wait_for_function(
+        f"() => document.querySelector('#model-title').textContent.startsWith('{name} (')"
+    )
+    page.wait_for_selector(f"{row}.selected")
     page.wait_for_selector("#sim-clear:not([hidden])")
     page.fill("#teach-rounds", str(ROUNDS))
     page.dispatch_event("#teach-rounds", "change")
