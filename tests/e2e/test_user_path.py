@@ -1,0 +1,380 @@
+"""The operator's path, end to end, with only what a new user has.
+
+``visioncell serve`` runs as a process on the simulated cell with a fresh database; the
+token is the one it prints at start-up (read from its output, as a user copies it).  In
+headless Chromium the Models page's wizard creates and teaches a 3D part and a wheel, the
+Inspection page inspects once and then runs a sorted run of objects the test puts on the
+belt through the simulator's REST controls (as a user of the demo does): each taught part
+must land in its own bin and the untrained one in the reject bin, as the Inspection page,
+the Reports drill-down and the CSV export all say, with durations that match the wall
+time.  Then the same through the CLI as a subprocess (``models add``, ``models teach``,
+``inspect once``, ``inspect run --sort --count N``, ``report``).
+
+Nothing is set up behind the product's back: no catalogue geometry, no database access, no
+benchmark helper.  The simulator's truth is read only to check where objects landed.
+The tests of this module run in order and share one server.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import re
+import subprocess
+import sys
+import time
+from datetime import datetime
+from pathlib import Path
+
+import httpx
+import pytest
+
+from tests.e2e.conftest import start_server
+
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
+
+VIEWPORT = {"width": 1280, "height": 800}
+PART = "gear-housing"  # a 3D part: top and side views
+WHEEL = "wheel-7spoke-curved"  # a wheel: top views
+UNTRAINED = "oil-filter"  # never taught: must go to the reject bin
+CLI_PART = "junction-box"  # taught through the CLI
+ROUNDS = 1  # teach rounds per model; the run then places every part at the taught yaw
+YAW_DEG = 0.0
+SPACING_M = 0.5  # between objects on the belt (more than the top view sees of it)
+#: Bounds that only end a hang: the machine may be loaded by other work.
+TEACH_S = 1500.0
+RUN_S = 2400.0
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    s = start_server(
+        tmp_path_factory.mktemp("user-path"),
+        ready_s=600.0,  # MuJoCo and the first renders start slowly on a busy machine
+        VISIONCELL_DRIVER="sim",
+        VISIONCELL_CAMERA="sim",
+        VISIONCELL_SIM_DEMO="false",
+        VISIONCELL_TIME_SCALE="10",
+    )
+    yield s
+    s.stop()
+
+
+@pytest.fixture(scope="module")
+def token(cell) -> str:
+    """The token ``visioncell serve`` printed: the line after '... token (user ...):'."""
+    lines = cell.log.read_text().splitlines()
+    for k, line in enumerate(lines[:-1]):
+        if re.search(r"\btoken \(user '[^']+'", line):
+            assert "engineer token" in line, line  # a loopback demo: one token for the tour
+            return lines[k + 1].strip()
+    raise AssertionError(f"no start-up token in the output of serve:\n{chr(10).join(lines)}")
+
+
+@pytest.fixture(scope="module")
+def auth(token) -> dict[str, str]:
+    return {"Authorization": f"Bearer {token}"}
+
+
+@pytest.fixture(scope="module")
+def page(browser, cell, token):
+    p = browser.new_page(viewport=VIEWPORT, accept_downloads=True)
+    p.goto(cell.base + "/#models")
+    p.fill("#token", token)
+    p.click("#login")
+    p.wait_for_selector("#models-page")
+    yield p
+    p.close()
+
+
+# -- helpers: REST with the printed token, the simulator's controls -------------------------
+def _get(cell, auth, path: str) -> dict:
+    r = httpx.get(f"{cell.base}/api{path}", headers=auth, timeout=60)
+    assert r.status_code == 200, (path, r.status_code, r.text)
+    return r.json()
+
+
+def _station_m(cell, auth) -> float:
+    return float(_get(cell, auth, "/sim/conveyor")["conveyor"]["station_s_m"])
+
+
+def _clear_belt(cell, auth) -> None:
+    """Stop the belt in index mode and take every object off it (the wizard's 'clear')."""
+    r = httpx.post(f"{cell.base}/api/sim/conveyor", headers=auth, timeout=60,
+                   json={"running": False, "mode": "index", "dwell_s": None})  # fmt: skip
+    assert r.status_code == 200, r.text
+    for o in _get(cell, auth, "/sim/objects?limit=100")["data"]:
+        r = httpx.delete(f"{cell.base}/api/sim/objects/{o['id']}", headers=auth, timeout=60)
+        assert r.status_code == 204, r.text
+
+
+def _put(cell, auth, name: str, along_m: float) -> int:
+    r = httpx.post(f"{cell.base}/api/sim/objects", headers=auth, timeout=60,
+                   json={"name": name, "position_along_belt_m": along_m, "lateral_m": 0.0,
+                         "yaw_rad": YAW_DEG * 3.141592653589793 / 180})  # fmt: skip
+    assert r.status_code == 201, r.text
+    return int(r.json()["object"]["id"])
+
+
+def _rows(cell, auth) -> list[dict]:
+    return sorted(_get(cell, auth, "/inspections?limit=100")["data"], key=lambda r: r["id"])
+
+
+def _when(text: str) -> float:
+    t = datetime.fromisoformat(text.replace("Z", "+00:00"))
+    if t.tzinfo is None:
+        from datetime import UTC
+
+        t = t.replace(tzinfo=UTC)
+    return t.timestamp()
+
+
+def _bin_of(cell, auth, model: str) -> str:
+    """The bin the cell sorts this model's part into (its part's own bin)."""
+    m = next(m for m in _get(cell, auth, "/models?limit=100")["data"] if m["name"] == model)
+    return f"bin-{m['part']}"
+
+
+def _cli(cell, *args: str, timeout: float = TEACH_S) -> subprocess.CompletedProcess[str]:
+    r = subprocess.run([sys.executable, "-m", "backend.cli", *args], capture_output=True,
+                       text=True, env=cell.env, timeout=timeout)  # fmt: skip
+    assert r.returncode == 0, (args, r.returncode, r.stdout, r.stderr)
+    return r
+
+
+# -- 1. the Models page: create and teach a 3D part and a wheel in the wizard ----------------
+def _teach_in_wizard(page, name: str, kind: str) -> dict:
+    page.goto(page.url.split("#")[0] + "#models")
+    page.wait_for_selector("#models-page")
+    page.fill("#new-model-name", name)
+    page.select_option("#new-model-kind", kind)
+    page.click("#new-model")
+    # The user picks the new model's row (the list may still be refreshing after a teach).
+    row = f'#models-table tr[data-name="{name}"]'
+    page.wait_for_selector(row)
+    page.click(row)
+    page.wait_for_function(
+        f"() => document.querySelector('#model-title').textContent.startsWith('{name} (')"
+    )
+    page.wait_for_selector(f"{row}.selected")
+    page.wait_for_selector("#sim-clear:not([hidden])")
+    page.fill("#teach-rounds", str(ROUNDS))
+    page.dispatch_event("#teach-rounds", "change")
+    page.select_option("#teach-rolls", "one")
+    page.wait_for_function(
+        f"() => document.querySelector('#teach-start').textContent.includes('of {ROUNDS}')"
+    )
+    page.click("#sim-clear")
+    page.wait_for_function(
+        "() => document.querySelector('#teach-message').textContent.includes('station cleared')"
+    )
+    page.fill("#place-yaw", str(int(YAW_DEG)))
+    result: dict = {}
+    for k in range(ROUNDS):
+        if k == 0:  # the first round grabs the empty station, then waits for the object
+            page.click("#teach-start")
+            page.wait_for_selector("#teach-place.attention", timeout=TEACH_S * 1000)
+            page.select_option("#place-name", name)
+            page.click("#place-object")
+        else:  # later rounds: the wizard turns the object to the round's yaw, then teaches
+            page.click("#place-object")
+            page.wait_for_function(
+                "() => document.querySelector('#teach-message').textContent.includes('placed')"
+            )
+            page.click("#teach-start")
+        page.wait_for_function(
+            "() => /teach job \\S+: (done|failed|cancelled|interrupted)/"
+            ".test(document.querySelector('#teach-state').textContent)",
+            timeout=TEACH_S * 1000,
+        )
+        state = page.text_content("#teach-state")
+        assert state.endswith("done"), (state, page.text_content("#teach-message"))
+        result["text"] = page.text_content("#teach-result")
+    page.wait_for_function(
+        "() => document.querySelector('#teach-round').textContent.startsWith('All ')"
+    )
+    return result
+
+
+@pytest.mark.timeout(3600)  # a bound on a hang only: slow on a loaded machine
+def test_teach_a_part_and_a_wheel_in_the_wizard(cell, auth, page):
+    assert _get(cell, auth, "/models")["count"] == 0  # a fresh database
+    _teach_in_wizard(page, PART, "3d")
+    height = page.text_content("#teach-height")
+    assert "Part height" in height and "not known" not in height, height
+    out = _teach_in_wizard(page, WHEEL, "2d")
+    thr = re.search(r"Threshold in force: ([0-9.]+)", out["text"])
+    assert thr and float(thr.group(1)) > 0.0, out["text"]
+    models = {m["name"]: m for m in _get(cell, auth, "/models?limit=100")["data"]}
+    assert set(models) == {PART, WHEEL}
+    for m in models.values():
+        assert m["views"] > 0 and m["height_m"] is not None, m
+        assert m["geometry_source"] == "measured", m
+
+
+# -- 2. the Inspection page: inspect once -------------------------------------------------
+@pytest.mark.timeout(1800)  # a bound on a hang only: slow on a loaded machine
+def test_inspect_once_from_the_inspection_page(cell, auth, page):
+    # The wheel taught last is still at the station.
+    page.goto(page.url.split("#")[0] + "#inspection")
+    page.wait_for_selector("#inspection-page")
+    page.click("#insp-once")
+    page.wait_for_selector("#filmstrip .frame", timeout=TEACH_S * 1000)
+    rows = _rows(cell, auth)
+    assert len(rows) == 1, rows
+    assert rows[0]["decision"] == "recognized" and rows[0]["model"] == WHEEL, rows[0]["reason"]
+    page.wait_for_function(
+        f"() => document.querySelector('#live-label').textContent.startsWith('#{rows[0]['id']} ')"
+    )
+    assert WHEEL in page.text_content("#live-label")
+
+
+# -- 3. a continuous sorted run of three objects ------------------------------------------
+@pytest.mark.timeout(3600)  # a bound on a hang only: slow on a loaded machine
+def test_sorted_run_puts_each_part_in_its_bin(cell, auth, page):
+    _clear_belt(cell, auth)
+    station = _station_m(cell, auth)
+    order = [PART, WHEEL, UNTRAINED]
+    for k, name in enumerate(order):  # upstream of the station, in this order
+        _put(cell, auth, name, station - 0.25 - SPACING_M * k)
+    before = {r["id"] for r in _rows(cell, auth)}
+    page.goto(page.url.split("#")[0] + "#inspection")
+    page.wait_for_selector("#inspection-page")
+    page.check("#insp-sort")
+    page.fill("#insp-count", str(len(order)))
+    page.click("#insp-run")
+    page.wait_for_selector("#belt-start:not([disabled])")
+    page.click("#belt-start")
+    # Each new row's first sighting bounds its wall time (polled often; the bound ends a hang).
+    seen: dict[int, float] = {}
+    t0 = time.monotonic()
+    while len(seen) < len(order):
+        assert time.monotonic() - t0 < RUN_S, f"the run stored {len(seen)} rows in {RUN_S} s"
+        for r in _rows(cell, auth):
+            if r["id"] not in before and r["id"] not in seen:
+                seen[r["id"]] = time.time()
+        time.sleep(0.5)
+    rows = [r for r in _rows(cell, auth) if r["id"] in seen]
+    assert [r["model"] for r in rows] == [PART, WHEEL, None], [
+        (r["decision"], r["model"], r["reason"]) for r in rows
+    ]
+    assert [r["decision"] for r in rows] == ["recognized", "recognized", "unknown"]
+    want = [_bin_of(cell, auth, PART), _bin_of(cell, auth, WHEEL), "reject"]
+    assert len(set(want)) == 3, want
+    for r, b in zip(rows, want, strict=True):
+        assert r["pick_outcome"]["bin"] == b, (r["id"], r["pick_outcome"], r["pick"])
+        assert r["pick_outcome"]["outcome"] == ("rejected" if b == "reject" else "placed"), r
+        # The stored duration is the inspection's own wall time: its start and end as
+        # stored, the end no later than the test first saw the row (polled every 0.5 s; a
+        # loaded machine may take seconds to answer).
+        start, end = _when(r["started_at"]), _when(r["finished_at"])
+        wall = end - start
+        assert abs(r["duration_s"] - wall) <= max(2.0, 0.05 * wall), (
+            r["id"],
+            r["duration_s"],
+            wall,
+        )
+        assert -1.0 <= seen[r["id"]] - end <= 60.0, (r["id"], seen[r["id"]], end)
+    # The simulator's truth, read only to check: each row is the object put there, in
+    # belt order, and every one of them was picked off the belt.
+    assert [(r["truth"] or {}).get("name") for r in rows] == order, [r["truth"] for r in rows]
+    assert _get(cell, auth, "/sim/objects?limit=100")["count"] == 0
+
+    # The Inspection page: each row's bin and pick outcome, from the filmstrip.
+    page.wait_for_function(
+        f"() => document.querySelectorAll('#filmstrip .frame').length >= {len(seen) + 1}",
+        timeout=120_000,
+    )
+    for r, b in zip(rows, want, strict=True):
+        page.click(f'#filmstrip .frame[data-id="{r["id"]}"]')
+        page.wait_for_function(
+            f"() => document.querySelector('#live-label').textContent.startsWith('#{r['id']} ')"
+        )
+        assert page.get_attribute("#live-pick", "data-bin") == b
+        assert page.get_attribute("#live-pick", "data-outcome") == r["pick_outcome"]["outcome"]
+        assert b in page.text_content("#live-pick")
+
+    # The Reports page: the table's bin column and the drill-down of each row.
+    page.goto(page.url.split("#")[0] + "#reports")
+    page.wait_for_selector(f'#rep-table tbody tr[data-id="{rows[-1]["id"]}"]')
+    for r, b in zip(rows, want, strict=True):
+        tr = f'#rep-table tbody tr[data-id="{r["id"]}"]'
+        assert page.text_content(f"{tr} .rep-bin").strip() == b
+        page.click(tr)
+        page.wait_for_function(
+            f"() => document.querySelector('#rep-detail-title').textContent"
+            f".startsWith('Inspection #{r['id']}:')"
+        )
+        assert page.get_attribute("#rep-detail-pick", "data-bin") == b
+        assert (
+            page.get_attribute("#rep-detail-pick", "data-outcome") == r["pick_outcome"]["outcome"]
+        )
+        shown = re.search(r"([0-9.]+) s$", page.text_content("#rep-detail-reason").strip())
+        assert shown and abs(float(shown.group(1)) - r["duration_s"]) < 0.011, shown
+
+    # The CSV export (downloaded from the page): bins, outcomes and durations.
+    with page.expect_download() as dl:
+        page.click("#rep-export")
+    table = {
+        int(t["id"]): t for t in csv.DictReader(io.StringIO(Path(dl.value.path()).read_text()))
+    }
+    for r, b in zip(rows, want, strict=True):
+        got = table[r["id"]]
+        assert (got["bin"], got["pick"]) == (b, r["pick_outcome"]["outcome"]), got
+        assert abs(float(got["duration_s"]) - r["duration_s"]) < 1e-3, got
+
+
+# -- 4. the same through the CLI ----------------------------------------------------------
+@pytest.mark.timeout(3600)  # a bound on a hang only: slow on a loaded machine
+def test_the_same_through_the_cli(cell, token, auth):
+    url = ["--token", token, "--url", cell.base]
+    r = _cli(cell, "models", "add", CLI_PART, "--kind", "3d", timeout=300)
+    assert r.stdout.strip().splitlines()[-1].isdigit(), r.stdout
+
+    # As the README says: the first teach grabs the empty station's backgrounds and then
+    # waits for the object, which the user puts there when the command says so.
+    _clear_belt(cell, auth)
+    cmd = [sys.executable, "-m", "backend.cli", "models", "teach", CLI_PART, "--wait", "600", *url]
+    err_log = cell.log.with_name("cli-teach.err")
+    placed = False
+    with (
+        err_log.open("w") as err_file,
+        subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stderr=err_file, text=True, env=cell.env
+        ) as proc,
+    ):
+        out: list[str] = []
+        for line in proc.stdout:  # the test's timeout bounds a hang
+            out.append(line)
+            if "waiting for an object" in line and not placed:
+                _put(cell, auth, CLI_PART, _station_m(cell, auth))
+                placed = True
+        code = proc.wait()
+    err = err_log.read_text()
+    assert code == 0, ("".join(out), err)
+    assert placed and "Traceback" not in err, ("".join(out), err)
+    m = next(m for m in _get(cell, auth, "/models?limit=100")["data"] if m["name"] == CLI_PART)
+    assert m["views"] > 0 and m["height_m"] is not None, m
+
+    r = _cli(cell, "inspect", "once", *url)
+    last = r.stdout.strip().splitlines()[-1]
+    assert re.match(rf"#\d+ recognized {re.escape(CLI_PART)} ", last), r.stdout
+
+    _clear_belt(cell, auth)
+    station = _station_m(cell, auth)
+    _put(cell, auth, CLI_PART, station - 0.25)
+    _put(cell, auth, UNTRAINED, station - 0.25 - SPACING_M)
+    r = httpx.post(f"{cell.base}/api/sim/conveyor", headers=auth, timeout=60,
+                   json={"running": True})  # fmt: skip
+    assert r.status_code == 200, r.text
+    r = _cli(cell, "inspect", "run", "--sort", "--count", "2", *url, timeout=RUN_S)
+    lines = [ln for ln in r.stdout.splitlines() if re.match(r"#\d+ ", ln)]
+    assert len(lines) == 2, r.stdout
+    assert re.match(rf"#\d+ recognized {re.escape(CLI_PART)} ", lines[0]), r.stdout
+    assert re.match(r"#\d+ unknown ", lines[1]), r.stdout
+    rows = _rows(cell, auth)[-2:]
+    assert [r_["pick_outcome"]["bin"] for r_ in rows] == [_bin_of(cell, auth, CLI_PART), "reject"]
+
+    r = _cli(cell, "report", timeout=300)
+    total = len(_rows(cell, auth))
+    assert re.search(rf"\binspections\b[^\n0-9]*\b{total}\b", r.stdout), r.stdout
