@@ -47,10 +47,15 @@ async function call(msgSel, method, path, body) {
 }
 
 // -- the model list ---------------------------------------------------------------------------
+// Each load is numbered: only the latest one's answer is shown, so a slow earlier load
+// (e.g. after a teach) cannot bring back a list without the model just created.
+let loads = 0;
+
 async function loadModels() {
   const gen = generation;
+  const seq = ++loads;
   const page = await call("#models-message", "GET", "/models?limit=1000");
-  if (!page || gen !== generation) return;
+  if (!page || gen !== generation || seq !== loads) return;
   models = page.data;
   const body = q("#models-table tbody");
   body.replaceChildren(...models.map((m) => el("tr", {
