@@ -194,6 +194,8 @@ class ThresholdKeeper:
                 await self._quiet()
                 self._pending = False
                 self._superseded = False
+                if len(self.live) == 0:  # nothing trained (a fresh cell): nothing to choose
+                    continue
                 job = self.jobs.start("threshold", self._body, params={"trigger": "change"})
                 self._job = job
                 assert job.task is not None
