@@ -27,7 +27,8 @@ function listen(target, type, fn) {
 
 function layout() {
   const canStore = ctx.can("operator");
-  return el("section", { className: "panel", id: "recognise-page" },
+  return el("section", { className: "page", id: "recognise-page" },
+    el("div", { className: "card" },
     el("h2", {}, "Recognise an image"),
     el("p", { className: "small" },
       "Drop a PNG or JPEG image here or pick one: the cell compares it with every trained view of the viewpoint."),
@@ -52,12 +53,13 @@ function layout() {
           el("thead", {}, el("tr", {}, el("th", {}, "model"), el("th", {}, "score"),
             el("th", {}, "threshold"), el("th", {}, "passes"))),
           el("tbody", {})),
-        el("p", { id: "recognise-times", className: "small" }))),
-    el("h2", {}, "Automatic threshold"),
-    el("p", { id: "threshold-state", className: "small" }),
-    el("p", { id: "threshold-rule" }),
-    el("p", { id: "threshold-figures", className: "small" }),
-    el("ul", { id: "threshold-advice" }));
+        el("p", { id: "recognise-times", className: "small" })))),
+    el("div", { className: "card" },
+      el("h2", {}, "Automatic threshold"),
+      el("p", { id: "threshold-state", className: "small" }),
+      el("p", { id: "threshold-rule" }),
+      el("p", { id: "threshold-figures", className: "small" }),
+      el("ul", { id: "threshold-advice" })));
 }
 
 function file() {
