@@ -463,7 +463,10 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgDatabase | None,
                     if kind == "baseline":
                         progress(f"baseline {k + 1}/{n}")
                         continue
-                    m0 = audit.commands
+                    # The e-stop lands inside an inspection (past its search for the part,
+                    # which stores nothing when cut short): after the inspection's second
+                    # motion (the top view's, then a side view's or the pick's).
+                    m0 = audit.commands + (1 if kind == "estop" else 0)
                     await wait_until(lambda m0=m0: audit.commands > m0, 120,  # noqa: B023 (awaited in this iteration)
                                      f"{kind}: the next inspection to move the arm")  # fmt: skip
                     await asyncio.sleep(float(np.random.default_rng(k).uniform(0.05, 0.6)))

@@ -11,7 +11,7 @@ from datetime import UTC, datetime, timedelta
 from typing import Any
 
 import pytest
-from sqlalchemy import delete, func, insert, select
+from sqlalchemy import MetaData, Table, delete, func, insert, select
 
 from backend.db.migrate import upgrade
 from backend.db.models import Cell, Inspection, InspectionInProgress, InspectionStage, ReportBlock
@@ -193,15 +193,23 @@ def test_a_failed_write_leaves_the_blocks_unchanged_postgres(postgres_url, monke
     asyncio.run(_failed_write(postgres_url, monkeypatch))
 
 
+def _table_at_0009() -> Table:
+    """The inspections table as revision 0009 had it (the columns added later left out)."""
+    later = {"source"}
+    cols = [c._copy() for c in Inspection.__table__.c if c.name not in later]
+    return Table("inspections", MetaData(), *cols)
+
+
 async def _rows_without_blocks(url: str) -> None:
     """Inspections and stage rows as revision 0009 stored them (no report blocks)."""
     db = Database(url)
     try:
         ids = await ensure_cells(db)
         rows = list(generate_rows(300, ids, seed=5, start=START, period_s=200.0))
+        old = _table_at_0009()
         async with db.session() as s:
             got = (await s.scalars(
-                insert(Inspection).returning(Inspection.id, sort_by_parameter_order=True), rows
+                insert(old).returning(old.c.id, sort_by_parameter_order=True), rows
             )).all()  # fmt: skip
             await s.execute(insert(InspectionStage),
                             [st for i, r in zip(got, rows, strict=True) for st in stage_rows(i, r)])  # fmt: skip

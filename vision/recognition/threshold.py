@@ -302,9 +302,10 @@ def choose_threshold(
     models = index.models
     negs = list(negatives or [])
     if not models or (len(models) < 2 and not negs):
+        have = f"only {models[0]}" if models else "none"
         raise ValueError(
             f"threshold selection needs at least two models, or one model and negative images "
-            f"(the empty belt, other things in the scene); the index has {models}"
+            f"(the empty belt, other things in the scene); the index has {have}"
         )
     if len(negs) > MAX_NEGATIVES:
         raise ValueError(f"at most {MAX_NEGATIVES} negative images, got {len(negs)}")
