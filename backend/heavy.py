@@ -66,7 +66,6 @@ class Busy(VisionCellError):
     """Every job slot stayed taken for the whole admission wait."""
 
     code = "busy"
-    http_status = 503
 
     def __init__(self, detail: str, *, retry_after_s: int) -> None:
         super().__init__(detail)
@@ -78,14 +77,12 @@ class ClientGone(VisionCellError):
     """The client that asked for the work has disconnected; nobody reads the answer."""
 
     code = "client_closed_request"
-    http_status = 499
 
 
 class PixelBudgetExceeded(VisionCellError):
     """A request's images together have more pixels than one job may decode."""
 
     code = "too_large"
-    http_status = 413
 
 
 def _mark_retrieved(fut: asyncio.Future[Any]) -> None:

@@ -17,7 +17,7 @@ and the true pose perturbed by up to ``--error-mm`` in position and ``--error-de
 (wall, median), cycle time (simulated seconds of motion, median), largest joint tracking
 error while a part was on the cup.
 
-Viewpoints: :func:`backend.inspection.viewpoints.plan_viewpoints` over a grid of object
+Viewpoints: :func:`robot.viewpoints.plan_viewpoints` over a grid of object
 positions across the belt (the true camera mounting), the share of views reached nominally,
 replaced, or unreachable, the median planning time and the largest deviation.
 
@@ -38,12 +38,12 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from backend.inspection.viewpoints import plan_viewpoints
 from robot.errors import Unreachable
 from robot.pick import execute_pick_place, execute_search_pick_place, plan_pick_place
 from robot.sim import CATALOGUE, SimDriver, SimEngine, suction_point
 from robot.sim.camera import DEFAULT_T_EE_CAM
 from robot.sim.obstacles import collision_world
+from robot.viewpoints import plan_viewpoints
 
 out = Console()
 err = Console(stderr=True)

@@ -6,7 +6,7 @@
                                               # folder (DEFAULT_RUN), then replayed
 
 A campaign of ``benchmarks.inspection`` takes minutes per part, most of it rendering and
-recognition; the pose fit (:func:`backend.inspection.pose.estimate_pose_views`) takes tens of
+recognition; the pose fit (:func:`vision.pose.estimate_pose_views`) takes tens of
 milliseconds.  ``record`` runs ``benchmarks.inspection`` with the given arguments and saves
 every call of that fit with what it was given (the verified trained top views: homography,
 inlier correspondences, camera poses, regions, triangulated heights; the current camera
@@ -115,8 +115,8 @@ def save_record(
 def load_record(path: Path) -> dict[str, Any]:
     """A record as the fit's arguments: ``matches``, ``kw``, ``silhouettes``, ``truth``
     (name and ``T``, or None) and the recorded answer's ``result_T`` (None when it failed)."""
-    from backend.inspection.pose import SilhouetteView, ViewMatch, _const
     from vision.camera import PinholeCamera
+    from vision.pose import SilhouetteView, ViewMatch, fixed_mask
 
     with np.load(path, allow_pickle=False) as z:
         meta = json.loads(str(z["meta"]))
@@ -130,7 +130,7 @@ def load_record(path: Path) -> dict[str, Any]:
             matches.append(ViewMatch(z[p + "H"], z[p + "inlier_xy"], z[p + "T_cam"],
                                      z[p + "T_obj"], _unpack(z, p + "mask"), shape, heights))  # fmt: skip
         sil = [
-            SilhouetteView(z[f"s{i}_T_cam"], z[f"s{i}_T_obj"], _const(_unpack(z, f"s{i}_mask")))
+            SilhouetteView(z[f"s{i}_T_cam"], z[f"s{i}_T_obj"], fixed_mask(_unpack(z, f"s{i}_mask")))
             for i in range(int(meta["silhouettes"]))
         ]
         kw = {
@@ -190,9 +190,9 @@ def replay(
     in_dir: Path, parts: tuple[str, ...] = (), limit: int = MAX_REPLAY
 ) -> list[dict[str, Any]]:
     """Fit every record of ``in_dir`` again; one row per record with a truth."""
-    from backend.inspection.pose import PoseFailed, estimate_pose_views
     from benchmarks.inspection import SYMMETRIC, pose_errors
     from robot.sim.catalogue import CATALOGUE
+    from vision.pose import PoseFailed, estimate_pose_views
 
     files = sorted(in_dir.glob("*.npz"))[:limit]
     rows: list[dict[str, Any]] = []

@@ -13,7 +13,7 @@ evenly over the whole turn; ``--teach-spread half``: evenly over a half turn;
 two untrained ones) is put back at random yaws with a few mm of jitter and inspected as
 :func:`backend.inspection.service.inspect_object` does: the top view segmented, side views
 planned at the station point, each side query matched inside the image of the space the
-object found from the top can occupy (:func:`backend.inspection.roi.side_roi`, the
+object found from the top can occupy (:func:`vision.segmentation.roi.side_roi`, the
 service's function, up to the tallest taught model's height; ``--no-roi``: the whole frame,
 as before), decided by :func:`vision.recognition.recognise_views` with the ``two-views``
 policy.  The side queries' feature counts and the regions' share of the frame are printed.
@@ -127,15 +127,15 @@ def run(
 
     headless_mujoco()
     from backend.calibration.autoplan import NOMINAL_T_EE_CAM
-    from backend.inspection.roi import height_bound, side_query, side_roi
-    from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
     from backend.recognition.index import FEATURE_OPTIONS
     from backend.recognition.teach import TOP_ROLLS_RAD, plan_shots, teach_yaws_rad
     from robot.kinematics import T_base_ee
     from robot.sim import CATALOGUE, SimEngine
     from robot.sim.imaging import capture
+    from robot.viewpoints import VIEW_NAMES, plan_viewpoints
     from vision.recognition import ViewIndex, choose_threshold, recognise_views
     from vision.recognition.views import colour_support
+    from vision.segmentation.roi import height_bound, side_query, side_roi
 
     rng = np.random.default_rng(seed)
     engine = SimEngine()

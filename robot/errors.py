@@ -27,7 +27,6 @@ class RobotError(VisionCellError):
     """Base of errors raised by the arm's kinematics, planning and drivers."""
 
     code = "robot_error"
-    http_status = 409
 
 
 class Unreachable(RobotError, ValueError):
@@ -38,7 +37,6 @@ class Unreachable(RobotError, ValueError):
     """
 
     code = "unreachable"
-    http_status = 422
     reason = "unreachable"
 
 
@@ -95,7 +93,6 @@ class JointLimitError(RobotError, ValueError):
     """
 
     code = "joint_limit"
-    http_status = 422
 
     def __init__(self, joint: int, value_rad: float, limits_rad: tuple[float, float]) -> None:
         import math
@@ -125,7 +122,6 @@ class TrajectoryTooLong(RobotError, ValueError):
     """
 
     code = "trajectory_too_long"
-    http_status = 422
 
     def __init__(self, detail: str, *, duration_s: float, samples: int) -> None:
         super().__init__(detail)
@@ -137,14 +133,12 @@ class DriverError(RobotError):
     """The robot driver cannot carry out a command (disconnected, timed out, faulted)."""
 
     code = "driver_error"
-    http_status = 503
 
 
 class RobotBusy(RobotError):
     """Another job holds the motion lock, or the arm is emergency-stopped."""
 
     code = "robot_busy"
-    http_status = 409
 
 
 class LinkDown(DriverError):
@@ -213,4 +207,3 @@ class SimError(RobotError):
     """The simulated cell cannot do what was asked (no free slot, unknown object or board)."""
 
     code = "sim_error"
-    http_status = 409

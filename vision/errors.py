@@ -3,7 +3,8 @@
 Every domain error raised by ``vision``, ``robot`` or ``backend`` derives from
 :class:`VisionCellError`.  The root lives here because ``vision`` is the one package that
 imports nothing else of ours; ``robot.errors`` subclasses it.  Each class carries a stable
-``code`` (the ``error`` field of the API's JSON body) and the HTTP status the API maps it to.
+``code`` (the ``error`` field of the API's JSON body) and nothing of HTTP: the API's edge
+holds the one table from error classes to HTTP statuses.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ class VisionCellError(Exception):
     """Root of all VisionCell domain errors."""
 
     code: str = "visioncell_error"
-    http_status: int = 400
 
     def __init__(self, detail: str) -> None:
         super().__init__(detail)
@@ -24,35 +24,30 @@ class ImageError(VisionCellError, ValueError):
     """An image has the wrong dtype, shape or content."""
 
     code = "bad_image"
-    http_status = 422
 
 
 class CameraError(VisionCellError):
     """An image source failed (device gone, stream ended, folder empty)."""
 
     code = "camera_error"
-    http_status = 503
 
 
 class StreamEnded(CameraError):
     """A finite source (a video file, a folder replayed without looping) has no more frames."""
 
     code = "stream_ended"
-    http_status = 409
 
 
 class CalibrationError(VisionCellError):
     """A calibration cannot be solved (too few views, no pattern, degenerate motion)."""
 
     code = "calibration_failed"
-    http_status = 422
 
 
 class RecognitionFailed(VisionCellError):
     """Recognition could not decide on an object."""
 
     code = "recognition_failed"
-    http_status = 422
 
 
 class InvalidInput(VisionCellError, ValueError):
@@ -65,21 +60,18 @@ class InvalidInput(VisionCellError, ValueError):
     """
 
     code = "invalid_value"
-    http_status = 422
 
 
 class NotFound(VisionCellError):
     """The thing named by an id or a name does not exist (a row, a job, a light, a plot)."""
 
     code = "not_found"
-    http_status = 404
 
 
 class Conflict(VisionCellError):
     """The request clashes with the current state (a name already taken, a locked resource)."""
 
     code = "conflict"
-    http_status = 409
 
 
 class NothingTrained(Conflict):

@@ -40,7 +40,7 @@ from starlette.routing import BaseRoute, WebSocketRoute
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from backend.api.deps import RoleCheck
-from backend.api.errors import ApiError, database_refusal
+from backend.api.errors import ApiError, database_refusal, status_of
 from vision.errors import VisionCellError
 
 __all__ = [
@@ -300,7 +300,7 @@ class BodyGuard:
         except ApiError as exc:
             return exc.status, exc.code, exc.detail, exc.headers
         except VisionCellError as exc:
-            return exc.http_status, exc.code, exc.detail, None
+            return status_of(exc), exc.code, exc.detail, None
         except Exception as exc:
             refusal = database_refusal(exc)
             if refusal is None:

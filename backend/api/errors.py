@@ -2,8 +2,10 @@
 
 The status comes from the exception's class, never from its message: domain errors
 (:class:`vision.errors.VisionCellError` and subclasses such as ``NotFound``, ``Conflict``,
-``InvalidInput``) carry ``code`` and ``http_status``; :class:`ApiError` carries them for
-the HTTP layer's own refusals (401, 403, 503).  A database that cannot serve the request
+``InvalidInput``) carry a ``code`` and stay free of HTTP; :data:`STATUS_OF_ERROR` is the
+one table from their classes to HTTP statuses (:func:`status_of`: a class not listed takes
+its nearest listed base's).  :class:`ApiError` carries code and status for the HTTP layer's
+own refusals (401, 403, 503).  A database that cannot serve the request
 now is a 503 with ``Retry-After`` (:func:`database_refusal`): every pooled connection busy
 (SQLAlchemy's pool ``TimeoutError``, :class:`~backend.db.session.DatabaseBusy`), or the
 server away (PEP 249 ``OperationalError`` / ``InterfaceError``: refused or lost connection,
@@ -22,16 +24,48 @@ from fastapi.responses import JSONResponse
 from sqlalchemy import exc as sa_exc
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from backend.calibration.sessions import OtherCell
+from backend.cell.errors import MoveAborted, PathBlocked
 from backend.db.session import DatabaseBusy
-from vision.errors import VisionCellError
+from backend.heavy import Busy, ClientGone, PixelBudgetExceeded
+from backend.inspection.service import CarriedAway, NoObject
+from backend.recognition.images import ImageTooLarge, UnsupportedImage
+from backend.recognition.index import StaleFeatures
+from backend.recognition.segment import SegmentationFailed
+from backend.recognition.teach import TeachTimeout
+from robot.errors import (
+    DriverError,
+    JointLimitError,
+    RobotBusy,
+    RobotError,
+    SimError,
+    TrajectoryTooLong,
+    Unreachable,
+)
+from vision.errors import (
+    CalibrationError,
+    CameraError,
+    Conflict,
+    ImageError,
+    InvalidInput,
+    NotFound,
+    RecognitionFailed,
+    StreamEnded,
+    VisionCellError,
+)
+from vision.pose import PoseFailed
+from vision.recognition.light import LightChanged
+from vision.recognition.serial import IndexFormatError
 
 __all__ = [
     "BUSY_RETRY_S",
     "DOWN_RETRY_S",
+    "STATUS_OF_ERROR",
     "ApiError",
     "database_refusal",
     "error_body",
     "install_error_handlers",
+    "status_of",
 ]
 
 log = logging.getLogger(__name__)
@@ -49,6 +83,61 @@ _HTTP_CODES = {
     422: "validation_error",
     503: "unavailable",
 }
+
+
+#: The HTTP status of each domain error class.  A class not listed answers with the status
+#: of its nearest listed base in its method resolution order (``NothingTrained`` with
+#: ``Conflict``'s 409), so a new error needs a row only when its status differs.
+STATUS_OF_ERROR: dict[type[VisionCellError], int] = {
+    VisionCellError: 400,
+    # the request's values or files
+    InvalidInput: 422,
+    ImageError: 422,
+    IndexFormatError: 422,
+    ImageTooLarge: 413,
+    PixelBudgetExceeded: 413,
+    UnsupportedImage: 415,
+    NotFound: 404,
+    # the work could not be done with what was given
+    CalibrationError: 422,
+    RecognitionFailed: 422,
+    SegmentationFailed: 422,
+    PoseFailed: 422,
+    Unreachable: 422,
+    JointLimitError: 422,
+    TrajectoryTooLong: 422,
+    PathBlocked: 422,
+    # the cell's state does not allow it now
+    Conflict: 409,
+    OtherCell: 409,
+    RobotError: 409,
+    RobotBusy: 409,
+    MoveAborted: 409,
+    SimError: 409,
+    StreamEnded: 409,
+    LightChanged: 409,
+    StaleFeatures: 409,
+    TeachTimeout: 409,
+    CarriedAway: 409,
+    NoObject: 409,
+    # a device or the server cannot serve it now
+    CameraError: 503,
+    DriverError: 503,
+    Busy: 503,
+    # nobody is left to read the answer (nginx's code)
+    ClientGone: 499,
+}
+
+
+def status_of(error: VisionCellError | type[VisionCellError]) -> int:
+    """The HTTP status a domain error (an instance or a class) is answered with: that of
+    the first class of its method resolution order listed in :data:`STATUS_OF_ERROR`."""
+    cls = error if isinstance(error, type) else type(error)
+    for base in cls.__mro__:
+        status = STATUS_OF_ERROR.get(base)
+        if status is not None:
+            return status
+    raise TypeError(f"{cls.__qualname__} is not a VisionCellError")
 
 
 class ApiError(Exception):
@@ -153,7 +242,7 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(VisionCellError)
     async def _domain_error(_: Request, exc: VisionCellError) -> JSONResponse:
-        return JSONResponse(error_body(exc.code, exc.detail), status_code=exc.http_status)
+        return JSONResponse(error_body(exc.code, exc.detail), status_code=status_of(exc))
 
     @app.exception_handler(RequestValidationError)
     async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:

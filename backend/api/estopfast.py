@@ -24,7 +24,7 @@ from fastapi.requests import HTTPConnection
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from backend.api.deps import known_user, runtime_of
-from backend.api.errors import error_body
+from backend.api.errors import error_body, status_of
 from backend.api.routes.robot import StateOnlyOut
 from vision.errors import VisionCellError
 
@@ -67,7 +67,7 @@ class EStopFastPath:
         try:
             await rt.cell.estop(by=user.name, role=user.role, source="rest")
         except VisionCellError as exc:
-            status, body = exc.http_status, error_body(exc.code, exc.detail)
+            status, body = status_of(exc), error_body(exc.code, exc.detail)
         except Exception as exc:
             log.error("internal error in the E-STOP: %r", exc, exc_info=exc)
             status = 500

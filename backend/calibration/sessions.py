@@ -50,7 +50,6 @@ class OtherCell(Conflict):
     """The row belongs to another cell: this cell may read it, not change it."""
 
     code = "other_cell"
-    http_status = 409
 
 
 def check_own(kind: str, row_id: int, row_cell_id: int, cell_id: int) -> None:

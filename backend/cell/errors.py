@@ -24,7 +24,6 @@ class PathBlocked(RobotError):
     """
 
     code = "path_blocked"
-    http_status = 422
 
     def __init__(self, detail: str, contacts: tuple[Contact, ...] = ()) -> None:
         super().__init__(detail)
@@ -41,7 +40,6 @@ class MoveAborted(RobotError):
     """
 
     code = "move_aborted"
-    http_status = 409
 
     def __init__(self, detail: str, report: MoveReport) -> None:
         super().__init__(detail)

@@ -54,7 +54,17 @@ from sqlalchemy import select
 from backend.cell.events import CellEvent
 from backend.db.models import TrainedView, utcnow
 from backend.inspection import recovery, results
-from backend.inspection.pose import (
+from backend.inspection.waiting import PartTracker, belt_status, conveyor_of, waiting_message
+from backend.recognition import thresholds
+from backend.recognition.images import encode_jpeg
+from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
+from backend.recognition.teach import plan_shots
+from backend.reports.scenes import SceneRecorder
+from robot.errors import Unreachable
+from robot.kinematics import T_base_ee
+from robot.viewpoints import VIEW_NAMES, plan_viewpoints
+from vision.errors import Conflict, InvalidInput, NothingTrained, VisionCellError
+from vision.pose import (
     ObjectPose,
     PoseFailed,
     SilhouetteView,
@@ -65,22 +75,12 @@ from backend.inspection.pose import (
     predict_along_belt,
     rests_on_too_little,
 )
-from backend.inspection.roi import SideRoi, height_bound, side_query, side_roi
-from backend.inspection.structure import FeatureHeights, HeightCache, TaughtTopView
-from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
-from backend.inspection.waiting import PartTracker, belt_status, conveyor_of, waiting_message
-from backend.recognition import thresholds
-from backend.recognition.images import encode_jpeg
-from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
-from backend.recognition.teach import plan_shots
-from backend.reports.scenes import SceneRecorder
-from robot.errors import Unreachable
-from robot.kinematics import T_base_ee
-from vision.errors import Conflict, InvalidInput, NothingTrained, VisionCellError
+from vision.pose.structure import FeatureHeights, HeightCache, TaughtTopView
 from vision.recognition import POLICIES, recognise_views
 from vision.recognition.light import apply_gain, light_gain, surround_colour
 from vision.recognition.recognise import verify_view
 from vision.segmentation import iou
+from vision.segmentation.roi import SideRoi, height_bound, side_query, side_roi
 
 __all__ = ["InspectOptions", "InspectionDone", "InspectionRun", "hold_until_ready", "inspect_object", "readiness", "start_inspection", "start_run"]  # fmt: skip
 
@@ -179,7 +179,6 @@ class CarriedAway(VisionCellError):
     """Constant speed: the belt carried the object past its end before a side view."""
 
     code = "carried_away"
-    http_status = 409
 
 
 def carried_point(found: NDArray[np.float64], ahead_m: float, end_y_m: float,
@@ -208,7 +207,6 @@ class NoObject(VisionCellError):
     """No object came to the station in time."""
 
     code = "no_object"
-    http_status = 409
 
 
 @dataclass
@@ -1573,7 +1571,7 @@ async def grab_belt_background(
     simulator's today: a :class:`~vision.errors.Conflict` otherwise).  Kept on the runtime
     (``rt.belt_background``) until the next grab.
     """
-    from backend.inspection.belt import BeltGeometry, build_belt_background
+    from vision.segmentation.belt import BeltGeometry, build_belt_background
 
     sim = rt.sim
     if sim is None:

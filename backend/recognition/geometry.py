@@ -3,7 +3,7 @@
 First from the top views' features (:func:`height_from_features`): the teach takes the top
 view at three camera rolls, and the camera sits off the flange's axis, so the rolls see the
 object from camera places about 90 mm apart; the features matched between them are
-triangulated (:func:`backend.inspection.structure.triangulate_heights`, the same guided
+triangulated (:func:`vision.pose.structure.triangulate_heights`, the same guided
 matching the pose uses) and the part's height is a high percentile of their heights: the
 highest textured surface, where the suction cup seals.  Where too few features are
 triangulated (a part with a plain top), from the silhouettes (:func:`measure_height`):
@@ -158,7 +158,7 @@ def height_from_features(
     max_height_m : float
         Tallest height looked for, metres (kept below the lowest camera).
     """
-    from backend.inspection.structure import TaughtTopView, triangulate_heights
+    from vision.pose.structure import TaughtTopView, triangulate_heights
 
     if not 2 <= len(shots) <= 24:
         raise InvalidInput(f"shots must hold 2 to 24 top views, got {len(shots)}")

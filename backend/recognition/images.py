@@ -56,14 +56,12 @@ class ImageTooLarge(InvalidInput):
     """An uploaded image has more bytes or pixels than allowed."""
 
     code = "too_large"
-    http_status = 413
 
 
 class UnsupportedImage(InvalidInput):
     """An uploaded file is not an image of a supported type, or does not decode."""
 
     code = "unsupported_media_type"
-    http_status = 415
 
 
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

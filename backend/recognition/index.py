@@ -56,7 +56,6 @@ class StaleFeatures(VisionCellError):
     """Stored features come from another descriptor method or version than the index uses."""
 
     code = "stale_features"
-    http_status = 409
 
 
 @dataclass(frozen=True)

@@ -49,7 +49,6 @@ class SegmentationFailed(VisionCellError):
     """No object could be separated from the background."""
 
     code = "segmentation_failed"
-    http_status = 422
 
 
 @dataclass(frozen=True, eq=False)

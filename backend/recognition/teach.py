@@ -3,7 +3,7 @@ done by the cell.
 
 With the object at the station the job
 
-1. plans the viewpoints from the station point (:func:`backend.inspection.viewpoints.
+1. plans the viewpoints from the station point (:func:`robot.viewpoints.
    plan_viewpoints`, the planner inspections use): the top view (1) for a ``2d`` model; the
    top and the two side views (2 inner, 3 outer) for a ``3d`` one.  The top view is taken at
    several camera rolls about the optical axis (joint q5, :data:`TOP_ROLLS_RAD`), so a model
@@ -43,7 +43,6 @@ from numpy.typing import NDArray
 from backend import audit
 from backend.db.session import Database
 from backend.heavy import HeavyPool
-from backend.inspection.viewpoints import VIEW_NAMES, plan_viewpoints
 from backend.recognition import thresholds
 from backend.recognition.geometry import (
     HeightMeasurement,
@@ -58,6 +57,7 @@ from backend.recognition.segment import SegmentationFailed, foreground_mask, seg
 from backend.recognition.views import ViewInput, add_views, view_public
 from robot.collision import CollisionWorld
 from robot.kinematics import T_base_ee
+from robot.viewpoints import VIEW_NAMES, plan_viewpoints
 from vision.camera import PinholeCamera
 from vision.errors import Conflict, InvalidInput, VisionCellError
 from vision.features.types import Features
@@ -113,7 +113,6 @@ class TeachTimeout(VisionCellError):
     """No object arrived at the station in time."""
 
     code = "teach_timeout"
-    http_status = 409
 
 
 @dataclass(frozen=True)

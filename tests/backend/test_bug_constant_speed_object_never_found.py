@@ -26,10 +26,10 @@ import numpy as np
 import pytest
 
 from backend.inspection import service
-from backend.inspection.belt import BeltGeometry, build_belt_background
-from backend.inspection.pose import plane_points
 from robot.kinematics import T_base_ee
 from vision.camera import PinholeCamera
+from vision.pose import plane_points
+from vision.segmentation.belt import BeltGeometry, build_belt_background
 from vision.sources import Frame
 
 GEO = BeltGeometry(centre_x_m=0.8, start_y_m=-1.3, width_m=0.44, surface_z_m=0.45, loop_m=2.6)

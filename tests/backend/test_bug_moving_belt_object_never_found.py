@@ -1,4 +1,4 @@
-"""The empty-belt background registered to the belt's travel (backend.inspection.belt)."""
+"""The empty-belt background registered to the belt's travel (vision.segmentation.belt)."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from backend.inspection.belt import BeltBackground, BeltGeometry, build_belt_background
-from backend.inspection.pose import plane_points
 from backend.recognition.segment import SegmentationFailed, foreground_mask
 from vision.camera import PinholeCamera
 from vision.errors import InvalidInput
+from vision.pose import plane_points
+from vision.segmentation.belt import BeltBackground, BeltGeometry, build_belt_background
 
 GEO = BeltGeometry(centre_x_m=0.8, start_y_m=-1.3, width_m=0.44, surface_z_m=0.45, loop_m=2.6)
 PITCH = 2.6 / 9  # stripes evenly spaced round the loop, as the simulator's

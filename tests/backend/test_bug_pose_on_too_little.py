@@ -26,9 +26,9 @@ import pytest
 from backend.calibration import NOMINAL_T_EE_CAM
 from backend.calibration.auto import nominal_camera
 from backend.inspection import service
-from backend.inspection.pose import ObjectPose, PoseFailed
 from backend.recognition.teach import plan_shots
 from robot.sim.world import ConveyorSpec
+from vision.pose import ObjectPose, PoseFailed
 
 SPEC = ConveyorSpec()
 CAMERA = nominal_camera(640, 480)

@@ -8,6 +8,7 @@ import asyncio
 
 import pytest
 
+from backend.api.errors import status_of
 from backend.jobs import JobManager
 from robot.errors import RobotBusy
 from tests.utils.cells import ideal_cell
@@ -40,7 +41,7 @@ async def test_cell_moves_in_the_same_tick(settings):
         job = cell.home(speed=1.0)
         with pytest.raises(RobotBusy) as info:
             cell.move_joints(Q_A, speed=1.0)
-        assert info.value.http_status == 409 and info.value.code == "robot_busy"
+        assert status_of(info.value) == 409 and info.value.code == "robot_busy"
         await cell.jobs.wait(job)
         assert job.state.value == "done"
     finally:

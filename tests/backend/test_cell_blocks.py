@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 
+from backend.api.errors import status_of
 from backend.cell import (
     JobProgress,
     JobState,
@@ -72,7 +73,7 @@ async def test_move_to_is_collision_checked_along_the_path(cell):
     q0 = cell.driver.state.q
     with pytest.raises(PathBlocked, match="wall") as info:
         await cell.move_to(Q_A, world=CollisionWorld((wall,)))
-    assert info.value.contacts and info.value.http_status == 422
+    assert info.value.contacts and status_of(info.value) == 422
     assert cell.driver.state.q == q0  # nothing moved
     await cell.move_to(Q_A, speed=1.0, world=CollisionWorld())  # no wall: fine
 

@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from backend.inspection.pose import SilhouetteView, ViewMatch, _const, estimate_pose_views
 from benchmarks import pose_replay
-from tests.backend.test_bug_pose_parallax import SURFACE, _scene
+from tests.vision.test_bug_pose_parallax import SURFACE, _scene
+from vision.pose import SilhouetteView, ViewMatch, estimate_pose_views, fixed_mask
 
 
 def _call(yaw_deg: float, seed: int):
@@ -22,7 +22,9 @@ def _call(yaw_deg: float, seed: int):
                   kw["view_shape"], heights)  # fmt: skip
     fit_kw = dict(camera=kw["camera"], T_base_cam_now=kw["T_base_cam_now"],
                   z_plane_m=kw["z_plane_m"], z_floor_m=SURFACE, query_mask=kw["view_mask"])  # fmt: skip
-    sil = [SilhouetteView(kw["T_base_cam_view"], kw["T_base_obj_taught"], _const(kw["view_mask"]))]
+    sil = [
+        SilhouetteView(kw["T_base_cam_view"], kw["T_base_obj_taught"], fixed_mask(kw["view_mask"]))
+    ]
     return [m], fit_kw, sil, truth
 
 

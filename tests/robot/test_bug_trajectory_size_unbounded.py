@@ -41,7 +41,7 @@ def test_too_many_samples_are_refused_before_allocation():
     # Valid speed and rate, but 3.6e3 s x 2000 Hz samples: refused by the sample bound.
     with pytest.raises(TrajectoryTooLong, match="samples") as info:
         plan_joint_move(ASEA.lower, ASEA.upper, speed=MIN_SPEED, rate_hz=2000.0)
-    assert info.value.samples > MAX_SAMPLES and info.value.http_status == 422
+    assert info.value.samples > MAX_SAMPLES and info.value.code == "trajectory_too_long"
 
 
 def test_cartesian_line_and_resampling_respect_the_bounds():

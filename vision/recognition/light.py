@@ -56,7 +56,6 @@ class LightChanged(VisionCellError):
     """The light changed since the views were taught beyond what a per-channel gain undoes."""
 
     code = "light_changed"
-    http_status = 409
 
 
 def surround_colour(

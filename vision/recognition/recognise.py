@@ -131,7 +131,7 @@ class Candidate:
         ``None`` when verification found no model.
     inlier_xy : ndarray of shape (n_inliers, 4) or None
         The inlier correspondences behind ``H``: trained-view ``x, y`` then query ``x, y``,
-        pixels.  The pose (:mod:`backend.inspection.pose`) fits the object's motion to them
+        pixels.  The pose (:mod:`vision.pose`) fits the object's motion to them
         with each feature's own height: ``H`` is one plane's map, and the features of a
         wheel or a bracket lie at several heights seen from cameras tens of millimetres
         apart.

@@ -32,7 +32,6 @@ class IndexFormatError(VisionCellError, ValueError):
     """A serialised index is not one, or was written by another (stale) format version."""
 
     code = "bad_view_index"
-    http_status = 422
 
 
 def dump(index: ViewIndex) -> bytes:

@@ -18,7 +18,7 @@ from pydantic import BaseModel, Field, model_validator
 from backend import audit
 from backend import calibration as svc
 from backend.api.deps import CellDep, DatabaseDep, EngineerUser, SessionDep, SimDep, ViewerUser
-from backend.api.errors import ApiError, error_body
+from backend.api.errors import ApiError, error_body, status_of
 from backend.api.schemas import JobOut, Page
 from backend.api.types import (
     MAX_ABS_JOINT_API_RAD,
@@ -211,7 +211,7 @@ def _check_upload(name: str, data: bytes) -> tuple[int, int]:
     try:
         return check_image_size(data, name=name)  # bytes and declared pixels, before decoding
     except InvalidInput as exc:
-        if exc.http_status == 413:
+        if status_of(exc) == 413:
             raise
         raise ApiError(
             415, "unsupported_media_type", f"file {name!r} does not decode as an image"

@@ -33,8 +33,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from backend.inspection.pose import plane_points
 from vision.errors import InvalidInput
+from vision.pose.geometry import plane_points
 
 __all__ = ["BeltBackground", "BeltGeometry", "build_belt_background"]
 

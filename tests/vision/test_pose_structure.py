@@ -1,4 +1,4 @@
-"""Feature heights triangulated from a model's taught top views (backend.inspection.structure)
+"""Feature heights triangulated from a model's taught top views (vision.pose.structure)
 and the pose fit that holds the features at them.
 
 The scenes are synthetic: object points at known heights seen by the cell's top view (50 mm
@@ -13,15 +13,15 @@ import cv2
 import numpy as np
 import pytest
 
-from backend.inspection.pose import estimate_pose
-from backend.inspection.structure import (
+from tests.vision.test_bug_pose_parallax import CAM, STATION, SURFACE, TOP, _cam, _planar, _project
+from vision.features.types import Features, Keypoints
+from vision.pose import estimate_pose
+from vision.pose.structure import (
     MAX_SPREAD_M,
     HeightCache,
     TaughtTopView,
     triangulate_heights,
 )
-from tests.backend.test_bug_pose_parallax import CAM, STATION, SURFACE, TOP, _cam, _planar, _project
-from vision.features.types import Features, Keypoints
 
 YAWS_DEG = (0.0, 90.0, 180.0, -90.0)
 ROLLS = (0.0, 2.094, -2.094)
@@ -208,7 +208,7 @@ def test_heights_must_be_finite_and_ordered(lo, hi):
 def test_matching_in_blocks_of_rows_gives_the_same_heights(monkeypatch):
     """The guided matching works through one view's features in blocks (bounded memory at
     any feature count); the blocks must not change the answer."""
-    import backend.inspection.structure as structure
+    import vision.pose.structure as structure
 
     pts = _points(10, 90)
     views, _ = _views(pts, _descriptors(90, 10), seed=11)

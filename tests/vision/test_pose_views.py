@@ -12,8 +12,8 @@ import cv2
 import numpy as np
 import pytest
 
-from backend.inspection.pose import PoseFailed, ViewMatch, estimate_pose, estimate_pose_views
-from tests.backend.test_bug_pose_parallax import CAM, STATION, SURFACE, TOP, _cam, _planar, _project
+from tests.vision.test_bug_pose_parallax import CAM, STATION, SURFACE, TOP, _cam, _planar, _project
+from vision.pose import PoseFailed, ViewMatch, estimate_pose, estimate_pose_views
 
 TRUTH = _planar(math.radians(37.0), STATION[0] + 0.003, STATION[1] - 0.002)
 
@@ -204,7 +204,7 @@ def test_a_round_outline_leaves_the_choice_to_the_correspondences():
 
 
 def test_silhouette_overlap_is_one_for_the_true_motion_and_bounded():
-    from backend.inspection.pose import silhouette_overlap
+    from vision.pose import silhouette_overlap
 
     taught = _planar(math.radians(90.0), *STATION[:2])
     T_view = _cam(2.094)

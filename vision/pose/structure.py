@@ -1,6 +1,6 @@
 """Heights of a model's trained features, triangulated from its taught top views.
 
-The pose's joint fit (:func:`backend.inspection.pose.refine_with_parallax`) places each
+The pose's joint fit (:func:`vision.pose.refine_with_parallax`) places each
 correspondence's trained feature on its trained viewing ray at an unknown height, bounded
 between the belt and the top face.  From one current view a feature's height and the
 object's shift trade off against each other (the parallax of a camera that moved along the
@@ -46,9 +46,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from backend.inspection.pose import closest_points, object_rays
 from vision.camera import PinholeCamera
 from vision.features.types import Features
+from vision.pose.geometry import closest_points, object_rays
 
 __all__ = [
     "FeatureHeights",

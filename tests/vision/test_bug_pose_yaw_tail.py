@@ -16,8 +16,8 @@ import math
 
 import numpy as np
 
-from backend.inspection.pose import estimate_pose
-from tests.backend.test_bug_pose_parallax import SURFACE, TOP, _cam, _observed, _planar, _project
+from tests.vision.test_bug_pose_parallax import SURFACE, TOP, _cam, _observed, _planar, _project
+from vision.pose import estimate_pose
 
 #: How far the shading lags the part's turn, degrees (3-5 px at the bolt circle).
 LAG_DEG = 4.0

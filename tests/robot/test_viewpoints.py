@@ -7,8 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from backend.calibration.autoplan import NOMINAL_T_EE_CAM
-from backend.inspection.viewpoints import plan_viewpoint, plan_viewpoints
 from robot.aiming import aimed_flange_pose, look_at
 from robot.collision import Box
 from robot.errors import Unreachable
@@ -18,7 +16,13 @@ from robot.sim.camera import DEFAULT_T_EE_CAM
 from robot.sim.obstacles import collision_world
 from robot.sim.poses import viewpoint as sim_viewpoint
 from robot.sim.world import ConveyorSpec
+from robot.viewpoints import plan_viewpoint, plan_viewpoints
 
+#: The nominal camera mounting before calibration (the camera 40 mm out along the approach
+#: axis, turned a quarter about it): the backend's ``NOMINAL_T_EE_CAM``.
+NOMINAL_T_EE_CAM = np.array(
+    [[0.0, -1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.04], [0.0, 0.0, 0.0, 1.0]]
+)
 WORLD = collision_world()
 STATION = ConveyorSpec().station_point
 H = 0.1

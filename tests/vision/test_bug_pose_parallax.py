@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 import pytest
 
-from backend.inspection.pose import estimate_pose, refine_with_parallax
 from vision.camera import PinholeCamera
+from vision.pose import estimate_pose, refine_with_parallax
 
 K = np.array([[600.0, 0, 319.5], [0, 600.0, 239.5], [0, 0, 1]])
 CAM = PinholeCamera(K, np.zeros(5), width=640, height=480)

@@ -19,9 +19,9 @@ import cv2
 import numpy as np
 import pytest
 
-import backend.inspection.pose as pose_mod
-from backend.inspection.pose import ViewMatch, estimate_pose_views
-from tests.backend.test_bug_pose_parallax import CAM, STATION, SURFACE, TOP, _cam, _planar, _project
+import vision.pose.views as pose_mod
+from tests.vision.test_bug_pose_parallax import CAM, STATION, SURFACE, TOP, _cam, _planar, _project
+from vision.pose import ViewMatch, estimate_pose_views
 
 
 def _scene(seed: int, n_stuck: int = 0, noise_px: float = 0.3, now=None):

@@ -1,4 +1,4 @@
-"""The object pose from the top view's homography (backend.inspection.pose) on exact geometry."""
+"""The object pose from the top view's homography (vision.pose) on exact geometry."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from backend.inspection.pose import PoseFailed, estimate_pose, plane_points, predict_along_belt
 from vision.camera import PinholeCamera
+from vision.pose import PoseFailed, estimate_pose, plane_points, predict_along_belt
 
 K = np.array([[600.0, 0, 319.5], [0, 600.0, 239.5], [0, 0, 1]])
 CAM = PinholeCamera(K, np.zeros(5), width=640, height=480)

@@ -9,7 +9,7 @@ the side query is restricted to the image of the space the object can occupy:
 
 1. the convex hull of the object's region in the top view (its silhouette) is
    back-projected through the top camera (active intrinsics and hand-eye,
-   :func:`backend.inspection.pose.plane_points`) onto the belt plane ``z0`` and onto the
+   :func:`vision.pose.plane_points`) onto the belt plane ``z0`` and onto the
    plane ``z0 + h`` of a height bound ``h``.  Every point of the object lies on a viewing
    ray through its silhouette and between the two planes, so the object lies inside the
    truncated cone (the visual hull of one view) spanned by the two polygons; it is convex,
@@ -26,11 +26,6 @@ the side query is restricted to the image of the space the object can occupy:
 Whatever cannot be done (an empty or degenerate silhouette, a plane behind the camera, a
 region off the image or empty) falls back to the whole frame, and :attr:`SideRoi.reason`
 says why, for the inspection's stored reason.
-
-Measured (``benchmarks.recognition_yaw --teach-yaws 4 --queries 3``, before the own bars,
-seeds 0 and 1, 72 trained and 12 untrained inspections): side query features p50 289 ->
-113, the region 15-16 % of the frame, no fallback; the own model's side score p50 0.31 ->
-0.37; named 61/72 -> 65/72, untrained unknown 12/12 both.
 """
 
 from __future__ import annotations
@@ -44,8 +39,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from backend.inspection.pose import PoseFailed, plane_points
 from vision.camera import PinholeCamera
+from vision.pose.geometry import PoseFailed, plane_points
 
 __all__ = ["MAX_PART_HEIGHT_M", "SideRoi", "height_bound", "side_query", "side_roi"]
 
@@ -291,7 +286,7 @@ def side_query(
 ) -> NDArray[np.uint8] | tuple[NDArray[np.uint8], NDArray[np.uint8]]:
     """What a side viewpoint's ``look`` answers to :func:`vision.recognition.recognise_views`:
     the image with the region as its mask, or the image alone (whole frame) when ``roi``
-    fell back.  The service's inspection and ``benchmarks.recognition_yaw`` both answer so."""
+    fell back."""
     img = np.asarray(side_rgb)
     if roi.mask is None:
         return img
