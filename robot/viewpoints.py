@@ -337,10 +337,28 @@ def plan_viewpoints(
     views: tuple[str, ...] = VIEW_NAMES,
     **options: object,
 ) -> ViewpointPlan:
-    """Plan the viewpoints ``views`` (default top, inner, outer) of an object at ``point``.
+    """Plan the viewpoints ``views`` (default top, inner, outer) of an object at ``point``
+    (the chapter's three viewpoints, section 4.1).
 
-    Keyword options are those of :func:`plan_viewpoint`; each view is planned
-    independently.  Raises as :func:`plan_viewpoint` for the first view that fails.
+    Parameters
+    ----------
+    point : array_like of shape (3,)
+        The object's footprint centre on the belt, base frame, metres.
+    T_ee_cam : array_like of shape (4, 4)
+        Camera mounting on the flange.
+    views : tuple of {"top", "inner", "outer"}
+        The views to plan, each at most once.
+    **options
+        Those of :func:`plan_viewpoint`; each view is planned independently.
+
+    Returns
+    -------
+    ViewpointPlan
+
+    Raises
+    ------
+    ValueError, Unreachable
+        As :func:`plan_viewpoint`, for the first view that fails.
     """
     if not views or any(v not in VIEW_INDEX for v in views) or len(set(views)) != len(views):
         raise ValueError(f"views must be distinct names from {VIEW_NAMES}, got {views!r}")

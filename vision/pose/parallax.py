@@ -194,10 +194,35 @@ def refine_with_parallax(
     (0.1 px per 50 mm, :data:`W_UNKNOWN`) so that heights the views cannot tell apart stay
     where the plane fit put them instead of wandering.  A correspondence listed twice (a
     keypoint with two orientations) counts once, and those the first fit leaves more than
-    :data:`REJECT_PX` off are dropped before a second fit.  Returns ``(T_delta, RMS
-    reprojection error in px)`` of the correspondences kept; ``None``
-    when the solver fails, or when it moved the start by more than
-    :data:`MAX_REFINE_SHIFT_M` / :data:`MAX_REFINE_YAW_RAD`.
+    :data:`REJECT_PX` off are dropped before a second fit.  The problem is a small bundle
+    adjustment (Triggs et al. [1]_) solved with a sparse Jacobian (``scipy.optimize.
+    least_squares``, trust-region reflective with bounds).
+
+    Parameters
+    ----------
+    inlier_xy : ndarray of shape (N, 4)
+        Correspondences: trained ``x, y``, current ``x, y``, pixels.
+    camera : PinholeCamera
+    T_base_cam_view, T_base_cam_now : ndarray of shape (4, 4)
+        Camera poses of the trained view and of the current exposure.
+    T_delta0 : ndarray of shape (4, 4)
+        The start: the plane fit's motion.
+    z_floor_m, z_top_m : float
+        Heights of the belt surface and of the top face, metres.
+    heights : ndarray of shape (N,), optional
+        Triangulated heights of the trained features (``nan`` where unknown).
+
+    Returns
+    -------
+    (T_delta, reproj_px) or None
+        The motion and the RMS reprojection error of the correspondences kept, pixels;
+        ``None`` when the solver fails, or when it moved the start by more than
+        :data:`MAX_REFINE_SHIFT_M` / :data:`MAX_REFINE_YAW_RAD`.
+
+    References
+    ----------
+    .. [1] B. Triggs, P. McLauchlan, R. Hartley and A. Fitzgibbon, "Bundle adjustment - a
+       modern synthesis", LNCS 1883, Springer, 2000, 298-372.
     """
     refined = fit_motion(
         [(np.asarray(inlier_xy, dtype=np.float64).reshape(-1, 4), T_base_cam_view, np.eye(4),

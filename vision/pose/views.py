@@ -152,8 +152,25 @@ def silhouette_overlap(
     millimetres off; the overlap is therefore the best over small shifts
     (:data:`SILHOUETTE_SHIFT`).  What it measures is whether the outline's asymmetric
     parts (a side nozzle, a shaft) lie where the answer puts them: answers a turn apart
-    differ there by far more.  Empty regions overlap 0; ``nan`` when the plane cannot be
-    back-projected from the trained camera.
+    differ there by far more.
+
+    Parameters
+    ----------
+    view_mask, query_mask : ndarray of shape (H, W), bool
+        The trained and the current region.
+    camera : PinholeCamera
+    T_base_cam_view, T_base_cam_now : ndarray of shape (4, 4)
+        Camera poses of the trained view and of the current exposure.
+    T_delta : ndarray of shape (4, 4)
+        The planar motion of the object since it was taught, base frame.
+    z_m : float
+        Height of the plane the region is mapped through, metres.
+
+    Returns
+    -------
+    float
+        Intersection over union in [0, 1]; 0 for empty regions, ``nan`` when the plane
+        cannot be back-projected from the trained camera.
     """
     vm = np.asarray(view_mask, dtype=bool)
     qm = np.asarray(query_mask, dtype=bool)
@@ -231,6 +248,26 @@ def estimate_pose_views(
     register a sixth of a turn off on as many correspondences as it registers right; its
     outline (the side nozzle) cannot.  Every group considered is recorded in
     :attr:`ObjectPose.hypotheses`.
+
+    Parameters
+    ----------
+    matches : list of ViewMatch
+        The trained top views verified on the current one, best-scored first.
+    camera : PinholeCamera
+    T_base_cam_now : ndarray of shape (4, 4)
+        Camera pose of the current exposure.
+    z_plane_m, z_floor_m : float
+        Heights of the object's top face and of the belt surface, metres.
+    query_mask : ndarray of shape (H, W), bool, optional
+        The object's region in the current view.
+    silhouettes : list of SilhouetteView, optional
+        Taught top views whose regions the answers are judged by.
+
+    Returns
+    -------
+    ObjectPose
+        ``method="parallax"`` with ``views`` the views fitted, or the lead view's own
+        answer (:func:`~vision.pose.parallax.estimate_pose`).
 
     Raises
     ------

@@ -78,7 +78,22 @@ def height_bound(heights: Iterable[float | None], *, default_m: float = MAX_PART
     """Height bound of the object at the station before it is named: the tallest stored
     height of the trained models when every one has a height, else ``default_m``.
 
-    Raises ``ValueError`` for a height that is not a finite number in (0, 1] m.
+    Parameters
+    ----------
+    heights : iterable of float or None
+        The trained models' heights, metres (None: unknown).
+    default_m : float
+        The bound when a height is unknown or there is none, metres, in (0, 1].
+
+    Returns
+    -------
+    float
+        Metres.
+
+    Raises
+    ------
+    ValueError
+        A height that is not a finite number in (0, 1] m.
     """
     if isinstance(default_m, bool) or not (
         isinstance(default_m, int | float) and math.isfinite(default_m) and 0.0 < default_m <= 1.0
@@ -150,7 +165,9 @@ def side_roi(
     margin_px: int = 6,
     moved_m: tuple[float, float, float] | NDArray[np.float64] | None = None,
 ) -> SideRoi:
-    """The side view's region of interest from the top view's segmentation (module docstring).
+    """The side view's region of interest from the top view's segmentation (module docstring):
+    the image of the visual hull of one view (Laurentini [1]_), bounded by the belt and a
+    height, through the chapter's camera model (eqs. 1-5).
 
     Parameters
     ----------
@@ -186,6 +203,11 @@ def side_roi(
     ------
     ValueError
         Inputs of the wrong type, shape or range (bad data, not a bad view).
+
+    References
+    ----------
+    .. [1] A. Laurentini, "The visual hull concept for silhouette-based image
+       understanding", IEEE Trans. PAMI 16(2) (1994), 150-162.
     """
     tm = np.asarray(top_mask)
     if tm.ndim != 2 or tm.dtype not in (np.bool_, np.uint8):
@@ -284,9 +306,25 @@ def side_roi(
 def side_query(
     side_rgb: NDArray[np.uint8], roi: SideRoi
 ) -> NDArray[np.uint8] | tuple[NDArray[np.uint8], NDArray[np.uint8]]:
-    """What a side viewpoint's ``look`` answers to :func:`vision.recognition.recognise_views`:
-    the image with the region as its mask, or the image alone (whole frame) when ``roi``
-    fell back."""
+    """What a side viewpoint's ``look`` answers to :func:`vision.recognition.recognise_views`.
+
+    Parameters
+    ----------
+    side_rgb : ndarray of shape (H, W, 3), uint8
+    roi : SideRoi
+        Its region of interest (:func:`side_roi`).
+
+    Returns
+    -------
+    ndarray or (ndarray, ndarray)
+        The image with the region as its mask, or the image alone (whole frame) when
+        ``roi`` fell back.
+
+    Raises
+    ------
+    ValueError
+        A region of another size than the image.
+    """
     img = np.asarray(side_rgb)
     if roi.mask is None:
         return img
