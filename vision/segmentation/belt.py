@@ -33,6 +33,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from vision.camera import PinholeCamera
 from vision.errors import InvalidInput
 from vision.pose.geometry import plane_points
 
@@ -123,12 +124,12 @@ class BeltBackground:
 
 
 def _belt_coords(
-    shape: tuple[int, int], camera: object, T_base_cam: NDArray[np.float64], g: BeltGeometry
+    shape: tuple[int, int], camera: PinholeCamera, T_base_cam: NDArray[np.float64], g: BeltGeometry
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     h, w = shape
     ys, xs = np.mgrid[0:h, 0:w]
     px = np.stack([xs.ravel(), ys.ravel()], axis=1).astype(np.float64)
-    pts = plane_points(px, camera, T_base_cam, g.surface_z_m).reshape(h, w, 3)  # type: ignore[arg-type]
+    pts = plane_points(px, camera, T_base_cam, g.surface_z_m).reshape(h, w, 3)
     u = (pts[..., 1] - g.start_y_m).astype(np.float32)
     lateral = pts[..., 0] - (g.centre_x_m - g.width_m / 2.0)
     on = (lateral >= 0.003) & (lateral <= g.width_m - 0.003)
@@ -139,7 +140,7 @@ def _belt_coords(
 def build_belt_background(
     frames: list[tuple[NDArray[np.uint8], float]],
     *,
-    camera: object,
+    camera: PinholeCamera,
     T_base_cam: NDArray[np.float64],
     geometry: BeltGeometry,
 ) -> BeltBackground:
