@@ -9,10 +9,10 @@ face and on the other trained views' correspondences.  But a feature's height is
 of the model, not of the inspection: every taught top view was taken from a known camera
 pose (its joints through the hand-eye transform) with the object in a known frame (the
 station turned by the teach's yaw): three camera rolls per teach round, 12 or 24 views
-from camera places up to about 100 mm apart relative to the object.  A feature matched between two of them is triangulated in the
-object's frame (the midpoint of the two viewing rays' common perpendicular; Hartley and
-Zisserman, *Multiple View Geometry*, 2nd ed., 2003, chapter 12), and the fit then holds it
-near that height instead of guessing.
+from camera places up to about 100 mm apart relative to the object.  A feature matched
+between two of them is triangulated in the object's frame (the midpoint of the two viewing
+rays' common perpendicular; Hartley and Zisserman, *Multiple View Geometry*, 2nd ed.,
+2003, chapter 12), and the fit then holds it near that height instead of guessing.
 
 The features are matched with the known geometry (guided matching; Hartley and Zisserman,
 section 11.6 applied to a known pair of poses): a feature of one view can only be seen in
@@ -20,8 +20,8 @@ the other on the part of its epipolar line between where its ray meets the belt 
 meets the top face, so its candidates are the other view's features within
 :data:`EPIPOLAR_PX` of that segment, and the ratio test (Lowe 2004, section 7.1) is taken
 among those candidates only.  A plain ratio test over the whole view keeps almost nothing of
-a part whose features repeat (the pipe flange's six bolts: 2 % of its features were
-triangulated with it); the segment holds one bolt.  The nearest candidate must also be
+a part whose features repeat (a flange's bolts all look alike, so the nearest and the
+second nearest are two bolts); the segment holds one bolt.  The nearest candidate must also be
 nearly as close in descriptor as the nearest feature anywhere in the other view, and the
 match mutual.  A match counts only if the two rays pass within :data:`MAX_GAP_PX` (in pixels
 at the point's depth), meet at :data:`MIN_ANGLE_RAD` or more (a narrower angle leaves the

@@ -111,7 +111,7 @@ class SilhouetteView:
 
 
 #: Two trained views' plane poses agree when within this distance and turn of each other
-#: (the plane answer alone is 3-5 mm off for parts with features below the top face; a
+#: (the plane answer alone is millimetres off for parts with features below the top face; a
 #: view registered on the wrong features, the pipe flange's bolt circle a sixth of a turn
 #: off or the valve block on a handful of look-alike corners, is tens of millimetres or
 #: degrees away).
@@ -444,9 +444,8 @@ def _by_silhouette(
 
     The outline settles what the correspondences cannot: a part whose features repeat
     round a circle registers a sixth of a turn off on as many of them as it registers
-    right (the flange: 0.70 against 0.98), and a plane answer thrown far off by
-    parallax or look-alike features (the bracket's 26 mm: 0.66 against 0.97) does not fit
-    either.  Answers a few millimetres apart fit it about equally (the shift search
+    right, but its outline (a side nozzle) overlaps far less there; and a plane answer
+    thrown far off by parallax or look-alike features does not fit the outline either.  Answers a few millimetres apart fit it about equally (the shift search
     absorbs them), and there the correspondences' joint fit is the better judge.
 
     A group's answer (its first view's plane pose) puts the current camera somewhere
