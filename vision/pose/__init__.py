@@ -27,14 +27,9 @@ from vision.pose.parallax import (
     estimate_pose,
     refine_with_parallax,
 )
+from vision.pose.silhouette import SilhouetteView, fixed_mask, silhouette_overlap
 from vision.pose.structure import FeatureHeights, HeightCache, TaughtTopView, triangulate_heights
-from vision.pose.views import (
-    SilhouetteView,
-    ViewMatch,
-    estimate_pose_views,
-    fixed_mask,
-    silhouette_overlap,
-)
+from vision.pose.views import ViewMatch, estimate_pose_views
 
 __all__ = [
     "MAX_RESIDUAL_M",

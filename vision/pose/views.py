@@ -34,10 +34,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -47,9 +45,7 @@ from vision.pose.geometry import (
     PoseFailed,
     closest_points,
     object_rays,
-    plane_points,
     pose_apart,
-    sample_region,
     yaw_of,
 )
 from vision.pose.parallax import (
@@ -59,14 +55,9 @@ from vision.pose.parallax import (
     estimate_pose,
     fit_motion,
 )
+from vision.pose.silhouette import SilhouetteView, choose_by_silhouette, fixed_mask
 
-__all__ = [
-    "SilhouetteView",
-    "ViewMatch",
-    "estimate_pose_views",
-    "fixed_mask",
-    "silhouette_overlap",
-]
+__all__ = ["ViewMatch", "estimate_pose_views"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,17 +90,6 @@ class ViewMatch:
     heights: NDArray[np.float64] | None = None
 
 
-@dataclass(frozen=True, eq=False)
-class SilhouetteView:
-    """A trained top view of the model whose region can be compared with the current one:
-    its camera pose, the model frame as it saw it, and its region (``mask()``, decoded
-    when first asked for: only the views nearest an answer's viewpoint are)."""
-
-    T_base_cam_view: NDArray[np.float64]
-    T_base_obj_taught: NDArray[np.float64]
-    mask: Callable[[], NDArray[np.bool_] | None]
-
-
 #: Two trained views' plane poses agree when within this distance and turn of each other
 #: (the plane answer alone is millimetres off for parts with features below the top face; a
 #: view registered on the wrong features, the pipe flange's bolt circle a sixth of a turn
@@ -117,104 +97,6 @@ class SilhouetteView:
 #: degrees away).
 AGREE_M = 0.008
 AGREE_YAW_RAD = math.radians(4.0)
-
-
-#: Groups of agreeing views whose answers overlap the current region (intersection over
-#: union of the trained silhouette moved by the answer) within this much of the best group
-#: fit the outline equally well; a group needs at least :data:`SILHOUETTE_MIN_SHARE` of the
-#: leading group's correspondences to be considered.
-SILHOUETTE_TOLERANCE = 0.02
-SILHOUETTE_MIN_SHARE = 0.2
-#: Largest shift of the moved trained region searched, as a share of the current region's
-#: size (the answers' positions are a few millimetres off; a turn moves more).
-SILHOUETTE_SHIFT = 0.04
-
-
-def silhouette_overlap(
-    view_mask: NDArray[np.bool_],
-    query_mask: NDArray[np.bool_],
-    *,
-    camera: PinholeCamera,
-    T_base_cam_view: NDArray[np.float64],
-    T_base_cam_now: NDArray[np.float64],
-    T_delta: NDArray[np.float64],
-    z_m: float,
-) -> float:
-    """Intersection over union of the current region ``query_mask`` and the trained
-    region ``view_mask`` moved by the planar motion ``T_delta`` (taught to now).
-
-    The trained region is mapped through the plane ``z = z_m``: back-projected from the
-    trained camera, moved, projected into the current camera (a homography fitted to a
-    grid of the region's pixels, so the lens distortion is averaged over it).  Parts of
-    the outline at other heights shift by parallax between the two cameras (a few
-    millimetres when the trained camera stood near where the current one stands relative
-    to the object: the caller picks that view), and the answer's position is a few
-    millimetres off; the overlap is therefore the best over small shifts
-    (:data:`SILHOUETTE_SHIFT`).  What it measures is whether the outline's asymmetric
-    parts (a side nozzle, a shaft) lie where the answer puts them: answers a turn apart
-    differ there by far more.
-
-    Parameters
-    ----------
-    view_mask, query_mask : ndarray of shape (H, W), bool
-        The trained and the current region.
-    camera : PinholeCamera
-    T_base_cam_view, T_base_cam_now : ndarray of shape (4, 4)
-        Camera poses of the trained view and of the current exposure.
-    T_delta : ndarray of shape (4, 4)
-        The planar motion of the object since it was taught, base frame.
-    z_m : float
-        Height of the plane the region is mapped through, metres.
-
-    Returns
-    -------
-    float
-        Intersection over union in [0, 1]; 0 for empty regions, ``nan`` when the plane
-        cannot be back-projected from the trained camera.
-    """
-    vm = np.asarray(view_mask, dtype=bool)
-    qm = np.asarray(query_mask, dtype=bool)
-    if not vm.any() or not qm.any():
-        return 0.0
-    src = sample_region(vm, vm.shape, n=8)
-    if len(src) < 4:
-        return 0.0
-    try:
-        P = plane_points(src, camera, T_base_cam_view, z_m)
-    except PoseFailed:
-        return math.nan
-    P = P @ np.asarray(T_delta, dtype=np.float64)[:3, :3].T + np.asarray(T_delta)[:3, 3]
-    T_cam_base = np.linalg.inv(np.asarray(T_base_cam_now, dtype=np.float64))
-    rvec, _ = cv2.Rodrigues(T_cam_base[:3, :3])
-    dst, _ = cv2.projectPoints(
-        P.reshape(-1, 1, 3), rvec, T_cam_base[:3, 3], camera.K,
-        np.asarray(camera.dist, dtype=np.float64),
-    )  # fmt: skip
-    Hm, _ = cv2.findHomography(src.reshape(-1, 1, 2), dst.reshape(-1, 1, 2), 0)
-    if Hm is None or not np.all(np.isfinite(Hm)):
-        return math.nan
-    # compared at full resolution in a window round the current region (half its size
-    # again on each side, so a moved outline stays inside)
-    ys, xs = np.nonzero(qm)
-    pad = int(0.5 * max(xs.max() - xs.min(), ys.max() - ys.min())) + 2
-    h, w = qm.shape
-    x0, y0 = max(0, int(xs.min()) - pad), max(0, int(ys.min()) - pad)
-    x1, y1 = min(w, int(xs.max()) + pad + 1), min(h, int(ys.max()) + pad + 1)
-    shift = np.array([[1.0, 0.0, -x0], [0.0, 1.0, -y0], [0.0, 0.0, 1.0]])
-    warped = cv2.warpPerspective(vm.astype(np.uint8), shift @ Hm, (x1 - x0, y1 - y0),
-                                 flags=cv2.INTER_NEAREST) > 0  # fmt: skip
-    small_q = qm[y0:y1, x0:x1]
-    # Each answer's position carries the plane fit's few millimetres of error, which moves
-    # a round outline as much as a turn moves a small asymmetric part of it: the overlap
-    # is the best over shifts of up to SILHOUETTE_SHIFT of the region's size (the
-    # intersection at every shift in one correlation; the areas do not change).
-    r = max(2, round(SILHOUETTE_SHIFT * max(xs.max() - xs.min(), ys.max() - ys.min())))
-    q_pad = cv2.copyMakeBorder(
-        small_q.astype(np.float32), r, r, r, r, cv2.BORDER_CONSTANT, value=0.0
-    )
-    inter = float(cv2.matchTemplate(q_pad, warped.astype(np.float32), cv2.TM_CCORR).max())
-    union = float(np.count_nonzero(warped)) + float(np.count_nonzero(small_q)) - inter
-    return 0.0 if union <= 0 else inter / union
 
 
 def estimate_pose_views(
@@ -241,7 +123,7 @@ def estimate_pose_views(
     first view of the group gives the answer alone (:func:`estimate_pose`).
 
     With ``query_mask`` (the current top view's region) and more than one group, the
-    groups are also judged by their silhouettes (:func:`_by_silhouette`): the trained
+    groups are also judged by their silhouettes (:func:`~vision.pose.silhouette.choose_by_silhouette`): the trained
     region of ``silhouettes`` (every taught top view of the model; default: the matches'
     own masks) nearest each answer's viewpoint, moved by that answer, against the current
     region.  A part whose features repeat round a circle (the pipe flange's bolts) can
@@ -306,15 +188,16 @@ def estimate_pose_views(
         groups_seen.append((group, sum(len(m.inlier_xy) for m, _ in group)))
     # the most correspondences first (ties: the earlier view)
     order = sorted(range(len(groups_seen)), key=lambda i: -groups_seen[i][1])
-    hyps, chosen = _by_silhouette(
-        [groups_seen[i] for i in order], camera=camera, T_base_cam_now=T_base_cam_now,
+    ranked = [groups_seen[i] for i in order]
+    hyps, pick = choose_by_silhouette(
+        [(g[0][1], len(g), n) for g, n in ranked], camera=camera, T_base_cam_now=T_base_cam_now,
         z_m=0.5 * (z_plane_m + z_floor_m), query_mask=query_mask,
         silhouettes=silhouettes if silhouettes is not None else [
             SilhouetteView(m.T_base_cam_view, m.T_base_obj_taught, fixed_mask(m.view_mask))
             for m in matches if m.view_mask is not None
         ],
     )  # fmt: skip
-    best, best_n = chosen
+    best, best_n = ranked[pick]
     lead_m, lead = best[0]
 
     def single() -> ObjectPose:
@@ -419,90 +302,3 @@ def _rays_met(
         zs, ws = out[v]
         zs[idx[who == v]], ws[idx[who == v]] = z_met[who == v], w_met[who == v]
     return out
-
-
-def fixed_mask(mask: NDArray[np.bool_] | None) -> Callable[[], NDArray[np.bool_] | None]:
-    return lambda: mask
-
-
-_Hyp = tuple[list[tuple[ViewMatch, ObjectPose]], int]
-
-
-def _by_silhouette(
-    ranked: list[_Hyp],
-    *,
-    camera: PinholeCamera,
-    T_base_cam_now: NDArray[np.float64],
-    z_m: float,
-    query_mask: NDArray[np.bool_] | None,
-    silhouettes: list[SilhouetteView],
-) -> tuple[tuple[dict[str, object], ...], _Hyp]:
-    """Of the groups of agreeing views (``ranked``: most correspondences first), the one
-    to fit: the first of those (with at least :data:`SILHOUETTE_MIN_SHARE` of the leading
-    group's correspondences) whose silhouette overlap is within
-    :data:`SILHOUETTE_TOLERANCE` of the best.
-
-    The outline settles what the correspondences cannot: a part whose features repeat
-    round a circle registers a sixth of a turn off on as many of them as it registers
-    right, but its outline (a side nozzle) overlaps far less there; and a plane answer
-    thrown far off by parallax or look-alike features does not fit the outline either.  Answers a few millimetres apart fit it about equally (the shift search
-    absorbs them), and there the correspondences' joint fit is the better judge.
-
-    A group's answer (its first view's plane pose) puts the current camera somewhere
-    relative to the object; the trained view taken from nearest that place (the object
-    frame of its teach) sees the outline with the least parallax, and its region moved
-    by the answer is compared with the current one (:func:`silhouette_overlap`).
-    Returns a record of every group and the chosen one.
-    """
-    cam_now = np.asarray(T_base_cam_now, dtype=np.float64)[:, 3]
-    rel_views = [
-        (np.linalg.inv(np.asarray(v.T_base_obj_taught, dtype=np.float64))
-         @ np.asarray(v.T_base_cam_view, dtype=np.float64)[:, 3])[:3]
-        for v in silhouettes
-    ]  # fmt: skip
-    ious: list[float | None] = []
-    for group, _n in ranked:
-        if query_mask is None or not silhouettes or len(ranked) == 1:
-            ious.append(None)
-            continue
-        T_obj = group[0][1].T_base_obj
-        rel_now = (np.linalg.inv(T_obj) @ cam_now)[:3]
-        near = sorted(
-            range(len(silhouettes)), key=lambda i: float(np.linalg.norm(rel_views[i] - rel_now))
-        )
-        iou: float | None = None
-        for i in near:
-            mask = silhouettes[i].mask()
-            if mask is None:
-                continue
-            v = silhouettes[i]
-            iou = silhouette_overlap(
-                mask, query_mask, camera=camera, T_base_cam_view=v.T_base_cam_view,
-                T_base_cam_now=T_base_cam_now,
-                T_delta=T_obj @ np.linalg.inv(np.asarray(v.T_base_obj_taught, dtype=np.float64)),
-                z_m=z_m,
-            )  # fmt: skip
-            break
-        ious.append(iou if iou is not None and math.isfinite(iou) else None)
-    # The outline rules out answers it does not fit; among those it fits about equally
-    # (a position a few millimetres off is absorbed by the shift search), the most
-    # correspondences decide, as without it.
-    lead_n = ranked[0][1]
-    eligible = [i for i in range(len(ranked)) if ious[i] is not None
-                and (i == 0 or ranked[i][1] >= SILHOUETTE_MIN_SHARE * lead_n)]  # fmt: skip
-    pick = 0
-    if ious[0] is not None and eligible:
-        best_iou = max(float(ious[i] or 0.0) for i in eligible)
-        pick = next(i for i in eligible if float(ious[i] or 0.0) >= best_iou - SILHOUETTE_TOLERANCE)
-    record: tuple[dict[str, object], ...] = tuple(
-        {
-            "position_m": [float(v) for v in g[0][1].T_base_obj[:3, 3]],
-            "yaw_rad": float(g[0][1].yaw_rad),
-            "views": len(g),
-            "correspondences": int(n),
-            "silhouette_iou": None if iou is None else round(float(iou), 4),
-            "chosen": i == pick,
-        }
-        for i, ((g, n), iou) in enumerate(zip(ranked, ious, strict=True))
-    )
-    return record, ranked[pick]
