@@ -159,7 +159,7 @@ class CellRuntime:
         self.bus = EventBus()
         self._database: Database | None = None
         self._cell: Cell | None = None
-        self.cell_id: int | None = None
+        self._cell_id: int | None = None
         self._sim: SimEngine | None = None
         self._world: CellWorld | None = None
         self.view3d: View3D | None = None
@@ -233,6 +233,13 @@ class CellRuntime:
         if self._live_index is None:
             raise RuntimeError("the cell runtime is not running")
         return self._live_index
+
+    @property
+    def cell_id(self) -> int:
+        """Id of the cell's row (after entering)."""
+        if self._cell_id is None:
+            raise RuntimeError("the cell runtime is not running")
+        return self._cell_id
 
     @property
     def world(self) -> CellWorld:
@@ -328,7 +335,7 @@ class CellRuntime:
         stack.push_async_callback(self.auth_cache.close)
         await check_database(db)
         self._database = db
-        self.cell_id = await ensure_cell_row(db, s.cell_name)
+        self._cell_id = await ensure_cell_row(db, s.cell_name)
         async with db.session() as session:  # the emergency stop knows every live token
             await load_known_tokens(session, self.known_tokens)
         # Every E-STOP press and reset goes to the audit trail after the stop itself.

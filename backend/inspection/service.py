@@ -749,7 +749,7 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
     state: dict[str, Any] = {"decision": "failed", "reason": "", "truth": None, "scores": {},
                              "model": None, "model_id": None, "score": None, "pose": None,
                              "viewpoints": (), "pick": None, "u_m": found.u_m}  # fmt: skip
-    view = getattr(ctx.rt, "view3d", None)
+    view = ctx.rt.view3d
     state["scene"] = SceneRecorder(getattr(view, "server", None))
     db = ctx.rt.database
     # The durable marker goes in before the inspection moves the arm past the top view (a
@@ -898,6 +898,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, plan: _TopPlan, part: F
     if whole:
         region: Any = _WholeImage(np.ones(frame.rgb.shape[:2], dtype=bool))
     else:
+        assert bg is not None  # not whole: there is a background
         t = time.monotonic()
         near = None if mode == "continuous" else _station_px(ctx, T_cam_top, z_mid)
         region = await asyncio.to_thread(segment_object, frame.rgb, bg, near_px=near)
@@ -986,8 +987,8 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, plan: _TopPlan, part: F
             res.model,
             float(res.score),
         )
-        m = live.model_of_name(res.model)
-        state["model_id"] = None if m is None else m.id
+        indexed = None if res.model is None else live.model_of_name(res.model)
+        state["model_id"] = None if indexed is None else indexed.id
         state["reason"] = f"{res.model} scored {res.score:.2f} over {len(res.viewpoints)} view(s)"
     else:
         state["decision"], state["score"] = "unknown", float(res.score)
@@ -1416,7 +1417,7 @@ async def warm_feature_heights(ctx: _Ctx) -> int:
             poses.setdefault(int(mid), {})[int(vid)] = (j, float(y))
     done = 0
     for m in models:
-        if poses.get(m.id):
+        if poses.get(m.id) and m.height_m is not None:  # (the list holds only those)
             await asyncio.to_thread(_feature_heights, ctx, m.name, float(m.height_m), poses[m.id])
             done += 1
     return done
@@ -1521,7 +1522,9 @@ async def _pick(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: Ob
         return {"sorted": opts.sort, "ok": False, "bin": None if b is None else b.name,
                 "reject": bool(b is not None and b.reject), "reason": f"cannot pick: {exc}"}  # fmt: skip
     if not opts.sort:
-        await cell.execute(plan.steps[0].trajectory)
+        approach = plan.steps[0].trajectory
+        assert approach is not None  # a planned pick's first step moves
+        await cell.execute(approach)
         return {
             "sorted": False,
             "ok": True,
