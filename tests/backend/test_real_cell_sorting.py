@@ -2,13 +2,15 @@
 
 ``visioncell serve`` runs as a user starts it (ideal driver, folder camera of real COIL-20
 images, ``VISIONCELL_CELL_LAYOUT`` naming a TOML layout with bins); the token it prints
-signs in; an inspection with ``sort`` plans the part into the bin the layout gives its
-model (uncalibrated: it says where the part would go and why it is not picked).  A layout
+signs in; an inspection with ``sort`` sorts the part into the bin the layout gives its
+model: uncalibrated it says where the part would go and why it is not picked; with a camera
+calibration activated over REST the pick is planned and made into that bin.  A layout
 without bins says so, naming the layout; a bad layout stops the start naming the value.
 """
 
 from __future__ import annotations
 
+import asyncio
 import os
 import re
 import subprocess
@@ -23,6 +25,10 @@ from fastapi.testclient import TestClient
 from pydantic import ValidationError
 
 from backend.app import create_app
+from backend.calibration import NOMINAL_T_EE_CAM
+from backend.db.models import Calibration, CalibrationKind
+from backend.db.session import Database
+from backend.runtime import ensure_cell_row
 from tests.utils.factories import make_settings, make_tokens, migrate
 from tests.utils.recorded import coil_dir, coil_file, link_sequence, upload_views, wait_job
 
@@ -81,6 +87,28 @@ def _inspect_sorted(client: object, headers: dict[str, str]) -> dict:
     return r.json()
 
 
+async def _calibrations(url: str, cell: str) -> list[int]:
+    """Two solved (not active) calibrations of the cell: intrinsics of the 128 x 128 images
+    and the camera's mounting.  They stand in for sessions solved from board images, which
+    this camera (a folder of object photos) cannot take; activating them is the user's step."""
+    db = Database(url)
+    try:
+        cell_id = await ensure_cell_row(db, cell)
+        async with db.session() as session:
+            rows = [
+                Calibration(cell_id=cell_id, kind=CalibrationKind.intrinsic, sample_count=12,
+                            parameters={"K": [[150.0, 0, 64.0], [0, 150.0, 64.0], [0, 0, 1]],
+                                        "dist": [0.0] * 5, "image_size": [128, 128]}),
+                Calibration(cell_id=cell_id, kind=CalibrationKind.hand_eye, sample_count=12,
+                            parameters={"T_ee_cam": NOMINAL_T_EE_CAM.tolist()}),
+            ]  # fmt: skip
+            session.add_all(rows)
+            await session.flush()
+            return [int(r.id) for r in rows]
+    finally:
+        await db.dispose()
+
+
 @pytest.fixture
 def served(tmp_path: Path, data_dir: Path) -> Iterator[tuple[httpx.Client, dict[str, str], Path]]:
     coil, folder = _camera(tmp_path, data_dir)
@@ -88,6 +116,7 @@ def served(tmp_path: Path, data_dir: Path) -> Iterator[tuple[httpx.Client, dict[
     layout.write_text(LAYOUT)
     settings = make_settings(tmp_path, camera_folder=folder, data_dir=data_dir)
     migrate(settings)
+    calibrations = asyncio.run(_calibrations(settings.database_url, settings.cell_name))
     env = {
         **os.environ,
         "VISIONCELL_DATABASE_URL": settings.database_url,
@@ -122,7 +151,7 @@ def served(tmp_path: Path, data_dir: Path) -> Iterator[tuple[httpx.Client, dict[
             assert tokens, out.read_text()[-2000:]
             eng = {"Authorization": f"Bearer {tokens[-1]}"}
             _teach(client, eng, coil)
-            yield client, eng, out
+            yield client, eng, calibrations
     finally:
         proc.terminate()
         try:
@@ -133,7 +162,7 @@ def served(tmp_path: Path, data_dir: Path) -> Iterator[tuple[httpx.Client, dict[
 
 
 def test_a_real_cell_plans_the_pick_into_the_bin_of_its_layout(served):
-    client, eng, _log = served
+    client, eng, calibrations = served
     row = _inspect_sorted(client, eng)
     assert row["decision"] == "recognized" and row["model"] == "obj1", row["reason"]
     pick = row["pick"]
@@ -147,9 +176,22 @@ def test_a_real_cell_plans_the_pick_into_the_bin_of_its_layout(served):
     assert r.status_code == 200 and r.json()["belt"] is None, r.text
     r = client.post("/api/belt", json={"running": True}, headers=eng)
     assert r.status_code == 409 and r.json()["error"] == "conflict", r.text
+    # Calibrated: the part is picked (a guarded descent: imported views give no pose) and
+    # dropped into its bin by the ideal driver.
+    for cid in calibrations:
+        r = client.post(f"/api/calibration/calibrations/{cid}/activate", headers=eng)
+        assert r.status_code == 200, r.text
+    row = _inspect_sorted(client, eng)
+    assert row["decision"] == "recognized" and row["model"] == "obj1", row["reason"]
+    assert "uncalibrated" not in row["reason"], row["reason"]
+    pick = row["pick"]
+    assert pick["sorted"] is True and pick["bin"] == "bin-one" and pick["reject"] is False, pick
+    assert pick["search"] is True and pick["ok"] is True, pick
 
 
-def _layout_cell(tmp_path: Path, data_dir: Path, layout_text: str) -> tuple[TestClient, dict]:
+def _layout_cell(
+    tmp_path: Path, data_dir: Path, layout_text: str
+) -> tuple[TestClient, dict[str, dict[str, str]], Path, Path]:
     coil, folder = _camera(tmp_path, data_dir)
     layout = tmp_path / "cell.json"
     layout.write_text(layout_text)
@@ -158,7 +200,7 @@ def _layout_cell(tmp_path: Path, data_dir: Path, layout_text: str) -> tuple[Test
     migrate(settings)
     tokens = make_tokens(settings)
     headers = {role: {"Authorization": f"Bearer {tok}"} for role, tok in tokens.items()}
-    return TestClient(create_app(settings)), headers, coil, layout  # type: ignore[return-value]
+    return TestClient(create_app(settings)), headers, coil, layout
 
 
 def test_a_layout_without_bins_says_sorting_needs_them(tmp_path, data_dir):
