@@ -1,8 +1,14 @@
-"""Build the robot driver and the camera that the settings ask for.
+"""Build the robot driver, the camera and the cell's world that the settings ask for.
 
 With ``driver="sim"`` or ``camera="sim"`` one :class:`robot.sim.SimEngine` (one per process)
 backs both: the simulated arm and the eye-in-hand camera on its flange.  A simulated camera
 with another driver draws the arm where that driver reports it.
+
+The cell's world comes with them (:func:`make_world`): the conveyor and the layout (station,
+belt, bins) are the simulator's when it runs; otherwise a fixed station
+(:class:`robot.drivers.conveyor.FixedStation`) and the layout file of
+``VISIONCELL_CELL_LAYOUT`` (or the default station without bins).  Only the simulator knows
+the truth (where its objects are), for evaluations.
 """
 
 from __future__ import annotations
@@ -11,23 +17,65 @@ import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import numpy as np
+from numpy.typing import NDArray
+
 from backend.settings import Settings
+from robot.cellworld import CellLayout, TruthSource
 from robot.drivers.base import RobotDriver
+from robot.drivers.conveyor import Conveyor, FixedStation
+from vision.camera import PinholeCamera
 from vision.sources import Camera
 
 if TYPE_CHECKING:
     from robot.sim import SimEngine
 
-__all__ = ["Hardware", "make_camera", "make_driver", "make_hardware", "make_sim_engine"]
+__all__ = [
+    "CellWorld",
+    "Hardware",
+    "NominalCamera",
+    "make_camera",
+    "make_driver",
+    "make_hardware",
+    "make_sim_engine",
+    "make_world",
+]
+
+
+@dataclass(frozen=True)
+class NominalCamera:
+    """The camera model and mounting a cell uses without an active calibration, when its
+    camera comes with exact ones (the simulator's, by construction)."""
+
+    camera: PinholeCamera
+    T_ee_cam: NDArray[np.float64]
+    label: str
+
+
+@dataclass(frozen=True)
+class CellWorld:
+    """The cell around the arm: its conveyor, its layout and, in the simulator, the truth."""
+
+    conveyor: Conveyor
+    layout: CellLayout
+    truth: TruthSource | None = None
+    nominal: NominalCamera | None = None
 
 
 @dataclass(frozen=True)
 class Hardware:
-    """The driver, the camera and, when simulated, the engine behind them."""
+    """The driver, the camera, the cell's world and, when simulated, the engine behind them.
+
+    ``world`` defaults to the one :func:`make_world` builds for ``sim`` and no layout file."""
 
     driver: RobotDriver
     camera: Camera
     sim: SimEngine | None = None
+    world: CellWorld | None = None
+
+    def cell_world(self) -> CellWorld:
+        """``world``, or the default for ``sim``."""
+        return self.world if self.world is not None else make_world(None, self.sim)
 
 
 def headless_mujoco() -> None:
@@ -106,8 +154,30 @@ def make_camera(
     raise ValueError(f"camera {settings.camera!r} is not available in this build")
 
 
+def make_world(settings: Settings | None, sim: SimEngine | None = None) -> CellWorld:
+    """The conveyor, the layout and the truth of the cell: the simulator's when ``sim``, else
+    a fixed station with the layout file of ``settings.cell_layout`` (the default station
+    without bins when unset)."""
+    if sim is not None:
+        from robot.sim import SimConveyor
+        from robot.sim.layout import SimObjectTruth, cell_layout
+
+        cam = sim.config.camera
+        nominal = NominalCamera(cam.pinhole, np.asarray(cam.T_ee_cam, dtype=np.float64),
+                                "simulator nominal")  # fmt: skip
+        return CellWorld(SimConveyor(sim), cell_layout(sim.config.layout), SimObjectTruth(sim),
+                         nominal)  # fmt: skip
+    path = None if settings is None else settings.cell_layout
+    if path is None:
+        return CellWorld(FixedStation(), CellLayout())
+    from robot.layoutfile import load_layout
+
+    return CellWorld(FixedStation(), load_layout(path))
+
+
 def make_hardware(settings: Settings) -> Hardware:
-    """Driver and camera for ``settings``, sharing one simulation engine where both are simulated."""
+    """Driver, camera and the cell's world for ``settings``, sharing one simulation engine
+    where both are simulated."""
     sim = make_sim_engine(settings) if "sim" in (settings.driver, settings.camera) else None
     driver = make_driver(settings, sim)
-    return Hardware(driver, make_camera(settings, sim, driver), sim)
+    return Hardware(driver, make_camera(settings, sim, driver), sim, make_world(settings, sim))

@@ -14,9 +14,10 @@ Entering builds, in this order, and exiting undoes in the reverse order:
    (:class:`StartupError` says to run ``visioncell db upgrade`` otherwise);
 2. the cell's row, named by ``Settings.cell_name`` (created on first start), whose id
    every per-cell service (calibration sessions, active calibrations, inspections) is given;
-3. the hardware the settings name: robot driver, camera and, when either is simulated, the
-   MuJoCo engine behind both (with its belt as a conveyor under the E-STOP and its table
-   and belt as the collision model);
+3. the hardware the settings name: robot driver, camera, the cell's world (conveyor,
+   layout of station, belt and bins, and in the simulator its truth) and, when either is
+   simulated, the MuJoCo engine behind both (with its belt as a conveyor under the E-STOP
+   and its table and belt as the collision model);
 4. the :class:`~backend.cell.Cell` (driver connected, camera feed, jobs, event bus);
 5. the viser 3D view, when ``view3d_enabled`` (or ``view3d=True``).
 """
@@ -38,9 +39,10 @@ from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Cell as CellRow
 from backend.db.session import Database
 from backend.estoplog import EStopLog
-from backend.hardware import Hardware, make_hardware
+from backend.hardware import CellWorld, Hardware, NominalCamera, make_hardware
 from backend.heavy import HeavyPool
 from backend.inspection import recovery
+from backend.inspection.state import InspectionState
 from backend.jobs import JobManager
 from backend.knowntokens import KnownTokens
 from backend.readcache import ReadCache
@@ -55,6 +57,8 @@ if TYPE_CHECKING:
     from backend.recognition.autothreshold import ThresholdKeeper
     from backend.recognition.sync import IndexSync
     from backend.view3d import View3D
+    from robot.cellworld import CellLayout, TruthSource
+    from robot.drivers.conveyor import Conveyor
     from robot.sim import SimEngine
 
 __all__ = ["CellRuntime", "StartupError", "check_database", "ensure_cell_row"]
@@ -130,9 +134,20 @@ class CellRuntime:
         Id of the cell's row (``settings.cell_name``).
     cell : Cell
     bus : EventBus
+    conveyor : Conveyor
+        The cell's conveyor (the simulator's belt, or a fixed station).
+    layout : CellLayout
+        Station, belt and bins (the simulator's, or the layout file's).
+    truth : TruthSource or None
+        Where the objects truly are (simulator only; read by evaluations, never decisions).
+    nominal_camera : NominalCamera or None
+        The camera model and mounting used without an active calibration, when exact.
     sim : SimEngine or None
-        The simulated cell, when the driver or the camera is simulated.
+        The simulated cell, when the driver or the camera is simulated (its own routes,
+        its calibration run, the 3D view's scene and the benchmarks).
     view3d : View3D or None
+    inspection : InspectionState
+        The belt background and the continuous run of the inspection service.
     """
 
     def __init__(
@@ -144,8 +159,9 @@ class CellRuntime:
         self.bus = EventBus()
         self._database: Database | None = None
         self._cell: Cell | None = None
-        self.cell_id: int | None = None
-        self.sim: SimEngine | None = None
+        self._cell_id: int | None = None
+        self._sim: SimEngine | None = None
+        self._world: CellWorld | None = None
         self.view3d: View3D | None = None
         self._live_index: LiveIndex | None = None
         #: Keeps the live index in step with other processes' changes (after entering).
@@ -154,10 +170,8 @@ class CellRuntime:
         self.teach_backgrounds = BackgroundStore()
         #: Ids of the failed rows written at start-up for inspections left unfinished.
         self.interrupted_at_start: list[int] = []
-        #: The top view's empty belt registered to its travel (inspection.grab_belt_background).
-        self.belt_background: Any = None
-        #: The continuous inspection run, if one was started (``backend.inspection.service``).
-        self.inspection_run: Any = None
+        #: The inspection service's belt background and continuous run.
+        self.inspection = InspectionState()
         #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).
         #: Successful sign-ins reused for 2 s (``backend.authcache``).
         self.auth_cache = AuthCache(refresh_ahead=settings.refresh_ahead)
@@ -221,6 +235,45 @@ class CellRuntime:
         return self._live_index
 
     @property
+    def cell_id(self) -> int:
+        """Id of the cell's row (after entering)."""
+        if self._cell_id is None:
+            raise RuntimeError("the cell runtime is not running")
+        return self._cell_id
+
+    @property
+    def world(self) -> CellWorld:
+        """The cell's conveyor, layout and truth (after entering)."""
+        if self._world is None:
+            raise RuntimeError("the cell runtime is not running")
+        return self._world
+
+    @property
+    def conveyor(self) -> Conveyor:
+        """The cell's conveyor (after entering)."""
+        return self.world.conveyor
+
+    @property
+    def layout(self) -> CellLayout:
+        """Station, belt and bins (after entering)."""
+        return self.world.layout
+
+    @property
+    def truth(self) -> TruthSource | None:
+        """Where the objects truly are: the simulator only; for evaluations."""
+        return None if self._world is None else self._world.truth
+
+    @property
+    def nominal_camera(self) -> NominalCamera | None:
+        """Camera model and mounting without an active calibration, when exact (simulator)."""
+        return None if self._world is None else self._world.nominal
+
+    @property
+    def sim(self) -> SimEngine | None:
+        """The simulated cell (None on a real cell, and before entering)."""
+        return self._sim
+
+    @property
     def jobs(self) -> JobManager:
         """The cell's jobs."""
         return self.cell.jobs
@@ -265,7 +318,8 @@ class CellRuntime:
         self._database = None
         self._live_index = None
         self.view3d = None
-        self.sim = None
+        self._sim = None
+        self._world = None
 
     async def _build(self, stack: contextlib.AsyncExitStack) -> None:
         s = self.settings
@@ -281,7 +335,7 @@ class CellRuntime:
         stack.push_async_callback(self.auth_cache.close)
         await check_database(db)
         self._database = db
-        self.cell_id = await ensure_cell_row(db, s.cell_name)
+        self._cell_id = await ensure_cell_row(db, s.cell_name)
         async with db.session() as session:  # the emergency stop knows every live token
             await load_known_tokens(session, self.known_tokens)
         # Every E-STOP press and reset goes to the audit trail after the stop itself.
@@ -325,13 +379,14 @@ class CellRuntime:
         if hardware.sim is not None:
             engine = hardware.sim
             stack.push_async_callback(asyncio.to_thread, engine.stop)
-        world, conveyors = None, []
+        cell_world = hardware.cell_world()
+        world = None
         if hardware.sim is not None:
-            from robot.sim import SimConveyor
             from robot.sim.obstacles import collision_world
 
             world = collision_world(hardware.sim.config.layout, model=hardware.sim.arm_model)
-            conveyors.append(SimConveyor(hardware.sim))
+        # The E-STOP halts every conveyor that can move (a fixed station cannot).
+        conveyors = [cell_world.conveyor] if cell_world.conveyor.controllable else []
         driver: Any = hardware.driver
         logged = None
         if s.motion_log is not None:  # the audit sits between the cell and its driver
@@ -354,7 +409,8 @@ class CellRuntime:
         cell.jobs.add_listener(journal)
         await cell.start()
         stack.push_async_callback(cell.stop)
-        self.sim = hardware.sim
+        self._sim = hardware.sim
+        self._world = cell_world
         self._cell = cell
         if s.threshold_follow:
             from backend.recognition.autothreshold import ThresholdKeeper
@@ -380,7 +436,12 @@ class CellRuntime:
                 known=self.known_tokens,
             )
             view = View3D(
-                cell, host=s.viser_host, port=s.viser_port, sim=hardware.sim, access=access
+                cell,
+                host=s.viser_host,
+                port=s.viser_port,
+                sim=hardware.sim,
+                access=access,
+                bins=cell_world.layout.bins,
             )
             await view.start()
             stack.push_async_callback(view.stop)

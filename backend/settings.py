@@ -133,6 +133,12 @@ class Settings(BaseSettings):
         description="Folder camera: replay the images sorted by file name, or in the order "
         "the folder's order.txt lists them (one file name per line).",
     )
+    cell_layout: Path | None = Field(
+        None,
+        description="A real cell's layout file (TOML or JSON: the station, the belt, the "
+        "sorting bins; robot.layoutfile).  Unset: a fixed station in front of the arm, no "
+        "bins.  The simulated cell has its own layout.",
+    )
     camera_transfer: Literal["auto", "linear", "srgb"] = Field(
         "auto",
         description="The camera's transfer curve, for the colour descriptor (color-sift) and "
@@ -444,6 +450,18 @@ class Settings(BaseSettings):
             )
         if self.camera_order == "manifest" and self.camera != "folder":
             raise ValueError("camera_order='manifest' is an order of the folder camera's images")
+        if self.cell_layout is not None:
+            if "sim" in (self.driver, self.camera):
+                raise ValueError(
+                    "VISIONCELL_CELL_LAYOUT describes a real cell: the simulated cell "
+                    f"(driver={self.driver!r}, camera={self.camera!r}) has its own layout"
+                )
+            from robot.layoutfile import LayoutError, load_layout
+
+            try:
+                load_layout(self.cell_layout)
+            except LayoutError as exc:
+                raise ValueError(f"VISIONCELL_CELL_LAYOUT: {exc}") from None
         if self.http_port == self.viser_port and self.http_host == self.viser_host:
             raise ValueError(f"http_port and viser_port must differ, both are {self.http_port}")
         return self

@@ -30,11 +30,11 @@ from backend.cell import Cell
 from backend.db.models import Role, User
 from backend.db.session import Database
 from backend.readcache import ReadCache
+from backend.runtime import CellRuntime
 from backend.settings import Settings
 from backend.throttle import SignInThrottle, TooManyAttempts
 
 if TYPE_CHECKING:
-    from backend.runtime import CellRuntime
     from backend.view3d import View3D
     from robot.sim import SimEngine
 
@@ -190,9 +190,9 @@ async def read_through(
     return await cache.get_or_read(key, role=Role[user.role], tables=tables, read=fresh)
 
 
-# Types the runtime's module would import at start-up are written as Any here (FastAPI only
-# needs the dependency); the functions above carry the precise types.
-RuntimeDep = Annotated[Any, Depends(_runtime_dependency)]
+# The simulator and the 3D view would load MuJoCo and viser at start-up: written as Any here
+# (FastAPI only needs the dependency); the functions above carry the precise types.
+RuntimeDep = Annotated[CellRuntime, Depends(_runtime_dependency)]
 SettingsDep = Annotated[Settings, Depends(_settings_dependency)]
 DatabaseDep = Annotated[Database, Depends(get_database)]
 SimDep = Annotated[Any, Depends(get_sim_or_none)]

@@ -14,11 +14,11 @@ One inspection (:func:`inspect_object`):
    does (:func:`backend.recognition.segment.segment_object`);
 3. **recognise**: :func:`vision.recognition.recognise_views` with the live index and the
    thresholds in force; its ``look`` returns the top view for viewpoint 1 and moves the arm
-   to side viewpoints 2 / 3 planned (:func:`backend.inspection.viewpoints.plan_viewpoints`)
+   to side viewpoints 2 / 3 planned (:func:`robot.viewpoints.plan_viewpoints`)
    from where the top view found the object (predicted along the belt when it moves);
 4. **decide**: ``recognized`` (a model), ``unknown`` (no model passes, or models too alike:
    ambiguous) or ``failed`` (segmentation, a move, e-stop, stop), with the reason;
-5. **pose** (:mod:`backend.inspection.pose`) from the trained top views that verify on the
+5. **pose** (:mod:`vision.pose`) from the trained top views that verify on the
    top view; when it rests on too little (:func:`rests_on_too_little`) a second top view,
    turned about the camera's axis, gives it, or the object has no pose
    (:func:`_second_top_view`);
@@ -44,7 +44,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import timedelta
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -81,6 +81,11 @@ from vision.recognition.light import apply_gain, light_gain, surround_colour
 from vision.recognition.recognise import verify_view
 from vision.segmentation import iou
 from vision.segmentation.roi import SideRoi, height_bound, side_query, side_roi
+
+if TYPE_CHECKING:
+    from backend.runtime import CellRuntime
+    from robot.cellworld import BeltSpan, Bin
+    from robot.drivers.conveyor import Conveyor
 
 __all__ = ["InspectOptions", "InspectionDone", "InspectionRun", "hold_until_ready", "inspect_object", "readiness", "start_inspection", "start_run"]  # fmt: skip
 
@@ -213,7 +218,7 @@ class NoObject(VisionCellError):
 class _Ctx:
     """What one inspection needs from the runtime (built by :func:`context`)."""
 
-    rt: Any
+    rt: CellRuntime
     camera: Any
     T_ee_cam: NDArray[np.float64]
     source: str
@@ -222,22 +227,24 @@ class _Ctx:
     #: Why a pose (and so a pick) cannot be trusted here: empty when the camera model and
     #: its mounting are calibrated (or are the simulator's own, exact by construction).
     uncalibrated: str = ""
+    #: Where parts leave the belt (base y, metres; infinite: no belt).
+    belt_end_y_m: float = math.inf
 
 
-async def context(rt: Any) -> _Ctx:
-    """Camera model and mounting: the cell's active calibrations, else the simulator's
-    nominal camera and mounting, else the drawing's (reported in ``source``)."""
+async def context(rt: CellRuntime) -> _Ctx:
+    """Camera model and mounting: the cell's active calibrations, else the camera's exact
+    nominal ones (the simulator's), else the drawing's (reported in ``source``); the
+    station, its surface and the belt's end from the cell's layout."""
     from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration, nominal_camera
-    from robot.sim.world import ConveyorSpec
 
     async with rt.database.session() as session:
         cal = await active_camera_calibration(session, rt.cell_id)
     camera, T = cal.camera, cal.T_ee_cam
     src = []
-    sim = rt.sim
+    nominal = rt.nominal_camera
     if camera is None:
-        if sim is not None:
-            camera, s = sim.config.camera.pinhole, "simulator nominal intrinsics"
+        if nominal is not None:
+            camera, s = nominal.camera, f"{nominal.label} intrinsics"
         else:
             frame = rt.cell.latest_frame
             w, h = (640, 480) if frame is None else (frame.width, frame.height)
@@ -246,46 +253,38 @@ async def context(rt: Any) -> _Ctx:
     else:
         src.append("active intrinsics")
     if T is None:
-        if sim is not None:
-            T, s = np.asarray(sim.config.camera.T_ee_cam), "simulator nominal mounting"
+        if nominal is not None:
+            T, s = np.asarray(nominal.T_ee_cam), f"{nominal.label} mounting"
         else:
             T, s = np.asarray(NOMINAL_T_EE_CAM), "drawing's mounting (uncalibrated)"
         src.append(s)
     else:
         src.append("active hand-eye")
-    spec = sim.config.layout.conveyor if sim is not None else ConveyorSpec()
+    layout = rt.layout
+    end = layout.belt_end_y_m
     missing = [s for s in src if "uncalibrated" in s]
     why = ("needs an active camera calibration (intrinsics and hand-eye): this cell uses the "
            + " and the ".join(missing)) if missing else ""  # fmt: skip
     return _Ctx(rt, camera, np.asarray(T, dtype=np.float64), ", ".join(src),
-                np.asarray(spec.station_point, dtype=np.float64), float(spec.surface_z_m),
-                why)  # fmt: skip
+                layout.station_point, float(layout.surface_z_m), why,
+                math.inf if end is None else float(end))  # fmt: skip
 
 
-def _belt(rt: Any) -> tuple[str, float, float]:
-    """(mode, speed m/s, travel m) of the belt: the simulator's conveyor (its encoder)."""
-    if rt.sim is None:
-        return "index", 0.0, 0.0
-    st = rt.sim.conveyor_state
+def _belt(rt: CellRuntime) -> tuple[str, float, float]:
+    """(mode, speed m/s, travel m) of the cell's conveyor: ``continuous`` only while it runs
+    at a speed (its encoder gives the travel); a fixed station is ``index`` at 0 m."""
+    st = rt.conveyor.status()
     moving = st.running and st.mode == "continuous" and st.speed_m_s > 0
     return ("continuous" if moving else "index"), float(st.speed_m_s), float(st.travel_m)
 
 
-def _truth_near(rt: Any, point: NDArray[np.float64], back_m: float = 0.0) -> dict[str, Any] | None:
-    """Simulator only, for evaluation: the object nearest ``point`` (never read by decisions),
-    moved back ``back_m`` along the belt (its travel since the exposure)."""
-    if rt.sim is None:
-        return None
-    objs = rt.sim.objects()
-    if not objs:
-        return None
-    o = min(
-        objs, key=lambda o: float(np.linalg.norm(o.T_base_obj[:2, 3] - point[:2] + [0, back_m]))
-    )
-    T = o.T_base_obj.copy()
-    T[1, 3] -= back_m
-    return {"id": o.id, "name": o.name, "trainable": o.trainable,
-            "T_base_obj": T.tolist(), "yaw_rad": o.yaw_rad}  # fmt: skip
+def _truth_near(rt: CellRuntime, point: NDArray[np.float64],
+                back_m: float = 0.0) -> dict[str, Any] | None:  # fmt: skip
+    """For evaluation only, where the cell knows it (the simulator): the object nearest
+    ``point`` (never read by decisions), moved back ``back_m`` along the belt (its travel
+    since the exposure)."""
+    truth = rt.truth
+    return None if truth is None else truth.object_near(point, back_m)
 
 
 def _draw(rgb: NDArray[np.uint8], mask: NDArray[np.bool_] | None, label: str) -> bytes:
@@ -307,18 +306,19 @@ def _look_times(frame: Any, durations: dict[str, float]) -> None:
         _add(durations, k, lk.get(f"{k}_s", 0.0))
 
 
-def _travel_of(frame: Any, rt: Any) -> float:
+def _travel_of(frame: Any, rt: CellRuntime) -> float:
     """The belt's travel at the frame's exposure: the encoder count latched with it
-    (``meta["belt_travel_m"]``), else the encoder read now."""
+    (``meta["belt_travel_m"]``), else the conveyor's encoder at its exposure time."""
     t = frame.meta.get("belt_travel_m")
     if isinstance(t, int | float) and math.isfinite(t):
         return float(t)
-    return _belt(rt)[2]
+    stamp = getattr(frame, "stamp_s", None)
+    return float(rt.conveyor.travel_at(stamp if isinstance(stamp, float) else None))
 
 
 def _background_for(ctx: _Ctx, frame: Any, bg: NDArray[np.uint8]) -> NDArray[np.uint8]:
     """The empty-belt background for ``frame``: the belt background registered to the
-    belt's travel at its exposure (:mod:`backend.inspection.belt`) when one was grabbed
+    belt's travel at its exposure (:mod:`vision.segmentation.belt`) when one was grabbed
     from this camera pose and no still background was grabbed after it, else the still
     background ``bg`` (right while the belt stands where it stood when ``bg`` was grabbed).
 
@@ -328,11 +328,11 @@ def _background_for(ctx: _Ctx, frame: Any, bg: NDArray[np.uint8]) -> NDArray[np.
     a colour cast against the belt of the normal light (issue 14's campaign: 96.9 % and
     80.6 % named, after the constant-speed run had grabbed a belt background).
     """
-    bb = getattr(ctx.rt, "belt_background", None)
+    bb = ctx.rt.inspection.belt_background
     if bb is None or frame.robot_state is None:
         return bg
-    store = getattr(ctx.rt, "teach_backgrounds", None)
-    if store is not None and store.taken_at > bb.taken_at:
+    store = ctx.rt.teach_backgrounds
+    if store.taken_at > bb.taken_at:
         return bg
     if not bb.matches(_T_cam(frame.robot_state.q, ctx.T_ee_cam)):
         return bg
@@ -459,7 +459,7 @@ class Waiting:
     forever: bool = False
 
 
-def _indexing(rt: Any) -> bool:
+def _indexing(rt: CellRuntime) -> bool:
     """Whether an indexing belt is carrying its parts to the station now (it runs and holds
     none there): two alike frames then mean only that the camera saw the belt at one
     instant twice, not a part at rest."""
@@ -657,7 +657,7 @@ async def _look_with_region(ctx: _Ctx, q: NDArray[np.float64], *, top_mask: NDAr
                             **roi_options: Any) -> tuple[Any, NDArray[np.float64], SideRoi, float]:  # fmt: skip
     """Visit joints ``q``; the frame, its camera pose, the region of its image where the
     object found in the top view (``top_mask`` seen from ``T_cam_top``) can be
-    (:func:`backend.inspection.roi.side_roi`, up to ``height_m``, with ``roi_options``; with
+    (:func:`vision.segmentation.roi.side_roi`, up to ``height_m``, with ``roi_options``; with
     ``travel0`` -- the belt's travel at the top view's exposure, constant speed -- moved by
     the belt's travel since) and the seconds the region took."""
     f = await ctx.rt.cell.look(q, speed=speed)
@@ -692,13 +692,13 @@ async def _side_view(ctx: _Ctx, vp: int, point: NDArray[np.float64], *, T_plan: 
     return _SideView(f, T_cam, roi, plan_s, roi_s, tuple(notes))
 
 
-def _carried(rt: Any, found: NDArray[np.float64], travel0: float, speed_m_s: float,
+def _carried(ctx: _Ctx, found: NDArray[np.float64], travel0: float, speed_m_s: float,
              vp: int) -> NDArray[np.float64]:  # fmt: skip
     """Where to plan viewpoint ``vp`` of the object found at ``found`` in the top view (belt
     travel ``travel0`` then) at constant speed: where the belt will have carried it 1.5 s
     from now (:func:`carried_point`)."""
-    ahead = _belt(rt)[2] - travel0 + 1.5 * speed_m_s
-    return carried_point(found, ahead, rt.sim.config.layout.conveyor.end_y_m, vp)
+    ahead = _belt(ctx.rt)[2] - travel0 + 1.5 * speed_m_s
+    return carried_point(found, ahead, ctx.belt_end_y_m, vp)
 
 
 async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
@@ -747,7 +747,7 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
     state: dict[str, Any] = {"decision": "failed", "reason": "", "truth": None, "scores": {},
                              "model": None, "model_id": None, "score": None, "pose": None,
                              "viewpoints": (), "pick": None, "u_m": found.u_m}  # fmt: skip
-    view = getattr(ctx.rt, "view3d", None)
+    view = ctx.rt.view3d
     state["scene"] = SceneRecorder(getattr(view, "server", None))
     db = ctx.rt.database
     # The durable marker goes in before the inspection moves the arm past the top view (a
@@ -896,6 +896,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, plan: _TopPlan, part: F
     if whole:
         region: Any = _WholeImage(np.ones(frame.rgb.shape[:2], dtype=bool))
     else:
+        assert bg is not None  # not whole: there is a background
         t = time.monotonic()
         near = None if mode == "continuous" else _station_px(ctx, T_cam_top, z_mid)
         region = await asyncio.to_thread(segment_object, frame.rgb, bg, near_px=near)
@@ -930,7 +931,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, plan: _TopPlan, part: F
             return feats
         state["stage"] = f"viewpoint {vp}"
         report(0.3 + 0.2 * len(frames), f"viewpoint {vp}")
-        point = _carried(rt, found, travel0, speed_m_s, vp) if mode == "continuous" else found
+        point = _carried(ctx, found, travel0, speed_m_s, vp) if mode == "continuous" else found
         if whole:  # no top-view region to carry over: the side view is recognised whole
             plan = await asyncio.to_thread(plan_viewpoints, point, T_ee_cam=T_plan,
                                            views=(VIEW_NAMES[vp - 1],), object_height_m=AIM_HEIGHT_M)  # fmt: skip
@@ -984,8 +985,8 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, plan: _TopPlan, part: F
             res.model,
             float(res.score),
         )
-        m = live.model_of_name(res.model)
-        state["model_id"] = None if m is None else m.id
+        indexed = None if res.model is None else live.model_of_name(res.model)
+        state["model_id"] = None if indexed is None else indexed.id
         state["reason"] = f"{res.model} scored {res.score:.2f} over {len(res.viewpoints)} view(s)"
     else:
         state["decision"], state["score"] = "unknown", float(res.score)
@@ -1046,11 +1047,11 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, plan: _TopPlan, part: F
             t += sum(durations.get(k, 0.0) for k in ("move", "settle", "acquire")) - looked
             second = again.summary
     belt_stopped = False
-    if mode == "continuous" and opts.sort and rt.sim is not None:
+    if mode == "continuous" and opts.sort and rt.conveyor.controllable:
         # Picking from a moving belt would need conveyor tracking the 5-DOF arm's controller
         # has not: the cell stops the belt (the encoder then says where the object is: the
         # prediction below is exact) and starts it again after the pick.
-        rt.sim.configure_conveyor(running=False)
+        await rt.conveyor.stop()
         belt_stopped = True
     if pose is not None:
         pub = pose.public()
@@ -1076,9 +1077,9 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, plan: _TopPlan, part: F
     try:
         await _pick_stage(ctx, opts, state, pose, stored_h, radius, grasp, found, mode, travel0)
     finally:
-        if belt_stopped and rt.sim is not None and not cell.estopped:
+        if belt_stopped and not cell.estopped:
             with contextlib.suppress(Exception):
-                rt.sim.configure_conveyor(running=True, mode="continuous", speed_m_s=speed_m_s)
+                await rt.conveyor.start(mode="continuous", speed_m_s=speed_m_s)
     _add(durations, "pick", time.monotonic() - t)
 
 
@@ -1094,13 +1095,19 @@ async def _pick_stage(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], po
     or enter it).  An unknown or failed object goes to the reject bin.  A pick that cannot
     be planned or does not hold the part says so in the inspection's reason."""
     rt = ctx.rt
+    recognised = state["decision"] == "recognized"
     if pose is None and ctx.uncalibrated:
         why = f"not picked: a pick {ctx.uncalibrated}"
-        if opts.sort and rt.sim is None:
-            why += f"; {NO_BINS}"
-        state["pick"] = {"sorted": opts.sort, "ok": False, "reason": why}
+        pick: dict[str, Any] = {"sorted": opts.sort, "ok": False}
+        if opts.sort:  # where it would go: the sorting itself is planned without the pose
+            b = _bin_for(rt, _part_of(rt, state) if recognised else None)
+            if b is None:
+                why += f"; {_no_bin(rt)}"
+            else:
+                pick.update(bin=b.name, reject=bool(b.reject))
+                why += f"; it would go to bin {b.name!r}"
+        state["pick"] = {**pick, "reason": why}
         return
-    recognised = state["decision"] == "recognized"
     source = _geometry_source(rt.live_index, state["model"]) if recognised else ""
     at = found.copy()
     if mode == "continuous":
@@ -1217,7 +1224,7 @@ async def _second_top_view(
     point = found
     if mode == "continuous":
         try:
-            point = _carried(rt, found, travel0, speed_m_s, 1)
+            point = _carried(ctx, found, travel0, speed_m_s, 1)
         except Unreachable as exc:
             return none(str(exc))
     try:
@@ -1408,7 +1415,7 @@ async def warm_feature_heights(ctx: _Ctx) -> int:
             poses.setdefault(int(mid), {})[int(vid)] = (j, float(y))
     done = 0
     for m in models:
-        if poses.get(m.id):
+        if poses.get(m.id) and m.height_m is not None:  # (the list holds only those)
             await asyncio.to_thread(_feature_heights, ctx, m.name, float(m.height_m), poses[m.id])
             done += 1
     return done
@@ -1417,7 +1424,16 @@ async def warm_feature_heights(ctx: _Ctx) -> int:
 #: What a result says when the top view had no empty-belt background to segment against.
 WHOLE_IMAGE_NOTE = "recognised on the whole image (no empty-belt background: no teach on this cell)"
 #: What a result says when it should sort in a cell that has no bins.
-NO_BINS = "sorting is not available: this cell has no bins (only the simulated cell has them)"
+NO_BINS = "sorting is not available: this cell has no bins"
+
+
+def _no_bin(rt: CellRuntime) -> str:
+    """Why no bin takes a part: the layout has no bins, or no reject bin."""
+    layout = rt.layout
+    if not layout.bins:
+        return (f"{NO_BINS} (layout: {layout.source}; a real cell lists its bins in the "
+                "layout file VISIONCELL_CELL_LAYOUT)")  # fmt: skip
+    return f"no bin takes this part and the cell's layout ({layout.source}) has no reject bin"
 
 
 @dataclass(frozen=True, eq=False)
@@ -1428,14 +1444,15 @@ class _WholeImage:
     method: str = WHOLE_IMAGE_NOTE
 
 
-def _bin_for(rt: Any, part: str | None) -> Any:
-    if rt.sim is None:
-        return None
-    bins = rt.sim.config.layout.bins
-    for b in bins:
-        if part is not None and part in b.parts:
-            return b
-    return next((b for b in bins if b.reject), None)
+def _bin_for(rt: CellRuntime, part: str | None) -> Bin | None:
+    """The layout's bin for ``part`` (the reject bin for None or a part no bin takes)."""
+    return rt.layout.bin_for(part)
+
+
+def _part_of(rt: CellRuntime, state: dict[str, Any]) -> str | None:
+    """The part the recognised model is (its ``part``, else its name)."""
+    m = rt.live_index.model_of_name(state["model"]) if state["model"] else None
+    return None if m is None else m.part
 
 
 async def _pick_unknown(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any],
@@ -1459,8 +1476,7 @@ async def _pick_unknown(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any],
         part = None if m is None else m.part
     b = _bin_for(rt, part)
     if b is None:
-        return {"sorted": True, "ok": False,
-                "reason": NO_BINS if rt.sim is None else "no reject bin in this cell"}  # fmt: skip
+        return {"sorted": True, "ok": False, "reason": _no_bin(rt)}
     if why is not None and b.reject:
         why += f"; no bin takes part {part!r}: rejected"
     T = np.eye(4)
@@ -1504,7 +1520,9 @@ async def _pick(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: Ob
         return {"sorted": opts.sort, "ok": False, "bin": None if b is None else b.name,
                 "reject": bool(b is not None and b.reject), "reason": f"cannot pick: {exc}"}  # fmt: skip
     if not opts.sort:
-        await cell.execute(plan.steps[0].trajectory)
+        approach = plan.steps[0].trajectory
+        assert approach is not None  # a planned pick's first step moves
+        await cell.execute(approach)
         return {
             "sorted": False,
             "ok": True,
@@ -1512,8 +1530,7 @@ async def _pick(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: Ob
             "reason": "moved to the approach pose",
         }
     if b is None:
-        return {"sorted": True, "ok": False,
-                "reason": NO_BINS if rt.sim is None else "no bins in this cell"}  # fmt: skip
+        return {"sorted": True, "ok": False, "reason": _no_bin(rt)}
     with cell._arm("a pick"):  # the job holds the arm; this is its motion
         out = await execute_pick_place(cell.driver, plan)
     return {"sorted": True, "ok": out.ok, "bin": b.name, "reject": bool(b.reject),
@@ -1534,7 +1551,7 @@ class InspectionRun:
     job: Any = None
 
 
-async def _station_top(rt: Any) -> tuple[_Ctx, Any]:
+async def _station_top(rt: CellRuntime) -> tuple[_Ctx, Any]:
     """The context and the top view at the station, planned with the active hand-eye
     calibration (the nominal mounting without one)."""
     from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
@@ -1548,7 +1565,7 @@ async def _station_top(rt: Any) -> tuple[_Ctx, Any]:
     return ctx, top
 
 
-async def grab_background(rt: Any, *, speed: float | None = None) -> None:
+async def grab_background(rt: CellRuntime, *, speed: float | None = None) -> None:
     """Grab the empty-belt background of the top view at the station (the station must be
     empty), e.g. after the lights changed; stored with the teaches' backgrounds.  A belt
     background grabbed before it is no longer used (it holds the old light): grab that
@@ -1559,62 +1576,73 @@ async def grab_background(rt: Any, *, speed: float | None = None) -> None:
 
 
 async def grab_belt_background(
-    rt: Any, *, speed: float | None = None, frames: int = 14, jog_m_s: float = 0.5
+    rt: CellRuntime, *, speed: float | None = None, frames: int = 14, jog_m_s: float = 0.5
 ) -> Any:
     """Grab the empty-belt background of the top view at the station registered to the
-    belt's travel (:class:`backend.inspection.belt.BeltBackground`), for constant belt speed
+    belt's travel (:class:`vision.segmentation.belt.BeltBackground`), for constant belt speed
     and for a belt that moved since the still background was grabbed.
 
     The station and the belt upstream must be empty.  The arm looks from the top view; the
     belt is jogged round its whole loop in ``frames`` steps (at ``jog_m_s``), one still frame
-    after each, then left as it was.  Needs a conveyor the cell can jog and read (the
-    simulator's today: a :class:`~vision.errors.Conflict` otherwise).  Kept on the runtime
-    (``rt.belt_background``) until the next grab.
+    after each, then left as it was.  Needs a conveyor the cell can jog and read and a belt
+    in the cell's layout (a :class:`~vision.errors.Conflict` otherwise).  Kept on the
+    runtime (``rt.inspection.belt_background``) until the next grab.
     """
     from vision.segmentation.belt import BeltGeometry, build_belt_background
 
-    sim = rt.sim
-    if sim is None:
-        raise Conflict("a belt background needs a conveyor the cell can jog (the simulator's)")
+    conveyor, belt = _jog_check(rt)
     if isinstance(frames, bool) or not isinstance(frames, int) or not 5 <= frames <= 64:
         raise InvalidInput(f"frames must be an integer in 5..64, got {frames!r}")
     if not (isinstance(jog_m_s, int | float) and 0.01 <= jog_m_s <= 2.0):
         raise InvalidInput(f"jog_m_s must be in [0.01, 2] m/s, got {jog_m_s!r}")
     ctx, top = await _station_top(rt)
-    spec = sim.config.layout.conveyor
-    before = sim.conveyor_state
+    before = conveyor.status()
     shots: list[tuple[NDArray[np.uint8], float]] = []
     frame = await rt.cell.look(top.q, speed=speed)
-    step = spec.length_m / frames
+    step = belt.length_m / frames
     try:
-        sim.configure_conveyor(running=False)
+        await conveyor.stop()
         for _ in range(frames):
             frame = await rt.cell.look(None)
             shots.append((frame.rgb, _travel_of(frame, rt)))
-            start = sim.conveyor_state.travel_m
-            sim.configure_conveyor(running=True, mode="continuous", speed_m_s=float(jog_m_s))
-            deadline = time.monotonic() + 60.0
-            while sim.conveyor_state.travel_m - start < step:
+            start = conveyor.travel_at()
+            await conveyor.start(mode="continuous", speed_m_s=float(jog_m_s))
+            deadline = time.monotonic() + 60.0  # only a belt that does not move at all
+            while conveyor.travel_at() - start < step:
                 if time.monotonic() > deadline:
                     raise Conflict("the belt did not move while grabbing its background")
                 await asyncio.sleep(0.005)
-            sim.configure_conveyor(running=False)
-    finally:
-        sim.configure_conveyor(running=before.running, mode=before.mode, speed_m_s=before.speed_m_s)
+            await conveyor.stop()
+    finally:  # left as it was: its mode and speed, running or not
+        await conveyor.stop()
+        await conveyor.set_mode(before.mode, speed_m_s=before.speed_m_s)
+        if before.running:
+            await conveyor.start()
+    station = rt.layout.station_point
     geo = BeltGeometry(
-        spec.centre_x_m, spec.start_y_m, spec.width_m, spec.surface_z_m, spec.length_m
+        float(station[0]), belt.start_y_m, belt.width_m, float(station[2]), belt.length_m
     )
     bb = await asyncio.to_thread(build_belt_background, shots, camera=ctx.camera,
                                  T_base_cam=_T_cam(frame.robot_state.q, ctx.T_ee_cam), geometry=geo)  # fmt: skip
-    rt.belt_background = bb
+    rt.inspection.belt_background = bb
     return bb
 
 
-def start_belt_background(rt: Any) -> Any:
+def _jog_check(rt: CellRuntime) -> tuple[Conveyor, BeltSpan]:
+    """The conveyor and the belt a belt background jogs, or :class:`Conflict` saying why not."""
+    conveyor, belt = rt.conveyor, rt.layout.belt
+    if not conveyor.controllable:
+        raise Conflict(f"a belt background needs a conveyor the cell can jog: this cell's is "
+                       f"a {conveyor.name}")  # fmt: skip
+    if belt is None:
+        raise Conflict(f"a belt background needs a belt in the cell's layout ({rt.layout.source})")
+    return conveyor, belt
+
+
+def start_belt_background(rt: CellRuntime) -> Any:
     """Start a job grabbing the belt background (:func:`grab_belt_background`); 409 at once
     when the arm is busy or e-stopped, or the cell has no conveyor it can jog."""
-    if rt.sim is None:
-        raise Conflict("a belt background needs a conveyor the cell can jog (the simulator's)")
+    _jog_check(rt)
     rt.cell.check_can_move()
     rt.jobs.check_arm_free()
 
@@ -1626,7 +1654,7 @@ def start_belt_background(rt: Any) -> Any:
     return rt.jobs.start("belt-background", body, motion=True, params={})
 
 
-def _check_ready(rt: Any) -> None:
+def _check_ready(rt: CellRuntime) -> None:
     """409 at once (not in the job): e-stop, arm busy, nothing trained."""
     rt.cell.check_can_move()
     rt.jobs.check_arm_free()
@@ -1634,7 +1662,7 @@ def _check_ready(rt: Any) -> None:
         raise NothingTrained(NOT_TRAINED)
 
 
-async def start_inspection(rt: Any, opts: InspectOptions) -> Any:
+async def start_inspection(rt: CellRuntime, opts: InspectOptions) -> Any:
     """Start a job inspecting the object at the station; returns the job."""
     _check_ready(rt)
     ctx = await context(rt)
@@ -1648,7 +1676,7 @@ async def start_inspection(rt: Any, opts: InspectOptions) -> Any:
                          params={"policy": opts.policy, "sort": opts.sort, "camera_model": ctx.source})  # fmt: skip
 
 
-def readiness(rt: Any) -> list[str]:
+def readiness(rt: CellRuntime) -> list[str]:
     """What keeps the cell from starting an inspection now (empty: ready): the camera
     failing, the arm's link down; the database is checked by :func:`hold_until_ready`."""
     why = []
@@ -1661,7 +1689,7 @@ def readiness(rt: Any) -> list[str]:
     return why
 
 
-async def hold_until_ready(rt: Any, job: Any, *, max_s: float | None = None) -> float:
+async def hold_until_ready(rt: CellRuntime, job: Any, *, max_s: float | None = None) -> float:
     """Wait, without moving, until :func:`readiness` is empty and the database answers
     (backoff with jitter between checks); returns the seconds held.  A continuous run
     calls it before every object, so a fault holds the cell and the run goes on by itself
@@ -1690,13 +1718,13 @@ async def hold_until_ready(rt: Any, job: Any, *, max_s: float | None = None) -> 
         await b.sleep()
 
 
-def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun:
+def start_run(rt: CellRuntime, opts: InspectOptions, count: int | None) -> InspectionRun:
     """Start continuous operation (a job); :func:`stop_run` ends it after the current object."""
     if count is not None and (
         isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= MAX_COUNT
     ):
         raise InvalidInput(f"count must be an integer in 1..{MAX_COUNT} or null, got {count!r}")
-    cur = getattr(rt, "inspection_run", None)
+    cur = rt.inspection.run
     if (
         cur is not None
         and cur.job is not None
@@ -1758,13 +1786,13 @@ def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun
 
     run.job = rt.jobs.start("inspection-run", body, motion=True,
                             params={"policy": opts.policy, "sort": opts.sort, "count": count})  # fmt: skip
-    rt.inspection_run = run
+    rt.inspection.run = run
     return run
 
 
-def stop_run(rt: Any) -> InspectionRun:
+def stop_run(rt: CellRuntime) -> InspectionRun:
     """Ask the run to end after the current object (:class:`Conflict` if none is going)."""
-    run = getattr(rt, "inspection_run", None)
+    run = rt.inspection.run
     if run is None or run.job is None or run.job.task is None or run.job.task.done():
         raise Conflict("no inspection run is going")
     run.stop_requested = True

@@ -22,14 +22,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from robot.drivers.conveyor import BeltStatus, ControlledConveyor
+from robot.drivers.conveyor import BeltStatus, Conveyor
 from vision.errors import Conflict
 from vision.segmentation import iou
+
+if TYPE_CHECKING:
+    from backend.runtime import CellRuntime
 
 __all__ = [
     "PartTracker",
@@ -47,22 +50,19 @@ SAME_PART_M = 0.06
 SAME_REGION_IOU = 0.8
 
 
-def conveyor_of(rt: Any) -> ControlledConveyor | None:
-    """The cell's conveyor it can read and start (the first), or None."""
-    cell = getattr(rt, "cell", None)
-    for c in getattr(cell, "conveyors", ()) or ():
-        if isinstance(c, ControlledConveyor):
-            return c
-    return None
+def conveyor_of(rt: CellRuntime) -> Conveyor | None:
+    """The cell's conveyor when it can read and start it, else None (a fixed station)."""
+    c = rt.conveyor
+    return c if c.controllable else None
 
 
-def belt_status(rt: Any) -> BeltStatus | None:
+def belt_status(rt: CellRuntime) -> BeltStatus | None:
     """The belt's state now, or None when the cell has no conveyor it can read."""
     c = conveyor_of(rt)
     return None if c is None else c.status()
 
 
-def require_conveyor(rt: Any) -> ControlledConveyor:
+def require_conveyor(rt: CellRuntime) -> Conveyor:
     """The conveyor, or :class:`Conflict` (409) when the cell has none it can start."""
     c = conveyor_of(rt)
     if c is None:

@@ -556,7 +556,7 @@ async def start_teach(
     else the nominal lens and mounting.
     """
     from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration
-    from robot.sim.world import ConveyorSpec
+    from robot.cellworld import CellLayout
 
     async with db.session() as session:
         await get_model(session, model_id)
@@ -568,7 +568,7 @@ async def start_teach(
             camera = cal.camera or camera
     T = np.asarray(NOMINAL_T_EE_CAM if T_ee_cam is None else T_ee_cam, dtype=np.float64)
     T_seen = T if T_ee_cam is not None or mounting is None else np.asarray(mounting, np.float64)
-    p = np.asarray(ConveyorSpec().station_point if point is None else point, dtype=np.float64)
+    p = np.asarray(CellLayout().station_point if point is None else point, dtype=np.float64)
     if p.shape != (3,) or not np.all(np.isfinite(p)) or np.linalg.norm(p[:2]) > 1.6:
         raise InvalidInput(
             f"point must be 3 finite coordinates within 1.6 m of the column, got {p}"

@@ -104,6 +104,8 @@ class View3D:
         scene only: no control is ever shown.
     recheck_s : float
         How often signed-in clients' tokens are looked up again (revocation, role changes).
+    bins : tuple of robot.cellworld.Bin, optional
+        The sorting bins drawn (the cell's layout; default: the simulator's, else none).
     """
 
     def __init__(
@@ -118,6 +120,7 @@ class View3D:
         sim_rate_hz: float = 10.0,
         access: ViewAccess | None = None,
         recheck_s: float = 2.0,
+        bins: tuple[Any, ...] | None = None,
     ) -> None:
         if not 0.05 <= recheck_s <= 60.0:
             raise ValueError(f"recheck_s must be in [0.05, 60] s, got {recheck_s!r}")
@@ -132,6 +135,7 @@ class View3D:
         self.image_rate_hz = image_rate_hz
         self.sim_rate_hz = sim_rate_hz
         self.sim = sim
+        self._bins = bins
         self.server: viser.ViserServer | None = None
         self._task: asyncio.Task[None] | None = None
         self._recheck_task: asyncio.Task[None] | None = None
@@ -283,7 +287,9 @@ class View3D:
         # The latest inspection and the sorting bins (backend.inspection).
         from backend.view3d.inspections import InspectionScene, LabelCamera
 
-        bins = () if self.sim is None else self.sim.config.layout.bins
+        bins = self._bins
+        if bins is None:
+            bins = () if self.sim is None else self.sim.config.layout.bins
         first_view = LabelCamera(INITIAL_CAMERA_M, INITIAL_LOOK_AT_M,
                                  fov_rad=server.initial_camera.fov, height_px=EMBEDDED_VIEW_PX)  # fmt: skip
         self._inspection_scene = InspectionScene(

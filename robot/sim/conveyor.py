@@ -1,4 +1,4 @@
-"""The simulated belt behind the :class:`~robot.drivers.conveyor.ControlledConveyor` protocol."""
+"""The simulated belt behind the :class:`~robot.drivers.conveyor.Conveyor` protocol."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ class SimConveyor:
     """The conveyor of a :class:`~robot.sim.SimEngine` as a conveyor driver."""
 
     name = "sim-conveyor"
+    controllable = True
 
     def __init__(self, engine: SimEngine) -> None:
         self.engine = engine
@@ -43,6 +44,27 @@ class SimConveyor:
     async def set_running(self, running: bool) -> BeltStatus:
         """Start or stop the belt (refused while the emergency stop holds it)."""
         self.engine.configure_conveyor(running=bool(running))
+        return self.status()
+
+    def travel_at(self, t_s: float | None = None) -> float:
+        """The belt's encoder now.  The simulated camera latches the encoder with each frame
+        (``Frame.meta["belt_travel_m"]``), which the cell prefers; ``t_s`` is not looked up."""
+        return float(self.engine.conveyor_state.travel_m)
+
+    async def start(self, *, mode: str | None = None, speed_m_s: float | None = None) -> BeltStatus:
+        """Run the belt (in ``mode`` at ``speed_m_s`` when given; refused while the emergency
+        stop holds it)."""
+        self.engine.configure_conveyor(running=True, mode=mode, speed_m_s=speed_m_s)
+        return self.status()
+
+    async def stop(self) -> BeltStatus:
+        """Stop the belt."""
+        self.engine.configure_conveyor(running=False)
+        return self.status()
+
+    async def set_mode(self, mode: str, *, speed_m_s: float) -> BeltStatus:
+        """Set the belt's mode and speed, running or not."""
+        self.engine.configure_conveyor(mode=mode, speed_m_s=speed_m_s)
         return self.status()
 
     async def release(self) -> None:

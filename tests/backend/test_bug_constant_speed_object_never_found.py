@@ -26,6 +26,9 @@ import numpy as np
 import pytest
 
 from backend.inspection import service
+from backend.inspection.state import InspectionState
+from backend.recognition.teach import BackgroundStore
+from robot.drivers.conveyor import BeltStatus
 from robot.kinematics import T_base_ee
 from vision.camera import PinholeCamera
 from vision.pose import plane_points
@@ -105,13 +108,21 @@ def belt():
 
 
 def _ctx(belt, cell: _Cell) -> service._Ctx:
-    class _Sim:
-        @property
-        def conveyor_state(self):
-            return SimpleNamespace(running=True, mode="continuous", speed_m_s=0.05,
-                                   travel_m=cell.travel)  # fmt: skip
+    class _Belt:
+        controllable = True
 
-    rt = SimpleNamespace(cell=cell, sim=_Sim(), belt_background=belt)
+        def status(self) -> BeltStatus:
+            return BeltStatus(True, False, "continuous", 0.05, False, cell.travel, None)
+
+        def travel_at(self, t_s=None) -> float:
+            return cell.travel
+
+    rt = SimpleNamespace(
+        cell=cell,
+        conveyor=_Belt(),
+        teach_backgrounds=BackgroundStore(),
+        inspection=InspectionState(belt_background=belt),
+    )
     return service._Ctx(rt, CAM, T_EE_CAM, "test", STATION.copy(), GEO.surface_z_m)
 
 

@@ -12,6 +12,7 @@ from types import SimpleNamespace
 
 from backend.cell.events import CameraStatus
 from backend.inspection import service
+from backend.inspection.state import InspectionState
 from backend.jobs import JobManager
 from robot.drivers.conveyor import BeltStatus
 
@@ -21,6 +22,7 @@ class _Conveyor:
 
     name = "belt"
     halted = False
+    controllable = True
 
     def __init__(self) -> None:
         self.calls: list[str] = []
@@ -73,8 +75,9 @@ class _Db:
 
 async def test_the_run_looks_again_after_a_failure_and_holds_while_not_ready(monkeypatch):
     cell, db = _Cell(), _Db()
-    rt = SimpleNamespace(cell=cell, jobs=JobManager(), live_index=[1], sim=None,
-                         database=db, inspection_run=None)  # fmt: skip
+    rt = SimpleNamespace(cell=cell, jobs=JobManager(), live_index=[1],
+                         conveyor=cell.conveyors[0], database=db,
+                         inspection=InspectionState())  # fmt: skip
     seen: list[tuple[bool, bool]] = []
     decisions = iter(["unknown", "failed", "unknown", "failed", "recognized"])
 

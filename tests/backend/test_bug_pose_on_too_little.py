@@ -27,6 +27,7 @@ from backend.calibration import NOMINAL_T_EE_CAM
 from backend.calibration.auto import nominal_camera
 from backend.inspection import service
 from backend.recognition.teach import plan_shots
+from robot.drivers.conveyor import BeltStatus, FixedStation
 from robot.sim.world import ConveyorSpec
 from vision.pose import ObjectPose, PoseFailed
 
@@ -88,14 +89,14 @@ def _run(monkeypatch: pytest.MonkeyPatch, first: ObjectPose | None, second: Any,
     """The second top view after ``first``, the fit there answering ``second``; ``belt``:
     (travel now, travel at the second exposure) of a belt running at 0.05 m/s from 0."""
     cell, live = _Cell(None if belt is None else belt[1]), _Live()
-    sim = None
+    conveyor: Any = FixedStation()
     if belt is not None:
-        conveyor = SimpleNamespace(running=True, mode="continuous", speed_m_s=0.05,
-                                   travel_m=belt[0])  # fmt: skip
-        layout = SimpleNamespace(conveyor=SimpleNamespace(end_y_m=SPEC.station_point[1] + 1.0))
-        sim = SimpleNamespace(conveyor_state=conveyor, config=SimpleNamespace(layout=layout))
-    rt = SimpleNamespace(cell=cell, live_index=live, sim=sim)
-    ctx = service._Ctx(rt, CAMERA, T_EE_CAM, "test", SPEC.station_point, SPEC.surface_z_m)
+        status = BeltStatus(True, False, "continuous", 0.05, False, belt[0], None)
+        conveyor = SimpleNamespace(controllable=True, status=lambda: status,
+                                   travel_at=lambda t_s=None: belt[0])  # fmt: skip
+    rt = SimpleNamespace(cell=cell, live_index=live, conveyor=conveyor)
+    ctx = service._Ctx(rt, CAMERA, T_EE_CAM, "test", SPEC.station_point, SPEC.surface_z_m,
+                       belt_end_y_m=SPEC.station_point[1] + 1.0)  # fmt: skip
     calls: list[tuple[Any, ...]] = []
 
     async def fake_pose(ctx: Any, cand: Any, model: str, T_cam: Any, height: float,

@@ -18,7 +18,9 @@ from types import SimpleNamespace
 import numpy as np
 
 from backend.inspection import service
+from backend.inspection.state import InspectionState
 from backend.recognition.teach import BackgroundStore, Shot
+from robot.drivers.conveyor import FixedStation
 from tests.backend.test_bug_constant_speed_object_never_found import (
     CAM,
     GEO,
@@ -32,7 +34,11 @@ from vision.sources import Frame
 
 
 def _ctx(bb, store):
-    rt = SimpleNamespace(belt_background=bb, teach_backgrounds=store, sim=None)
+    rt = SimpleNamespace(
+        inspection=InspectionState(belt_background=bb),
+        teach_backgrounds=store,
+        conveyor=FixedStation(),
+    )
     return service._Ctx(rt, CAM, T_EE_CAM, "test", STATION.copy(), GEO.surface_z_m)
 
 

@@ -11,6 +11,7 @@ import pytest
 from backend.calibration.autoplan import NOMINAL_T_EE_CAM
 from backend.inspection import service
 from backend.recognition.teach import plan_shots
+from robot.drivers.conveyor import FixedStation
 from robot.kinematics import T_base_ee
 from robot.sim.camera import CameraSpec
 from robot.sim.world import ConveyorSpec
@@ -41,7 +42,7 @@ async def test_the_services_side_view_passes_the_region_as_the_query_mask(vp):
     T_top = T_base_ee(np.asarray(top.q)) @ T_ee_cam
     base = np.array([station[0], station[1], belt.surface_z_m])
     box = _box(base, (0.06, 0.05), 0.09)
-    rt = SimpleNamespace(cell=_Cell(), sim=None)
+    rt = SimpleNamespace(cell=_Cell(), conveyor=FixedStation())
     ctx = service._Ctx(rt, cam, T_ee_cam, "test", station, float(belt.surface_z_m))
     side = await service._side_view(
         ctx, vp, station, T_plan=np.asarray(NOMINAL_T_EE_CAM), top_mask=_silhouette(cam, T_top, box),

@@ -12,9 +12,10 @@ import pytest
 
 from backend.cell.events import CameraStatus
 from backend.inspection import service, waiting
+from backend.inspection.state import InspectionState
 from backend.jobs import JobManager
 from backend.recognition.segment import SegmentationFailed, foreground_mask
-from robot.drivers.conveyor import BeltStatus
+from robot.drivers.conveyor import BeltStatus, FixedStation
 from vision.errors import CameraError
 
 
@@ -90,8 +91,9 @@ class _Db:
 async def test_a_run_looks_again_when_looking_for_a_part_fails_and_ends_when_setup_is_missing(
     monkeypatch,
 ):
-    rt = SimpleNamespace(cell=_Cell(), jobs=JobManager(), live_index=[1], sim=None,
-                         database=_Db(), inspection_run=None)  # fmt: skip
+    rt = SimpleNamespace(cell=_Cell(), jobs=JobManager(), live_index=[1],
+                         conveyor=FixedStation(), database=_Db(),
+                         inspection=InspectionState())  # fmt: skip
     outcomes = iter([CameraError("camera stalled"), "unknown", "recognized"])
 
     async def fake_context(rt):

@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from backend.api.deps import OperatorUser, RuntimeDep, ViewerUser
 from backend.inspection import waiting
+from backend.runtime import CellRuntime
 from vision.errors import Conflict
 
 __all__ = ["router"]
@@ -38,7 +39,7 @@ class BeltOut(BaseModel):
     summary: str = Field(description="One line for the operator")
 
 
-def _answer(rt: Any) -> dict[str, Any]:
+def _answer(rt: CellRuntime) -> dict[str, Any]:
     st = waiting.belt_status(rt)
     return {"belt": None if st is None else st.as_dict(), "summary": waiting.describe(st)}
 

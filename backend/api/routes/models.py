@@ -416,12 +416,15 @@ async def teach_model(
         model_id=model_id,
         options=options,
         store=store,
-        point=None if body.point is None else np.asarray(body.point, dtype=np.float64),
+        point=rt.layout.station_point
+        if body.point is None
+        else np.asarray(body.point, dtype=np.float64),
         by=_by(user, body.reason),
         heavy=rt.heavy,
-        # Without a calibration: the simulator's lens and mounting (as inspections use them).
-        camera=None if rt.sim is None else rt.sim.config.camera.pinhole,
-        mounting=None if rt.sim is None else rt.sim.config.camera.T_ee_cam,
+        # Without a calibration: the camera's exact nominal lens and mounting (the
+        # simulator's), as inspections use them.
+        camera=None if rt.nominal_camera is None else rt.nominal_camera.camera,
+        mounting=None if rt.nominal_camera is None else rt.nominal_camera.T_ee_cam,
     )
     return {"job": job.public()}
 

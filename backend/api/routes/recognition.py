@@ -48,6 +48,7 @@ from backend.recognition.thresholds import (
     latest_settings,
     settings_audit_value,
 )
+from backend.runtime import CellRuntime
 from vision.errors import InvalidInput
 
 #: Database integer keys are 32-bit signed on PostgreSQL.
@@ -381,7 +382,7 @@ class NegativeList(BaseModel):
     count: int
 
 
-def _keeper_changed(runtime: Any) -> None:
+def _keeper_changed(runtime: CellRuntime) -> None:
     keeper = runtime.threshold_keeper
     if keeper is not None:
         keeper.changed()
