@@ -170,7 +170,7 @@ function build() {
     el("p", { id: "recipes-message", className: "error", role: "status" }));
   const editor = el("div", { id: "recipe-editor", className: "card recipe-editor", dataset: { minRole: "engineer", roleHint: "Creating and editing recipes" } },
     el("h2", { id: "recipe-form-title" }, "New recipe"),
-    el("form", { id: "recipe-form", on: { submit: save } },
+    el("form", { id: "recipe-form", novalidate: "", on: { submit: save } },
       el("div", { className: "row" },
         el("label", { className: "inline" }, "Name ", el("input", { id: "recipe-name", type: "text", required: "", maxlength: 64 })),
         el("label", { className: "inline" }, "Number ", el("input", { id: "recipe-number", type: "number", min: 1, max: 9999, step: 1, required: "" }))),
