@@ -116,6 +116,9 @@ class InspectionDone(CellEvent):
     T_base_obj: tuple[tuple[float, ...], ...] | None
     T_base_cams: tuple[tuple[tuple[float, ...], ...], ...]
     pick: dict[str, Any] | None = None
+    #: The recipe the inspection ran under (id, name; None: none).
+    recipe_id: int | None = None
+    recipe: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -128,6 +131,8 @@ class InspectionDone(CellEvent):
             "T_base_obj": None if self.T_base_obj is None else [list(r) for r in self.T_base_obj],
             "T_base_cams": [[list(r) for r in T] for T in self.T_base_cams],
             "pick": self.pick,
+            "recipe_id": self.recipe_id,
+            "recipe": self.recipe,
         }
 
 
@@ -958,6 +963,7 @@ async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[
         iid, rec.decision, rec.model_name, rec.reason, rec.score, rec.viewpoints,
         None if pose is None else tuple(tuple(r) for r in pose["T_base_obj"]),
         tuple(tuple(tuple(float(v) for v in r) for r in T) for T in cams), rec.pick,
+        rec.recipe_id, rec.recipe_name,
     )  # fmt: skip
     ctx.rt.bus.publish(ev)
 
