@@ -5,7 +5,8 @@ Two models are taught (top views, one roll: quick).  The run starts under recipe
 ``all-parts`` (every model in play); after its first object an operator selects
 ``steel-only`` (only ``wheel-steel`` in play), and the same kind of part, a gear housing,
 comes next: the first row is recognised under ``all-parts``, the second is ``unknown`` under
-``steel-only``, and the CSV export's last columns name each row's recipe.
+``steel-only``, and the CSV export's last columns name each row's recipe.  One more
+inspection names another recipe than the active one and an option over it.
 """
 
 from __future__ import annotations
@@ -124,9 +125,24 @@ def test_a_recipe_selected_between_two_objects_applies_to_the_next(cell):
     assert "not a model of recipe steel-only" in rows[1]["reason"]
     assert rows[1]["scores"]["gear-housing"] > rows[1]["scores"].get("wheel-steel", 0.0)
 
+    # One inspection under another recipe than the active one, an option given over it.
+    engine.clear_objects()
+    engine.spawn("gear-housing", s_m=station, yaw_rad=0.0)
+    body = {"recipe": a["id"], "policy": "naive", "wait_s": 60}
+    r = client.post("/api/inspections", json=body, headers=op)
+    assert r.status_code == 202, r.text
+    job = _wait(client, op, r.json()["job"]["id"])
+    assert job["state"] == "done", job
+    once = job["result"]["inspection"]
+    assert (once["recipe"], once["policy"], once["decision"], once["model"]) == (
+        "all-parts", "naive", "recognized", "gear-housing"), once["reason"]  # fmt: skip
+    r = client.post("/api/inspections", json={"recipe": 999}, headers=op)
+    assert r.status_code == 404 and r.json()["error"] == "not_found", r.text
+
     r = client.get("/api/reports/export.csv", headers=op)
     assert r.status_code == 200, r.text
     table = list(csv.reader(io.StringIO(r.text)))
     assert table[0][-3:] == ["source", "recipe_id", "recipe"]
     assert [row[-2:] for row in table[1:]] == [[str(a["id"]), "all-parts"],
-                                                [str(b["id"]), "steel-only"]]  # fmt: skip
+                                                [str(b["id"]), "steel-only"],
+                                                [str(a["id"]), "all-parts"]]  # fmt: skip
