@@ -291,8 +291,24 @@ async def activate(rt: Any, recipe_id: int, *, actor: str | audit.Actor, role: s
     with ``role``, or an :class:`~backend.audit.Actor`).  :class:`NotFound` for an id the
     cell has not, :class:`InvalidInput` for one that is no id."""
     who = _actor(actor, role)
-    async with rt.database.session() as session:
-        return await _select(rt, session, await _row(session, rt.cell_id, recipe_id), who, reason)
+
+    async def select_it(session: AsyncSession) -> RecipeRow:
+        return await _row(session, rt.cell_id, recipe_id)
+
+    return await _select_retrying(rt, select_it, who, reason)
+
+
+async def _select_retrying(rt: Any, find: Any, who: audit.Actor, reason: str | None) -> Recipe:
+    """:func:`_select` of the row ``find(session)`` gives; once more when a concurrent first
+    selection of the cell inserted its row meanwhile (then it is an update)."""
+    for attempt in (1, 2):
+        try:
+            async with rt.database.session() as session:
+                return await _select(rt, session, await find(session), who, reason)
+        except IntegrityError as exc:
+            if attempt == 2:
+                raise Conflict("the active recipe changed meanwhile: select again") from exc
+    raise AssertionError("unreachable")
 
 
 async def activate_number(rt: Any, number: int, *, actor: str | audit.Actor,
@@ -300,13 +316,16 @@ async def activate_number(rt: Any, number: int, *, actor: str | audit.Actor,
     """:func:`activate` by the recipe's number (what a PLC sends)."""
     number = check_number(number)
     who = _actor(actor, role)
-    async with rt.database.session() as session:
+
+    async def by_number(session: AsyncSession) -> RecipeRow:
         row = await session.scalar(
             select(RecipeRow).where(RecipeRow.cell_id == rt.cell_id, RecipeRow.number == number)
         )
         if row is None:
             raise NotFound(f"no recipe numbered {number} in this cell")
-        return await _select(rt, session, row, who, reason)
+        return row
+
+    return await _select_retrying(rt, by_number, who, reason)
 
 
 async def resolve_options(rt: Any, overrides: Mapping[str, Any], *,

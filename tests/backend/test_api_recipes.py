@@ -8,7 +8,7 @@ import asyncio
 from types import SimpleNamespace
 
 import pytest
-from sqlalchemy import func, select
+from sqlalchemy import func, select, text
 
 from backend.db.models import Recipe as RecipeRow
 from backend.db.session import Database
@@ -258,3 +258,29 @@ def test_plc_interface_selects_by_number_and_is_audited(client, headers, setting
     acts = [(e["actor"], e["actor_role"], e["entity_id"]) for e in reversed(trail["data"])
             if e["action"] == "activate"]  # fmt: skip
     assert acts == [("opcua:line-plc", "plc", str(b["id"])), ("modbus", "system", str(a["id"]))]
+
+
+def test_concurrent_first_selections_leave_one_active_recipe(client, headers, settings):
+    """Several links selecting at once on a cell with no active recipe yet: every call ends
+    in a selection (never an integrity error), and the cell has one active recipe."""
+    ids = [_recipe(client, headers, name=f"r{k}", number=k + 1).json()["id"] for k in range(4)]
+
+    async def run() -> tuple[list[object], int, int]:
+        db = Database(settings.database_url)
+        try:
+            async with db.session() as s:
+                cell_id = await s.scalar(select(RecipeRow.cell_id).where(RecipeRow.id == ids[0]))
+            rt = SimpleNamespace(database=db, cell_id=cell_id, sim=None)
+            got = await asyncio.gather(
+                *(service.activate(rt, i, actor=f"plc-{i}") for i in ids), return_exceptions=True
+            )
+            active = await service.active_recipe(rt)
+            async with db.session() as s:
+                n = await s.scalar(text("SELECT count(*) FROM recipe_selections"))
+            return got, active.id, int(n)
+        finally:
+            await db.dispose()
+
+    got, active, n = asyncio.run(run())
+    assert [getattr(g, "id", g) for g in got] == ids
+    assert n == 1 and active in ids
