@@ -1,9 +1,11 @@
 """The Recipes page in headless Chromium: an engineer creates a recipe in the form (a
 model ticked, a fixed threshold) and selects it; the Inspection page shows the active
-recipe and starts from its options; an operator selects another but has no editor; a
-viewer sees the active recipe and no controls."""
+recipe, starts from its options and sends only those changed; an operator selects
+another but has no editor; a viewer sees the active recipe and no controls."""
 
 from __future__ import annotations
+
+import json
 
 import httpx
 import pytest
@@ -64,6 +66,11 @@ def test_engineer_creates_and_selects_others_follow(browser, shared_server):
     assert page.input_value("#insp-policy") == "top-only"
     assert page.input_value("#insp-max-views") == "1"
     assert "threshold 0.30" in page.inner_text("#insp-recipe")
+    # Only what the operator changes is sent: the server takes the recipe's for the rest.
+    page.select_option("#insp-policy", "naive")
+    with page.expect_request(lambda q: q.url.endswith("/api/inspections")) as sent:
+        page.click("#insp-once")
+    assert json.loads(sent.value.post_data) == {"policy": "naive", "wait_s": 60}
     page.close()
 
     r = httpx.post(f"{server.base}/api/recipes", json={"name": "spare", "number": 22},
