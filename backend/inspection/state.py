@@ -11,8 +11,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from vision.segmentation.belt import BeltBackground
     from backend.inspection.service import InspectionRun
+    from vision.segmentation.belt import BeltBackground
 
 __all__ = ["InspectionState"]
 
