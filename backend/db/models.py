@@ -505,7 +505,7 @@ class InspectionInProgress(Base):
 
     Written (committed) before the arm moves for the inspection and deleted in the same
     transaction that writes the :class:`Inspection` row, so a marker that is still there at
-    start-up names an inspection cut short by the process ending (issue 16, part 1); the
+    start-up names an inspection cut short by the process ending; the
     start-up turns it into a complete ``failed`` row with the reason ``interrupted``.
     """
 

@@ -1,4 +1,4 @@
-"""What lets a cell survive faults (issue 16, part 1): in-progress markers, database outages,
+"""What lets a cell survive faults: in-progress markers, database outages,
 station backgrounds that outlive the process.
 
 * :func:`begin` commits an :class:`~backend.db.models.InspectionInProgress` marker before an

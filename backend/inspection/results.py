@@ -1,4 +1,4 @@
-"""Inspection results in the database (issue 14, part 6): one row per object, written once.
+"""Inspection results in the database: one row per object, written once.
 
 An :class:`InspectionRecord` is built in memory while the object is inspected and stored
 by :func:`store` in one transaction with its images, at the end (also when the inspection

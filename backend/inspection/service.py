@@ -1,4 +1,4 @@
-"""Inspecting objects at the station (issue 14, parts 3-6): one object, or continuous operation.
+"""Inspecting objects at the station: one object, or continuous operation.
 
 One inspection (:func:`inspect_object`):
 
@@ -414,8 +414,8 @@ def _background_for(ctx: _Ctx, frame: Any, bg: NDArray[np.uint8]) -> NDArray[np.
     A still background grabbed later makes the belt background stale: it is grabbed when
     the lights changed (:func:`grab_background`), and the belt background still holds the
     old light.  Preferring it whatever its age segmented the objects under half light and
-    a colour cast against the belt of the normal light (issue 14's campaign: 96.9 % and
-    80.6 % named, after the constant-speed run had grabbed a belt background).
+    a colour cast against the belt of the normal light, after a constant-speed run had
+    grabbed a belt background.
     """
     bb = ctx.rt.inspection.belt_background
     if bb is None or frame.robot_state is None:
@@ -807,7 +807,7 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
     came) to its end.  Cut short (cancel: e-stop or stop), the complete ``failed`` row is
     stored with the reason before the cancellation goes on.
 
-    Faults (issue 16): an in-progress marker is committed once the part is found (waiting,
+    Faults: an in-progress marker is committed once the part is found (waiting,
     without moving, up to ``db_wait_s`` -- None: until cancelled -- while the database is
     unavailable); any failure inside becomes a ``failed`` row with its reason; the row is
     stored with retries until the database takes it, in the transaction that removes the

@@ -110,7 +110,7 @@ class LoadReport:
 #: of the stored descriptor version (views extracted without them are listed as stale, to
 #: be re-extracted from their stored images).  No fixed ``threshold``: ``ViewIndex`` halves
 #: the detector threshold on low-texture views, which raised the gear housing's top view
-#: from 13 SIFT features to 42 in the simulated cell.  ``smooth_px`` (issue 14): a 1 px
+#: from 13 SIFT features to 42 in the simulated cell.  ``smooth_px``: a 1 px
 #: Gaussian before SIFT, because renders without optical blur and sensor noise near that
 #: lowered threshold gave first-octave keypoints that did not survive a turn of the part on
 #: the belt (``benchmarks/recognition_yaw_curve.py``, five parts taught at yaw 0 and seen at

@@ -1,4 +1,4 @@
-"""Teaching a model with the arm (issue 14, part 1): the chapter's training of section 3.5,
+"""Teaching a model with the arm: the chapter's training of section 3.5,
 done by the cell.
 
 With the object at the station the job

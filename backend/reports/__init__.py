@@ -1,4 +1,4 @@
-"""Reports over the stored inspections (issue 15, parts 4 and 6): exact aggregations over
+"""Reports over the stored inspections: exact aggregations over
 the packed report blocks (:mod:`backend.reports.blocks`, :mod:`backend.reports.queries`;
 the raw-row SQL in :mod:`backend.reports.sql`) that answer the same on SQLite and
 PostgreSQL, streamed exports, plots, image retention and the 3D scene recordings of

@@ -1,6 +1,6 @@
 """Report blocks: an exact, packed copy of the report columns of every inspection, in rows
 per (cell, UTC hour) of at most :data:`MAX_RECORDS` records each (parts 0, 1, ..), written
-in the inspection's own transaction (issue 15).
+in the inspection's own transaction.
 
 Why: the reports' nearest-rank percentiles (cycle time, eleven stages, score per model)
 over arbitrary filters cannot be read from a pre-aggregated histogram without losing

@@ -1,4 +1,4 @@
-"""Image retention (issue 15, part 6): what is kept, the storage used, pruning by age or size.
+"""Image retention: what is kept, the storage used, pruning by age or size.
 
 ``Settings.image_retention`` says whose images are stored at all (``all``, or ``failures``:
 unknown and failed inspections only; :func:`keeps_images`, used where the inspection service

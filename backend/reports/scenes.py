@@ -1,4 +1,4 @@
-"""3D scene recordings of inspections (issue 15, part 3's replay): viser's scene serializer.
+"""3D scene recordings of inspections: viser's scene serializer.
 
 While an object is inspected, :class:`SceneRecorder` holds a
 ``viser.ViserServer.get_scene_serializer()`` handle: it starts with a snapshot of the scene

@@ -1,4 +1,4 @@
-"""The latest inspection in the 3D view (issue 14, part 7): the sorting bins, the recognised
+"""The latest inspection in the 3D view: the sorting bins, the recognised
 object at its estimated pose with its label and decision, and the viewpoints visited as frusta.
 
 Follows the cell's event bus (:class:`backend.inspection.service.InspectionDone`); each

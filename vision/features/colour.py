@@ -20,8 +20,8 @@ Keypoints are detected on the grey image with the base method, the same keypoint
 base finds. Two layouts of the descriptor (``layout=``):
 
 * ``"chapter"``: the base descriptor of M1, M2, M3 at the keypoints, concatenated (3 x 128 =
-  384 for SIFT, 3 x 64 = 192 for SURF), as first built (issue 6). It wins under synthetic
-  changes and loses to the grey base under real light changes (issue 17);
+  384 for SIFT, 3 x 64 = 192 for SURF), as first built. It wins under synthetic
+  changes and loses to the grey base under real light changes;
 * ``"joint"`` (default, :mod:`vision.features.colour_joint`): the grey base descriptor, then
   the descriptors of *noise-aware* m-images M1 and M3 (a floor set from the measured noise
   before the logarithm, clipped pixels neutralised, optional sRGB linearisation), each
@@ -76,12 +76,12 @@ __all__ = [
 EPS = 1.0
 #: Descriptor layouts: ``"joint"`` (default) is the grey base descriptor followed by the
 #: contrast-weighted descriptors of the noise-aware m-images M1 and M3; ``"chapter"`` the
-#: three m-image descriptors of equations 15-17 alone, as first built (issue 6).
+#: three m-image descriptors of equations 15-17 alone, as first built.
 LAYOUTS = ("joint", "chapter")
 #: Weight of the m-image blocks against the grey block in the joint layout (times each
 #: block's noise weight), per base: chosen by leave-one-scene-out cross-validation over
-#: {0.1, 0.25, 0.5, 1, 1.5} on the real illumination scenes (issue 17; README, features
-#: section, ``python -m benchmarks.registration_colour_cv``): 0.25 in all 23 folds for SIFT,
+#: {0.1, 0.25, 0.5, 1, 1.5} on the real illumination scenes
+#: (``python -m benchmarks.registration_colour_cv``): 0.25 in all 23 folds for SIFT,
 #: 0.1 in 22 of 23 for SURF.
 COLOUR_WEIGHT: dict[str, float] = {"sift": 0.25, "surf": 0.1}
 _BASES = {"sift": 128, "surf": 64}

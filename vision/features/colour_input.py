@@ -2,7 +2,7 @@
 
 The invariance of the m1 m2 m3 ratios (chapter equations 15-17) to the illuminant holds for
 *linear* sensor values: a diagonal change of the light multiplies R, G, B by constants, which
-the log ratios subtract away. Real cameras add what that model leaves out (issue 17):
+the log ratios subtract away. Real cameras add what that model leaves out:
 
 * a transfer function: 8-bit sRGB output is ``V = f(L)`` with the sRGB curve (IEC 61966-2-1),
   so a gain on ``L`` is no gain on ``V``. ``transfer="srgb"`` inverts the curve first;

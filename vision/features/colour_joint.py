@@ -1,4 +1,4 @@
-"""The joint layout of the colour descriptor (issue 17): the grey base descriptor followed by
+"""The joint layout of the colour descriptor: the grey base descriptor followed by
 the descriptors of noise-aware m-images, each weighted by its colour contrast.
 
 Why (measured on the real illumination pairs of ``benchmarks.registration``): the chapter's
@@ -183,7 +183,7 @@ def block_snr_weight(
     ``quant_var`` (the quantisation's share of ``var``, same shape): the model takes it as
     independent per-pixel noise, which it is only where the sensor noise dithers it; given,
     the window's white noise is the mean squared finest diagonal detail ``HH`` of the m-image
-    clipped to [``var - quant_var``, ``var``] (issue 17: flat dark patches of 8-bit linear
+    clipped to [``var - quant_var``, ``var``] (flat dark patches of 8-bit linear
     images). The rest of the quantisation, ``Q = var - white``, is not dropped: it is coherent
     -- rounding without dither errs by the same amount over a flat region, an error of the
     region's level of variance ``step^2 / 12`` per channel all the same (Widrow, Kollar and
@@ -193,7 +193,7 @@ def block_snr_weight(
     piecewise-constant fields on one partition the squared steps scale with the variance of
     the levels, so its share of the window's gradient energy is ``Q / V`` with ``V`` the
     m-image's variance over the window; the weight is then ``max(0, 1 - N / E - Q / V)``
-    (issue 17: the dim red channel of the SFU chart, 0-10 DN, whose rounded log ratios
+    (the dim red channel of the SFU chart, 0-10 DN, whose rounded log ratios
     changed the M1 descriptor between the lamps though its weight was 0.9).
 
     Returns

@@ -85,7 +85,7 @@ def opencv_features(
         3.3); an image without optical blur (a render without anti-aliasing) or with sensor
         noise near the detector threshold breaks that assumption, and the first octave's
         keypoints then follow the pixel grid and the noise rather than the object: a part
-        rotated on the belt no longer finds them (issue 14, ``benchmarks/recognition_yaw.py``).
+        rotated on the belt no longer finds them.
     """
     if (
         isinstance(smooth_px, bool)

@@ -101,7 +101,7 @@ def surf_describe(
     coarse : bool
         Sample the 20 s window on a 10 x 10 grid spaced 2 s with Haar boxes of side 4 s
         instead of 20 x 20 spaced s with side 2 s: a quarter of the work, for smooth images
-        (the colour-ratio images of the joint colour descriptor, issue 17).
+        (the colour-ratio images of the joint colour descriptor).
 
     Returns
     -------
@@ -143,7 +143,7 @@ def surf_describe_channels(
     The sample grid and Haar boxes of each keypoint are computed once and read from all the
     images' integral images (one interleaved table); the result of each image equals
     :func:`surf_describe` of it (the same arithmetic). For the m-images of the joint colour
-    descriptor (issue 17).
+    descriptor.
 
     Parameters
     ----------

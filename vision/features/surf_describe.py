@@ -376,7 +376,7 @@ def describe_integral(
 
     ``theta_image`` is the keypoint orientation in the image frame (clockwise on screen).
     ``coarse`` samples the same window on a 10 x 10 grid spaced ``2 s`` with Haar boxes of
-    side ``4 s`` (a quarter of the work; for smooth images such as colour ratios, issue 17).
+    side ``4 s`` (a quarter of the work; for smooth images such as colour ratios).
     """
     xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
     if coarse:  # the same window's noise floor, scaled by the coarse grid's total weight

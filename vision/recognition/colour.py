@@ -132,7 +132,7 @@ def colour_signature(
     # proportion to its nearness (a linearly interpolated histogram): with hard sectors a
     # colour on a sector boundary (the red band of the twin wheel, half in each of two
     # sectors) moved wholly into one sector under a small hue shift, which the comparison
-    # read as a colour appearing and another vanishing (issue 14, colour cast).
+    # read as a colour appearing and another vanishing.
     pos = (np.arctan2(v[chromatic], u[chromatic]) + np.pi) / (2.0 * np.pi) * HUE_BINS - 0.5
     low = np.floor(pos)
     frac = pos - low
@@ -183,7 +183,7 @@ def held_sectors(signatures: list[ArrayLike]) -> NDArray[np.bool_]:
     shaded or highlighted face that the region's median does not cancel: under a warm lamp
     beside a white ambient light, 6 % of a wheel's side view in one hue) adds the same
     distance to every model and decides nothing, but it pushed the right model past the
-    distance at which it is taken to resemble its views (issue 14, colour cast).
+    distance at which it is taken to resemble its views.
     """
     if not signatures:
         return np.zeros(HUE_BINS, dtype=bool)

@@ -14,7 +14,7 @@ Score distributions, from the trained views alone
     because the two look alike from there (a part on two bases, two wheels with the same
     face), which the decision's ambiguity margin and the side views resolve; kept in, one
     pair of look-alikes among twelve models puts the largest impostor score, and so the
-    conformal threshold, at the genuine level (issue 14: every trained object unknown).
+    conformal threshold, at the genuine level (every trained object unknown).
 
 Rules
     ``"conformal-far"`` (default): the global threshold ``t`` is the ``k``-th smallest of the
@@ -35,7 +35,7 @@ Per-model thresholds
     no model gets a lower one, so the false-accept rate of the whole decision stays that of
     the global rule.
 
-Own bars (issue 14)
+Own bars
     ``own_viewpoint[vp][m]``: the rule on the scores model ``m`` gave to the other models'
     views of viewpoint ``vp`` alone (its twins' views left out), at most ``per_viewpoint[vp]``;
     ``per_viewpoint[vp]`` itself when ``m`` has fewer than :data:`MIN_OWN_IMPOSTORS` such
@@ -280,7 +280,7 @@ def choose_threshold(
         Called after each held-out query.
     exclude_twins : bool
         Leave the twins' scores out of the thresholds (default; module docstring).
-        ``False`` keeps them in: the rule before issue 14's fix, for comparison only.
+        ``False`` keeps them in: the earlier rule, kept for comparison only.
 
     Returns
     -------

@@ -40,7 +40,7 @@ Fused score
     reach, and only a side view can decide; the winner must also pass its own bar on a side
     view.
 
-    A model named by the top view alone is not put to the fused score (issue 14). Its top
+    A model named by the top view alone is not put to the fused score. Its top
     score passed a bar set above the impostor scores of the top views (the conformal rule
     of :func:`choose_threshold`; with fewer than 199 impostor scores at the default 1 %
     target it is the largest score any other model's top view got), so the top view already bounds how often an untrained
@@ -57,7 +57,7 @@ Fused score
     view did not name one model alone (only shortlisted, or look-alikes within the margin
     such as the twin wheels): there the side views decide exactly as before.
 
-Own bars (issue 14)
+Own bars
     On a side view a model's bar is its own bar there (``ThresholdChoice.own``: from the
     scores it gave the other models' views, never below the pooled rule, at most the
     viewpoint's bar; :func:`choose_threshold`, "Own bars"), not the viewpoint's global bar:
@@ -69,7 +69,7 @@ Own bars (issue 14)
     contenders, and to shortlist models for them; a name from the top view alone still
     needs the top view's acceptance bar.
 
-Grey look-alikes (issue 14)
+Grey look-alikes
     Two models whose grey features cannot be told apart at a side viewpoint (the confusion
     table of :func:`choose_threshold`: each passes the candidate bar on more than
     :data:`LOOKALIKE_SHARE` of the other's held-out views there; the 5-spoke wheel and its
@@ -91,7 +91,7 @@ Grey look-alikes (issue 14)
     constant belt speed the plain wheel ended "its twin not confirmed" after both side
     views: the answer this path gives once the margin has dropped the wheel).
 
-Colour tie-break (issue 14)
+Colour tie-break
     The features are grey, so two models that differ only by colour (a red band on a tyre's
     tread) stay within the ambiguity margin after every side view. When the side views end
     ``ambiguous``, each model within the margin of the best fused score is compared by colour

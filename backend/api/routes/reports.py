@@ -1,4 +1,4 @@
-"""Reports over the stored inspections (issue 15, part 4): summary, time series, confusion,
+"""Reports over the stored inspections: summary, time series, confusion,
 streamed exports, the image storage and its pruning, and the 3D scene of one inspection.
 
 Reading needs the viewer role, pruning the engineer role.  Filters (``from``, ``to``,
