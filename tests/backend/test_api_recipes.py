@@ -28,6 +28,38 @@ def _recipe(client, headers, **body):
     return client.post("/api/recipes", json=body, headers=headers["engineer"])
 
 
+#: The cell's layout: the bins the recipes below name (a recipe may name only bins the cell has).
+LAYOUT = """
+[station]
+x_m = 0.8
+y_m = 0.0
+surface_z_m = 0.45
+
+[[bins]]
+name = "bin-x"
+parts = ["wheel-a"]
+drop_m = [0.31, 0.61, 0.30]
+
+[[bins]]
+name = "bin-1"
+parts = ["wheel-b"]
+drop_m = [0.31, -0.61, 0.30]
+
+[[bins]]
+name = "reject"
+reject = true
+drop_m = [-0.53, -0.51, 0.30]
+"""
+
+
+@pytest.fixture
+def settings(settings, tmp_path):
+    """The migrated settings of a real cell whose layout file lists three bins."""
+    path = tmp_path / "cell.toml"
+    path.write_text(LAYOUT)
+    return settings.model_copy(update={"cell_layout": path})
+
+
 def _count(settings) -> int:
     async def run() -> int:
         db = Database(settings.database_url)
@@ -116,10 +148,7 @@ def test_roles(client, headers):
     assert r.status_code == 403 and r.json()["error"] == "forbidden", r.text
     assert client.get("/api/recipes").status_code == 401
     assert client.get("/api/recipes", headers=headers["viewer"]).status_code == 200
-    assert client.get("/api/recipes/bins", headers=headers["viewer"]).json() == {
-        "data": [],
-        "count": 0,
-    }
+    assert client.get("/api/recipes/bins", headers=headers["viewer"]).json()["count"] == 3
 
 
 @pytest.mark.parametrize(
@@ -139,6 +168,7 @@ def test_roles(client, headers):
         ({"models": ["a", "a"]}, 422, "distinct"),
         ({"bins": {"wheel-a": "bin x"}}, 422, "bins"),
         ({"models": ["wheel-a"], "bins": {"wheel-b": "bin-1"}}, 422, "not in the recipe"),
+        ({"models": ["wheel-a"], "bins": {"wheel-a": "bin-9"}}, 422, "no bin named bin-9"),
         ({"extra": 1}, 422, "extra"),
         ({"description": "d" * 2001}, 422, "description"),
     ],
