@@ -71,16 +71,36 @@ SCRIPTS: dict[str, dict[int, dict[str, float]]] = {
         2: {"A": 0.1, "B": 0.47},
         3: {"A": 0.1, "B": 0.45},
     },
-    "twin-below-own-bar": {1: {"B": 0.5, "A": 0.35}, 2: {"B": 0.4, "A": 0.2}, 3: {"A": 0.5, "B": 0.45}},
-    "twin-above-own-bar": {1: {"B": 0.5, "A": 0.35}, 2: {"B": 0.4, "A": 0.3}, 3: {"A": 0.5, "B": 0.45}},
-    "twin-outside-margin": {1: {"A": 0.6, "B": 0.49}, 2: {"A": 0.25, "B": 0.05}, 3: {"A": 0.25, "B": 0.27}},
-    "twin-never-passes": {1: {"A": 0.6, "B": 0.49}, 2: {"A": 0.25, "B": 0.05}, 3: {"A": 0.25, "B": 0.2}},
+    "twin-below-own-bar": {
+        1: {"B": 0.5, "A": 0.35},
+        2: {"B": 0.4, "A": 0.2},
+        3: {"A": 0.5, "B": 0.45},
+    },
+    "twin-above-own-bar": {
+        1: {"B": 0.5, "A": 0.35},
+        2: {"B": 0.4, "A": 0.3},
+        3: {"A": 0.5, "B": 0.45},
+    },
+    "twin-outside-margin": {
+        1: {"A": 0.6, "B": 0.49},
+        2: {"A": 0.25, "B": 0.05},
+        3: {"A": 0.25, "B": 0.27},
+    },
+    "twin-never-passes": {
+        1: {"A": 0.6, "B": 0.49},
+        2: {"A": 0.25, "B": 0.05},
+        3: {"A": 0.25, "B": 0.2},
+    },
     "named-beside-lookalike": {
         1: {"B": 0.773, "A": 0.579},
         2: {"A": 0.207, "B": 0.249},
         3: {"A": 0.3, "B": 0.25},
     },
-    "three-way-top": {1: {"A": 0.5, "B": 0.48, "C": 0.47}, 2: {"C": 0.5, "A": 0.3}, 3: {"B": 0.4, "C": 0.41}},
+    "three-way-top": {
+        1: {"A": 0.5, "B": 0.48, "C": 0.47},
+        2: {"C": 0.5, "A": 0.3},
+        3: {"B": 0.4, "C": 0.41},
+    },
     "rival-on-side3": {1: {"A": 0.6, "B": 0.2}, 2: {"A": 0.1}, 3: {"B": 0.6, "A": 0.1}},
     "naive-on-side2": {1: {"A": 0.5, "B": 0.49}, 2: {"B": 0.6}},
     "nothing": {},
@@ -144,7 +164,7 @@ THRESHOLDS: dict[str, Callable[[], float | ThresholdChoice | None]] = {
 
 #: Colour answers: ``None`` keeps the real ``colour_support`` (scripted views carry no
 #: candidates, so it finds no colour); ``False`` turns the tie-break off.
-COLOURS: dict[str, dict[str, float] | None | bool] = {
+COLOURS: dict[str, dict[str, float] | bool | None] = {
     "off": False,
     "real": None,
     "A": {"A": 0.0, "B": 2.4, "C": 3.0},
@@ -171,8 +191,16 @@ def _scripted(per_view: dict[int, dict[str, float]], dist: dict[str, float] | No
         names = index.models if models is None else [m for m in index.models if m in models]
         scores = {m: float(per_view.get(looked, {}).get(m, 0.0)) for m in names}
         calls.append(
-            ["recognise", looked, viewpoint, names, _threshold_summary(threshold), margin,
-             None if search is None else list(search), mask is None]  # fmt: skip
+            [
+                "recognise",
+                looked,
+                viewpoint,
+                names,
+                _threshold_summary(threshold),
+                margin,
+                None if search is None else list(search),
+                mask is None,
+            ]
         )
         decision, model, cont = decide(scores, threshold=threshold, margin=margin)
         best = max(scores, key=lambda m: (scores[m], m), default=None)
@@ -242,57 +270,75 @@ def _scripted_cases() -> Iterator[tuple[str, dict[str, Any]]]:
         for script in SCRIPTS:
             for th in thresholds:
                 for max_views, colour in budgets:
-                    yield f"{script}|{policy}|{th}|{max_views}|{colour}", {
-                        "script": script,
-                        "policy": policy,
-                        "threshold": th,
-                        "max_views": max_views,
-                        "colour": colour,
-                    }
+                    yield (
+                        f"{script}|{policy}|{th}|{max_views}|{colour}",
+                        {
+                            "script": script,
+                            "policy": policy,
+                            "threshold": th,
+                            "max_views": max_views,
+                            "colour": colour,
+                        },
+                    )
     for th, colour in (("choice", "real"), ("lookalikes", "real"), ("lookalikes", "far")):
         for script in SCRIPTS:
-            yield f"{script}|two-views|{th}|3|{colour}", {
-                "script": script,
-                "policy": "two-views",
-                "threshold": th,
-                "max_views": 3,
-                "colour": colour,
-            }
+            yield (
+                f"{script}|two-views|{th}|3|{colour}",
+                {
+                    "script": script,
+                    "policy": "two-views",
+                    "threshold": th,
+                    "max_views": 3,
+                    "colour": colour,
+                },
+            )
     for policy in POLICIES:
-        yield f"twin-outside-margin|{policy}|choice|1|off", {
-            "script": "twin-outside-margin",
-            "policy": policy,
-            "threshold": "choice",
-            "max_views": 1,
-            "colour": "off",
-        }
+        yield (
+            f"twin-outside-margin|{policy}|choice|1|off",
+            {
+                "script": "twin-outside-margin",
+                "policy": policy,
+                "threshold": "choice",
+                "max_views": 1,
+                "colour": "off",
+            },
+        )
     for name, margin in (("wide-margin", 0.3), ("no-margin", 0.0)):
         for script in ("ambiguous-top-lookalike", "twin-outside-margin", "three-way-top"):
             for policy in POLICIES:
-                yield f"{script}|{policy}|lookalikes|3|A|{name}", {
-                    "script": script,
-                    "policy": policy,
-                    "threshold": "lookalikes",
-                    "max_views": 3,
-                    "colour": "A",
-                    "margin": margin,
-                }
-    yield "limit-0", {
-        "script": "challengers",
-        "policy": "best-next",
-        "threshold": "top-confusion",
-        "max_views": 3,
-        "colour": "A",
-        "confusion_limit": 0.0,
-    }
-    yield "limit-1", {
-        "script": "challengers",
-        "policy": "best-next",
-        "threshold": "top-confusion",
-        "max_views": 3,
-        "colour": "A",
-        "confusion_limit": 1.0,
-    }
+                yield (
+                    f"{script}|{policy}|lookalikes|3|A|{name}",
+                    {
+                        "script": script,
+                        "policy": policy,
+                        "threshold": "lookalikes",
+                        "max_views": 3,
+                        "colour": "A",
+                        "margin": margin,
+                    },
+                )
+    yield (
+        "limit-0",
+        {
+            "script": "challengers",
+            "policy": "best-next",
+            "threshold": "top-confusion",
+            "max_views": 3,
+            "colour": "A",
+            "confusion_limit": 0.0,
+        },
+    )
+    yield (
+        "limit-1",
+        {
+            "script": "challengers",
+            "policy": "best-next",
+            "threshold": "top-confusion",
+            "max_views": 3,
+            "colour": "A",
+            "confusion_limit": 1.0,
+        },
+    )
 
 
 async def _run_scripted(index: ViewIndex, case: dict[str, Any]) -> dict[str, object]:
@@ -387,8 +433,14 @@ async def _real_outcomes(indexes: dict[str, ViewIndex]) -> dict[str, object]:
     }
     thresholds: dict[str, Any] = {
         "default": None,
-        "hand": replace(_choice(threshold=0.1), candidate=0.1, per_viewpoint={},
-                        per_model_viewpoint={}, candidate_viewpoint={}, confusion=confusion),  # fmt: skip
+        "hand": replace(
+            _choice(threshold=0.1),
+            candidate=0.1,
+            per_viewpoint={},
+            per_model_viewpoint={},
+            candidate_viewpoint={},
+            confusion=confusion,
+        ),
         "chosen": choose_threshold(indexes["twin"], target_far=0.1),
     }
     grid = {"plain": ("default", "hand"), "twin": ("chosen",)}

@@ -112,9 +112,7 @@ class ViewsRecognition:
         return len(self.viewpoints)
 
 
-async def take_look(
-    look: Look, viewpoint: int
-) -> tuple[np.ndarray | Features, np.ndarray | None]:
+async def take_look(look: Look, viewpoint: int) -> tuple[np.ndarray | Features, np.ndarray | None]:
     """Ask ``look`` for ``viewpoint``; returns ``(image or features, mask or None)``.
 
     Raises
@@ -257,9 +255,7 @@ class ViewState:
         first = 1 if self.skip_top and len(self.views) > 1 else 0
         views = self.views[first:]
         fused = {m: float(np.mean([r.scores.get(m, 0.0) for r in views])) for m in models}
-        bars = {
-            m: float(np.mean([self.bar(m, vp) for vp in self.visited[first:]])) for m in models
-        }
+        bars = {m: float(np.mean([self.bar(m, vp) for vp in self.visited[first:]])) for m in models}
         return fused, decide_with(fused, 1.0, bars, margin=self.margin)
 
     def result(
@@ -491,8 +487,12 @@ class TwoViews:
                 return state.result("recognized", named, fused, (named,))
             else:
                 return False  # nothing verified against it here
-        if decision == "recognized" and side.scores.get(model, 0.0) > state.bar(model, vp):
-            assert model is not None  # a recognised decision names its model
+        # (A recognised decision always names its model; the test tells the type checker.)
+        if (
+            decision == "recognized"
+            and model is not None
+            and side.scores.get(model, 0.0) > state.bar(model, vp)
+        ):
             twins = state.lookalikes(model, side, vp)
             if not twins:
                 return state.result(decision, model, fused, cont)
