@@ -113,7 +113,18 @@ class ViewsRecognition:
 
 
 async def take_look(look: Look, viewpoint: int) -> tuple[np.ndarray | Features, np.ndarray | None]:
-    """Ask ``look`` for ``viewpoint``; returns ``(image or features, mask or None)``.
+    """Ask ``look`` for what the camera sees from ``viewpoint``.
+
+    Parameters
+    ----------
+    look : callable(viewpoint) -> image, (image, mask) or Features; sync or async
+    viewpoint : int
+        1 (top), 2 or 3 (sides).
+
+    Returns
+    -------
+    image : ndarray of shape (H, W[, 3]) or Features
+    mask : ndarray of shape (H, W) or None
 
     Raises
     ------
@@ -138,8 +149,21 @@ async def take_look(look: Look, viewpoint: int) -> tuple[np.ndarray | Features, 
 
 
 def top_confusers(choice: ThresholdChoice, model: str, limit: float) -> tuple[str, ...]:
-    """Models confused with ``model`` from the top, either way, on at least ``limit`` of
-    the held-out views (the confusion table of :func:`choose_threshold`), sorted."""
+    """Models confused with ``model`` from the top, either way.
+
+    Parameters
+    ----------
+    choice : ThresholdChoice
+        Holds the confusion table of :func:`choose_threshold` (``confusion[1]`` for the top).
+    model : str
+    limit : float
+        Share in [0, 1] of held-out views on which a model passes for another to count.
+
+    Returns
+    -------
+    tuple of str
+        The confused models, sorted by name.
+    """
     row = choice.confusion.get(1, {}).get(model, {})
     rows_in = {a: r.get(model, 0.0) for a, r in choice.confusion.get(1, {}).items() if a != model}
     alike = {b for b, c in row.items() if c >= limit} | {
@@ -230,8 +254,22 @@ class ViewState:
     async def see(
         self, vp: int, viewpoint: int | None, models: Sequence[str] | None = None
     ) -> Recognition:
-        """Look from ``vp`` and recognise the view against the trained views of
-        ``viewpoint`` (all of them when ``None``), restricted to ``models``."""
+        """Look from ``vp`` and recognise the view; the view is appended to the state.
+
+        Parameters
+        ----------
+        vp : int
+            Viewpoint the camera looks from (1, 2 or 3); its threshold is used.
+        viewpoint : int or None
+            Viewpoint whose trained views are searched (``None``: every viewpoint, as the
+            naive policy does).
+        models : sequence of str, optional
+            Restrict the search to these models.
+
+        Returns
+        -------
+        Recognition
+        """
         image, mask = await take_look(self.look, vp)
         r = await asyncio.to_thread(
             self.recognise,
@@ -250,8 +288,18 @@ class ViewState:
         return r
 
     def fused_decision(self, models: list[str]) -> tuple[dict[str, float], Decision]:
-        """Fused scores of ``models`` over the views that count ("Fused score") and the
-        decision rule of section 3.5.1 applied to them with the mean bars."""
+        """The fused score of ``models`` and the decision on it ("Fused score").
+
+        Each model's score is the mean of its scores over the views that count (every view
+        taken, less the top view when it only shortlisted), its bar the mean of its bars
+        there; the decision rule of section 3.5.1 is applied to them.
+
+        Returns
+        -------
+        fused : dict of str to float
+        decision : tuple
+            ``(decision, model, contenders)`` as from :func:`decide_with`.
+        """
         first = 1 if self.skip_top and len(self.views) > 1 else 0
         views = self.views[first:]
         fused = {m: float(np.mean([r.scores.get(m, 0.0) for r in views])) for m in models}
@@ -265,7 +313,20 @@ class ViewState:
         scores: Mapping[str, float],
         contenders: Sequence[str],
     ) -> ViewsRecognition:
-        """The answer, with the views taken so far."""
+        """The answer, with the views taken so far.
+
+        Parameters
+        ----------
+        decision : {"recognized", "ambiguous", "unknown"}
+        model : str or None
+            The recognised model; its score is the answer's score (else the best score).
+        scores : mapping of str to float
+        contenders : sequence of str
+
+        Returns
+        -------
+        ViewsRecognition
+        """
         best = max(scores.values(), default=0.0)
         return ViewsRecognition(
             decision=decision,
@@ -373,7 +434,17 @@ class Policy(Protocol):
     needs_choice: bool
 
     async def run(self, state: ViewState) -> ViewsRecognition:
-        """Take the views (through ``state.see``) and answer."""
+        """Take the views and answer.
+
+        Parameters
+        ----------
+        state : ViewState
+            A fresh state; the policy takes views through :meth:`ViewState.see`.
+
+        Returns
+        -------
+        ViewsRecognition
+        """
         ...
 
 
