@@ -56,9 +56,8 @@ LOOKALIKE_SHARE = 0.5
 #: Colour tie-break (module docstring of :mod:`vision.recognition.views`), in the log units
 #: of ``colour_distance``: every other tied model must be at least ``COLOUR_MARGIN`` farther
 #: than the winner (0.7: about twice or half the share of one hue), and the winner at most
-#: ``COLOUR_MAX`` from its own views. On the simulated twins of
-#: ``benchmarks/recognition_yaw.py`` the right wheel's side views lie well under 0.1 and the
-#: other wheel's above 2 (the red band is 2-4 % of the inner side view); strongly coloured
+#: ``COLOUR_MAX`` from its own views: a twin's own side views lie far closer than its
+#: red-band twin's (the band is a few per cent of the side view), while strongly coloured
 #: parts whose colour shifts between views (the red valve block) are never decided by colour.
 COLOUR_MARGIN = 0.7
 COLOUR_MAX = 2.0

@@ -42,29 +42,29 @@ Fused score
     reach, and only a side view can decide; the winner must also pass its own bar on a side
     view.
 
-    A model named by the top view alone is not put to the fused score. Its top
-    score passed a bar set above the impostor scores of the top views (the conformal rule
-    of :func:`choose_threshold`; with fewer than 199 impostor scores at the default 1 %
-    target it is the largest score any other model's top view got), so the top view already bounds how often an untrained
-    object is named; what the side views add is the chapter's check against look-alikes.
-    A side view where neither it nor a challenger verifies (the object seen at a yaw whose
-    side was never taught verifies little) is no evidence either way, whereas fused as 0 it
-    dragged a clear top score (0.295 against a bar of 0.107) under the mean bar (0.098
-    against 0.160). So: the model is confirmed by a side view where it passes its bar (or
-    the fused decision names it); it is *overturned* by a side view won by a challenger
-    (the challenger passes its own side bar there and beats the model's score), after which
-    the models seen are decided as after an ambiguous top view (the fused decision, a
-    winner passing its own side bar, else ``ambiguous`` and the colour tie-break); if no
-    side view does either, it stays named. Untrained objects stay guarded where the top
-    view did not name one model alone (only shortlisted, or look-alikes within the margin
-    such as the twin wheels): there the side views decide exactly as before.
+    A model named by the top view alone is not put to the fused score. Its top score passed
+    a bar set above the impostor scores of the top views (the conformal rule of
+    :func:`choose_threshold`; with fewer than 199 impostor scores at the default 1 % target
+    it is the largest score any other model's top view got), so the top view already bounds
+    how often an untrained object is named; what the side views add is the chapter's check
+    against look-alikes. A side view where neither it nor a challenger verifies (the object
+    seen at a yaw whose side was never taught verifies little) is no evidence either way,
+    whereas fused as 0 it would drag a clear top score under the mean bar. So: the model is
+    confirmed by a side view where it passes its bar (or the fused decision names it); it is
+    *overturned* by a side view won by a challenger (the challenger passes its own side bar
+    there and beats the model's score), after which the models seen are decided as after an
+    ambiguous top view (the fused decision, a winner passing its own side bar, else
+    ``ambiguous`` and the colour tie-break); if no side view does either, it stays named.
+    Untrained objects stay guarded where the top view did not name one model alone (only
+    shortlisted, or look-alikes within the margin such as the twin wheels): there the side
+    views decide.
 
 Own bars
     On a side view a model's bar is its own bar there (``ThresholdChoice.own``: from the
     scores it gave the other models' views, never below the pooled rule, at most the
     viewpoint's bar; :func:`choose_threshold`, "Own bars"), not the viewpoint's global bar:
-    that one is set by the model most prone to verify others (side 2: 0.264, a wheel's),
-    and plain parts that verify with 8-12 inliers (0.1-0.2) never passed it. The fused bar
+    that one is set by the model most prone to verify others (a wheel's), and plain parts
+    that verify with few inliers would never pass it. The fused bar
     is the mean of these bars. Own bars are not acceptance bars on their own (over the
     models verified on a view their false-accept bounds add up), so they apply only where
     the top view has already tested the object: on the side views that check its
@@ -83,15 +83,13 @@ Grey look-alikes
     colour already singles one out; otherwise the remaining side viewpoint is visited for
     colour evidence alone (its grey scores still decide nothing between the look-alikes):
     the first side view may show the twins' difference poorly, or the true twin may verify
-    there only below its own bar, which the tie-break requires on some side view
-    (``benchmarks.inspection``: the plain five-spoke wheel ended ``ambiguous`` after one
-    side view, its red-band twin named from the top and not confirmed). For the same reason
+    there only below its own bar, which the tie-break requires on some side view. For the
+    same reason
     the ambiguity margin, which narrows the models checked on the next side view to the
     contenders, keeps a look-alike of a contender that verified on this one, and when the
     side views end without a decision the fused leader's look-alikes verified on any side
-    view are tied with it for colour, however far below it their grey scores fell (at
-    constant belt speed the plain wheel ended "its twin not confirmed" after both side
-    views: the answer this path gives once the margin has dropped the wheel).
+    view are tied with it for colour, however far below it their grey scores fell (else,
+    once the margin has dropped the true twin, it is never compared by colour).
 
 Colour tie-break
     The features are grey, so two models that differ only by colour (a red band on a tyre's
@@ -245,7 +243,7 @@ async def recognise_views(
         margin=margin,
         confusion_limit=float(confusion_limit),
         colour_tiebreak=colour_tiebreak,
-        # Looked up here, at call time, so that both can be replaced as this module's names.
+        # This module's names, read at call time: replacing them scripts the views' answers.
         recognise=recognise,
         colour_support=colour_support,
     )
