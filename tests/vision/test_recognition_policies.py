@@ -8,8 +8,9 @@ import pytest
 
 from tests.vision.recognition_utils import rotated, textured
 from vision.recognition import POLICIES, ThresholdChoice, ViewIndex, recognise, recognise_views
-from vision.recognition.policies import POLICY_OBJECTS, BestNext, TwoViews, ViewState
+from vision.recognition.policies import POLICY_OBJECTS, BestNext, TwoViews
 from vision.recognition.views import colour_support
+from vision.recognition.viewstate import ViewState
 
 TOP = {"A": 0, "B": 0, "C": 2}  # A and B alike from the top
 SIDE = {"A": 10, "B": 20, "C": 30}

@@ -1,8 +1,9 @@
 """3D recognition over viewpoints (chapter sections 3.5.2 and 3.5.3, Figures 6 and 7).
 
 ``recognise_views(look, index, policy=...)`` asks the caller for images, ``look(viewpoint)``,
-and decides after one, two or three of them. Each policy is a small object over one shared
-state (:mod:`vision.recognition.policies`); this module validates the arguments, builds the
+and decides after one, two or three of them. Each policy is a small object
+(:mod:`vision.recognition.policies`) over one shared state
+(:mod:`vision.recognition.viewstate`); this module validates the arguments, builds the
 state and hands it to the policy named. ``look`` may be a plain function or a coroutine
 function (the cell's moves the arm); it returns an image, an ``(image, mask)`` pair, or
 :class:`vision.features.Features`. The recognition itself runs in a worker thread so that an
@@ -110,19 +111,19 @@ import numpy as np
 
 from vision.recognition.colour import colour_distance, held_sectors
 from vision.recognition.index import ViewIndex, view_colour
-from vision.recognition.policies import (
+from vision.recognition.policies import POLICY_OBJECTS
+from vision.recognition.recognise import DEFAULT_MARGIN, Recognition, decide, recognise
+from vision.recognition.threshold import ThresholdChoice
+from vision.recognition.viewstate import (
     COLOUR_MARGIN,
     COLOUR_MAX,
     LOOKALIKE_SHARE,
     MAX_CONTENDERS,
-    POLICY_OBJECTS,
     Look,
     LookResult,
     ViewsRecognition,
     ViewState,
 )
-from vision.recognition.recognise import DEFAULT_MARGIN, Recognition, decide, recognise
-from vision.recognition.threshold import ThresholdChoice
 
 __all__ = [
     "COLOUR_MARGIN",
