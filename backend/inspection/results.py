@@ -23,6 +23,7 @@ from backend.db.models import (
     InspectionStage,
 )
 from backend.db.session import Database
+from backend.db.types import utcnow
 from vision.errors import InvalidInput, NotFound
 
 __all__ = ["PICK_OUTCOMES", "InspectionRecord", "ViewRecord", "get_image", "get_inspection",
@@ -115,7 +116,8 @@ async def store(
                 )
                 if earlier is not None:
                     return int(earlier)
-        return await _write(session, cell_id, rec, retention=retention, scene=scene)
+        (iid,) = await _write(session, cell_id, [rec], retention=retention, scene=scene)
+        return iid
 
 
 async def store_all(
@@ -123,68 +125,88 @@ async def store_all(
 ) -> list[int]:
     """Write several records (with their stage rows, report records and images) in one
     transaction: all or none; returns their ids in order."""
+    if not records:
+        return []
     async with db.session() as session:
-        return [await _write(session, cell_id, rec, retention=retention) for rec in records]
+        return await _write(session, cell_id, records, retention=retention)
+
+
+def _columns(cell_id: int, rec: InspectionRecord) -> dict[str, Any]:
+    """The ``inspections`` column values of one record."""
+    return {
+        "cell_id": cell_id,
+        "started_at": rec.started_at,
+        "finished_at": rec.finished_at,
+        "decision": Decision(rec.decision),
+        "model_id": rec.model_id,
+        "model_name": rec.model_name,
+        "score": rec.score,
+        "viewpoints_visited": list(rec.viewpoints),
+        "object_pose": None if rec.pose is None else rec.pose.get("T_base_obj"),
+        "duration_s": round(
+            sum(rec.durations.values()) if rec.duration_s is None else rec.duration_s, 4
+        ),
+        "note": rec.reason[:2000],
+        "policy": rec.policy,
+        "reason": rec.reason,
+        "durations": rec.durations,
+        "scores": rec.scores,
+        "pose": rec.pose,
+        "pick": rec.pick,
+        "truth": rec.truth,
+        "source": rec.source,
+    }
 
 
 async def _write(
     session: AsyncSession,
     cell_id: int,
-    rec: InspectionRecord,
+    records: list[InspectionRecord],
     *,
     retention: str,
     scene: bytes | None = None,
-) -> int:
-    """Add one record's rows in ``session`` (the caller's transaction); its id."""
+) -> list[int]:
+    """Add the records' rows in ``session`` (the caller's transaction); their ids in order.
+
+    Each table gets one batched statement for all the records (the rows with ``RETURNING``
+    their ids, then images, stage rows and report records), and nothing written is read
+    back: storing a result costs a few statements however many records there are.
+    ``scene`` (a 3D recording) belongs to a single record.
+    """
     from backend.reports.blocks import append as append_records
     from backend.reports.retention import keeps_images
     from backend.reports.stages import stage_rows
 
-    keep = keeps_images(retention, rec.decision)
-    row = Inspection(
-        cell_id=cell_id,
-        started_at=rec.started_at,
-        finished_at=rec.finished_at,
-        decision=Decision(rec.decision),
-        model_id=rec.model_id,
-        model_name=rec.model_name,
-        score=rec.score,
-        viewpoints_visited=list(rec.viewpoints),
-        object_pose=None if rec.pose is None else rec.pose.get("T_base_obj"),
-        duration_s=round(
-            sum(rec.durations.values()) if rec.duration_s is None else rec.duration_s, 4
-        ),
-        note=rec.reason[:2000],
-        policy=rec.policy,
-        reason=rec.reason,
-        durations=rec.durations,
-        scores=rec.scores,
-        pose=rec.pose,
-        pick=rec.pick,
-        truth=rec.truth,
-        source=rec.source,
+    if scene is not None and len(records) != 1:
+        raise ValueError(f"a scene belongs to one record, got {len(records)}")
+    values = [_columns(cell_id, rec) for rec in records]
+    table = Inspection.__table__
+    got = await session.execute(
+        insert(table).returning(table.c.id, sort_by_parameter_order=True), values
     )
-    for v in rec.views if keep else ():
-        row.images.append(
-            InspectionImage(viewpoint=v.viewpoint, image_jpeg=v.jpeg, scores=v.scores)
-        )
-    session.add(row)
-    await session.flush()
-    stages = stage_rows(row.id, {"cell_id": cell_id, "started_at": rec.started_at,
-                                 "decision": rec.decision, "model_name": rec.model_name,
-                                 "policy": rec.policy, "durations": rec.durations})  # fmt: skip
+    ids = [int(i) for i in got.scalars().all()]
+    if len(ids) != len(records):
+        raise RuntimeError(f"stored {len(ids)} inspection rows for {len(records)} records")
+    now = utcnow()
+    images, stages = [], []
+    for iid, rec, row in zip(ids, records, values, strict=True):
+        if keeps_images(retention, rec.decision):
+            images.extend(
+                {"inspection_id": iid, "viewpoint": v.viewpoint, "image_jpeg": v.jpeg,
+                 "scores": v.scores, "created_at": now}
+                for v in rec.views
+            )  # fmt: skip
+        stages.extend(stage_rows(iid, row | {"decision": rec.decision}))
+    if images:
+        await session.execute(insert(InspectionImage), images)
     if stages:
         await session.execute(insert(InspectionStage), stages)
-    await append_records(session, [{
-        "cell_id": cell_id, "started_at": rec.started_at, "decision": rec.decision,
-        "model_name": rec.model_name, "policy": rec.policy, "duration_s": row.duration_s,
-        "score": rec.score, "durations": rec.durations,
-        "viewpoints_visited": row.viewpoints_visited, "truth": rec.truth,
-    }])  # fmt: skip
-    if keep and scene:
-        session.add(InspectionScene(inspection_id=row.id, scene=scene, size_bytes=len(scene)))
+    await append_records(session, [row | {"decision": rec.decision}
+                                   for row, rec in zip(values, records, strict=True)])  # fmt: skip
+    if scene and keeps_images(retention, records[0].decision):
+        session.add(InspectionScene(inspection_id=ids[0], scene=scene, size_bytes=len(scene)))
         await session.flush()
-    return int(row.id)
+    return ids
 
 
 def pick_outcome(pick: Any, decision: str) -> dict[str, Any]:
