@@ -158,6 +158,33 @@ def _columns(cell_id: int, rec: InspectionRecord) -> dict[str, Any]:
     }
 
 
+#: Rows per multi-row ``INSERT`` on SQLite (19 bound values each, far below its limit).
+SQLITE_ROWS_PER_INSERT = 200
+
+
+async def _insert_rows(session: AsyncSession, values: list[dict[str, Any]]) -> list[int]:
+    """Insert ``inspections`` rows; their ids in the order of ``values``.
+
+    PostgreSQL batches the rows and orders the returned ids itself (SQLAlchemy's
+    "insertmanyvalues").  On SQLite that would be one statement per row, so the rows go in
+    one multi-row ``INSERT`` per chunk: SQLite inserts them one after the other, each
+    getting a rowid larger than any before it (the writer holds the database's lock), so
+    the returned ids sorted are the rows' ids in order.
+    """
+    table = Inspection.__table__
+    if session.get_bind().dialect.name != "sqlite" or len(values) == 1:
+        got = await session.execute(
+            insert(table).returning(table.c.id, sort_by_parameter_order=True), values
+        )
+        return [int(i) for i in got.scalars().all()]
+    ids: list[int] = []
+    for k in range(0, len(values), SQLITE_ROWS_PER_INSERT):
+        chunk = values[k : k + SQLITE_ROWS_PER_INSERT]
+        got = await session.execute(insert(table).values(chunk).returning(table.c.id))
+        ids += sorted(int(i) for i in got.scalars().all())
+    return ids
+
+
 async def _write(
     session: AsyncSession,
     cell_id: int,
@@ -180,11 +207,7 @@ async def _write(
     if scene is not None and len(records) != 1:
         raise ValueError(f"a scene belongs to one record, got {len(records)}")
     values = [_columns(cell_id, rec) for rec in records]
-    table = Inspection.__table__
-    got = await session.execute(
-        insert(table).returning(table.c.id, sort_by_parameter_order=True), values
-    )
-    ids = [int(i) for i in got.scalars().all()]
+    ids = await _insert_rows(session, values)
     if len(ids) != len(records):
         raise RuntimeError(f"stored {len(ids)} inspection rows for {len(records)} records")
     now = utcnow()
@@ -198,9 +221,9 @@ async def _write(
             )  # fmt: skip
         stages.extend(stage_rows(iid, row | {"decision": rec.decision}))
     if images:
-        await session.execute(insert(InspectionImage), images)
+        await session.execute(insert(InspectionImage.__table__), images)
     if stages:
-        await session.execute(insert(InspectionStage), stages)
+        await session.execute(insert(InspectionStage.__table__), stages)
     await append_records(session, [row | {"decision": rec.decision}
                                    for row, rec in zip(values, records, strict=True)])  # fmt: skip
     if scene and keeps_images(retention, records[0].decision):
