@@ -13,9 +13,9 @@ Protocol (one process, real uvicorn servers on 127.0.0.1, one SQLite database):
    with ``store=true`` (decoding and storage included in its time);
 4. baseline, same run, same images, same index and thresholds: the library's
    :func:`vision.recognition.recognise` on the decoded images, timed image by image next
-   to the endpoint (the two alternate which goes first, so that the load of a shared
-   machine falls on both alike); every 4th image also goes through the endpoint without
-   ``store`` (what storing the row costs).  ``--rounds N`` repeats the timed pass and
+   to the endpoint; every 4th image also goes through the endpoint without ``store`` (what
+   storing the row costs).  The calls on one image take turns at going first, so that the
+   load of a shared machine and a cold image fall on each alike.  ``--rounds N`` repeats the timed pass and
    quotes the median of the rounds' ratios (every round must give the same answers);
 5. a recorded cell: a second server on the same database with the ideal driver and the
    folder camera replaying the same queries, shuffled, one image per look in the order of
@@ -207,29 +207,31 @@ def _key(res: dict[str, Any]) -> tuple[Any, ...]:
 def time_round(client: httpx.Client, folder: Path, queries: list[tuple[int, int]], library: Any,
                *, round_no: int) -> dict[str, Any]:  # fmt: skip
     """One timed pass over ``queries``: per image the endpoint (``store=true``) and the
-    library, alternating which goes first; every 4th image the endpoint without storing."""
+    library, and every 4th image the endpoint without storing, taking turns at going first."""
     rows: list[tuple[str | None, dict[str, Any]]] = []
     lib_rows: list[tuple[str | None, dict[str, Any]]] = []
     t = {"endpoint": [], "library": [], "nostore": [], "handler": [], "store": []}
     for n, (o, k) in enumerate(queries, 1):
         name = f"obj{o}__{k}.png"
         rgb = np.ascontiguousarray(cv2.imread(str(folder / name), cv2.IMREAD_COLOR)[:, :, ::-1])
-        order = ("endpoint", "library") if (n + round_no) % 2 else ("library", "endpoint")
-        for step in order:
+        # Which call comes first (a cold image for it) rotates from image to image.
+        steps = ["endpoint", "library"] + (["nostore"] if n % 4 == 0 else [])
+        turn = (n // 4 + round_no) % len(steps) if n % 4 == 0 else (n + round_no) % 2
+        for step in steps[turn:] + steps[:turn]:
             if step == "endpoint":
                 dt, body = _recognise_once(client, folder, name, store=True)
                 t["endpoint"].append(dt)
                 t["handler"].append(body["durations"]["total"])
                 t["store"].append(body["durations"]["store"])
                 rows.append((_truth(o), body["data"][0]))
+            elif step == "nostore":
+                t["nostore"].append(_recognise_once(client, folder, name, store=False)[0])
             else:
                 t1 = time.perf_counter()
                 rec = library(rgb)
                 t["library"].append(time.perf_counter() - t1)
                 lib_rows.append((_truth(o), {"decision": rec.decision, "model": rec.model,
                                              "best_model": rec.best_model}))  # fmt: skip
-        if n % 4 == 0:
-            t["nostore"].append(_recognise_once(client, folder, name, store=False)[0])
         _progress(f"round {round_no + 1}: endpoint and library", n, len(queries))
     ms = {k: round(1e3 * statistics.median(v), 2) for k, v in t.items()}
     return {"rows": rows, "lib_rows": lib_rows, "ms": ms,
