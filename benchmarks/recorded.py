@@ -210,10 +210,14 @@ def time_round(client: httpx.Client, folder: Path, queries: list[tuple[int, int]
     library, and every 4th image the endpoint without storing, taking turns at going first."""
     rows: list[tuple[str | None, dict[str, Any]]] = []
     lib_rows: list[tuple[str | None, dict[str, Any]]] = []
-    t = {"endpoint": [], "library": [], "nostore": [], "handler": [], "store": []}
+    t: dict[str, list[float]] = {k: [] for k in ("endpoint", "library", "nostore", "handler",
+                                                 "store")}  # fmt: skip
     for n, (o, k) in enumerate(queries, 1):
         name = f"obj{o}__{k}.png"
-        rgb = np.ascontiguousarray(cv2.imread(str(folder / name), cv2.IMREAD_COLOR)[:, :, ::-1])
+        bgr = cv2.imread(str(folder / name), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise FileNotFoundError(f"cannot read {folder / name}")
+        rgb = np.ascontiguousarray(bgr[:, :, ::-1])
         # Which call comes first (a cold image for it) rotates from image to image.
         steps = ["endpoint", "library"] + (["nostore"] if n % 4 == 0 else [])
         turn = (n // 4 + round_no) % len(steps) if n % 4 == 0 else (n + round_no) % 2

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from datetime import datetime
-from typing import Any
+from typing import Any, cast
 
-from sqlalchemy import delete, func, insert, select
+from sqlalchemy import Table, delete, func, insert, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.db.models import (
@@ -171,7 +171,7 @@ async def _insert_rows(session: AsyncSession, values: list[dict[str, Any]]) -> l
     getting a rowid larger than any before it (the writer holds the database's lock), so
     the returned ids sorted are the rows' ids in order.
     """
-    table = Inspection.__table__
+    table = cast(Table, Inspection.__table__)
     if session.get_bind().dialect.name != "sqlite" or len(values) == 1:
         got = await session.execute(
             insert(table).returning(table.c.id, sort_by_parameter_order=True), values
@@ -211,7 +211,8 @@ async def _write(
     if len(ids) != len(records):
         raise RuntimeError(f"stored {len(ids)} inspection rows for {len(records)} records")
     now = utcnow()
-    images, stages = [], []
+    images: list[dict[str, Any]] = []
+    stages: list[dict[str, Any]] = []
     for iid, rec, row in zip(ids, records, values, strict=True):
         if keeps_images(retention, rec.decision):
             images.extend(
@@ -221,9 +222,9 @@ async def _write(
             )  # fmt: skip
         stages.extend(stage_rows(iid, row | {"decision": rec.decision}))
     if images:
-        await session.execute(insert(InspectionImage.__table__), images)
+        await session.execute(insert(cast(Table, InspectionImage.__table__)), images)
     if stages:
-        await session.execute(insert(InspectionStage.__table__), stages)
+        await session.execute(insert(cast(Table, InspectionStage.__table__)), stages)
     await append_records(session, [row | {"decision": rec.decision}
                                    for row, rec in zip(values, records, strict=True)])  # fmt: skip
     if scene and keeps_images(retention, records[0].decision):
