@@ -1,7 +1,8 @@
 """Recognising recorded images through the product: COIL-20 trained through the REST API,
-the threshold chosen by the product, queries through ``POST /api/recognition/recognise``.
+the threshold chosen by the product, queries through ``POST /api/recognition/recognise`` and
+through a recorded cell's inspection run.
 
-Protocol (one process, a real uvicorn server on 127.0.0.1, SQLite):
+Protocol (one process, real uvicorn servers on 127.0.0.1, one SQLite database):
 
 1. objects 1-10 (``obj1`` .. ``obj10``) are created and their views at 10 degree spacing
    (COIL index ``k`` even: 36 per object) uploaded through ``POST /api/models/{id}/views``;
@@ -11,18 +12,25 @@ Protocol (one process, a real uvicorn server on 127.0.0.1, SQLite):
    view of objects 11-15 (unknown objects) are sent to the endpoint one image per request
    with ``store=true`` (decoding and storage included in its time);
 4. baseline, same run, same images, same index and thresholds: the library's
-   :func:`vision.recognition.recognise` on the decoded images; and every 4th query through
-   the endpoint again without ``store`` (what storing the row costs).
+   :func:`vision.recognition.recognise` on the decoded images, timed image by image next
+   to the endpoint; every 4th image also goes through the endpoint without ``store`` (what
+   storing the row costs).  The calls on one image take turns at going first, so that the
+   load of a shared machine and a cold image fall on each alike.  ``--rounds N`` repeats the timed pass and
+   quotes the median of the rounds' ratios (every round must give the same answers);
+5. a recorded cell: a second server on the same database with the ideal driver and the
+   folder camera replaying the same queries, shuffled, one image per look in the order of
+   the recording's ``order.txt``; one ``POST /api/inspection/run`` (policy ``top-only``)
+   inspects them all, and every stored row is read back over REST and scored.
 
 Figures: known top-1 (the best model is the right one), false rejects (a known image not
 ``recognized``), false accepts (an unknown image ``recognized``), misrecognitions (a known
 image recognised as another object), and the time per image of the endpoint and of the
-library.  Targets: top-1 >= 99 %, false accepts <= 2 %, false rejects <= 5 %, endpoint
-<= 1.5 x library.
+library, with the machine's load average.  Targets: top-1 >= 99 %, false accepts <= 2 %,
+false rejects <= 5 % (endpoint and recorded cell), endpoint <= 1.5 x library.
 
-``python -m benchmarks.recorded [--short] [--json]``; ``--short`` trains at 20 degree
-spacing and subsamples the queries (what ``tests/benchmarks`` runs: it checks the run, not
-the targets, which need the full protocol).
+``python -m benchmarks.recorded [--short] [--rounds N] [--no-cell] [--json]``; ``--short``
+trains at 20 degree spacing and subsamples the queries (what ``tests/benchmarks`` runs: it
+checks the run, not the targets, which need the full protocol).
 """
 
 from __future__ import annotations
@@ -30,6 +38,8 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import os
+import random
 import socket
 import statistics
 import sys
@@ -175,7 +185,133 @@ def score(rows: list[tuple[str | None, dict[str, Any]]]) -> dict[str, Any]:
     }
 
 
-def run(data_dir: Path, *, plan: Plan = FULL, workdir: Path | None = None) -> dict[str, Any]:
+def _recognise_once(
+    client: httpx.Client, folder: Path, name: str, *, store: bool
+) -> tuple[float, dict[str, Any]]:
+    """One image through the endpoint: the client's wall time and the answer."""
+    data = _png(folder / name)
+    t1 = time.perf_counter()
+    r = client.post("/api/recognition/recognise", files=[("images", (name, data, "image/png"))],
+                    data={"viewpoint": "1", "store": "true" if store else "false"})  # fmt: skip
+    t = time.perf_counter() - t1
+    r.raise_for_status()
+    return t, dict(r.json())
+
+
+def _key(res: dict[str, Any]) -> tuple[Any, ...]:
+    """What must not change between rounds: the decision, the model and every score."""
+    return (res["decision"], res["model"], res["best_model"],
+            tuple((s["model"], s["score"]) for s in res["scores"]))  # fmt: skip
+
+
+def time_round(client: httpx.Client, folder: Path, queries: list[tuple[int, int]], library: Any,
+               *, round_no: int) -> dict[str, Any]:  # fmt: skip
+    """One timed pass over ``queries``: per image the endpoint (``store=true``) and the
+    library, and every 4th image the endpoint without storing, taking turns at going first."""
+    rows: list[tuple[str | None, dict[str, Any]]] = []
+    lib_rows: list[tuple[str | None, dict[str, Any]]] = []
+    t: dict[str, list[float]] = {k: [] for k in ("endpoint", "library", "nostore", "handler",
+                                                 "store")}  # fmt: skip
+    for n, (o, k) in enumerate(queries, 1):
+        name = f"obj{o}__{k}.png"
+        bgr = cv2.imread(str(folder / name), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise FileNotFoundError(f"cannot read {folder / name}")
+        rgb = np.ascontiguousarray(bgr[:, :, ::-1])
+        # Which call comes first (a cold image for it) rotates from image to image.
+        steps = ["endpoint", "library"] + (["nostore"] if n % 4 == 0 else [])
+        turn = (n // 4 + round_no) % len(steps) if n % 4 == 0 else (n + round_no) % 2
+        for step in steps[turn:] + steps[:turn]:
+            if step == "endpoint":
+                dt, body = _recognise_once(client, folder, name, store=True)
+                t["endpoint"].append(dt)
+                t["handler"].append(body["durations"]["total"])
+                t["store"].append(body["durations"]["store"])
+                rows.append((_truth(o), body["data"][0]))
+            elif step == "nostore":
+                t["nostore"].append(_recognise_once(client, folder, name, store=False)[0])
+            else:
+                t1 = time.perf_counter()
+                rec = library(rgb)
+                t["library"].append(time.perf_counter() - t1)
+                lib_rows.append((_truth(o), {"decision": rec.decision, "model": rec.model,
+                                             "best_model": rec.best_model}))  # fmt: skip
+        _progress(f"round {round_no + 1}: endpoint and library", n, len(queries))
+    ms = {k: round(1e3 * statistics.median(v), 2) for k, v in t.items()}
+    return {"rows": rows, "lib_rows": lib_rows, "ms": ms,
+            "time_ratio": round(ms["endpoint"] / ms["library"], 3)}  # fmt: skip
+
+
+def recorded_cell(settings: Any, token: str, folder: Path, work: Path,
+                  queries: list[tuple[int, int]], expected: dict[str, tuple[Any, ...]]) -> dict[str, Any]:  # fmt: skip
+    """Part 5 of the protocol: a cell on the same database replaying ``queries`` (shuffled)
+    from its folder camera, one image per look, through one inspection run over REST."""
+    from backend.settings import Settings
+
+    sequence = list(queries)
+    random.Random(32).shuffle(sequence)
+    recording = work / "recording"
+    recording.mkdir()
+    names = []
+    for i, (o, k) in enumerate(sequence):
+        # Names whose sorted order is not the recording's: the order file states it.
+        name = f"obj{o}__{k}_shot{i:04d}.png"
+        (recording / name).symlink_to(folder / f"obj{o}__{k}.png")
+        names.append(name)
+    (recording / "order.txt").write_text("# the recorded top views\n" + "\n".join(names) + "\n")
+    cell = Settings(**{**settings.model_dump(), "camera_folder": recording,
+                       "camera_replay": "look", "camera_order": "manifest"})  # fmt: skip
+    with _server(cell) as (base, _app):
+        client = httpx.Client(base_url=base, headers={"Authorization": f"Bearer {token}"},
+                              timeout=300)  # fmt: skip
+        status = wait_for_threshold(client, 600)
+        t0 = time.perf_counter()
+        r = client.post("/api/inspection/run", json={"policy": "top-only", "count": len(sequence)})
+        r.raise_for_status()
+        job_id = r.json()["job"]["id"]
+        while True:
+            job = client.get(f"/api/jobs/{job_id}").json()["job"]
+            if job["state"] != "running":
+                break
+            _progress("recorded cell: inspecting", round(job["progress"] * len(sequence)),
+                      len(sequence))  # fmt: skip
+            time.sleep(1.0)
+        t_run = time.perf_counter() - t0
+        if job["state"] != "done":
+            raise RuntimeError(f"the inspection run ended {job['state']}: {job}")
+        ids = job["result"]["inspection_ids"]
+        stored = []
+        for n, iid in enumerate(ids, 1):
+            r = client.get(f"/api/inspections/{iid}")
+            r.raise_for_status()
+            stored.append(r.json())
+            _progress("recorded cell: reading the stored rows", n, len(ids))
+        threshold = status["settings"]["global_threshold"]
+        client.close()
+    if len(stored) != len(sequence):
+        raise RuntimeError(f"{len(stored)} rows stored for a recording of {len(sequence)}")
+    rows = []
+    agree = 0
+    for (o, k), row in zip(sequence, stored, strict=True):
+        scores = row["scores"] or {}
+        best = max(scores, key=lambda m: (scores[m], m)) if scores else None
+        rows.append((_truth(o), {"decision": row["decision"], "model": row["model"],
+                                 "best_model": best}))  # fmt: skip
+        agree += (row["decision"], row["model"]) == expected[f"obj{o}__{k}.png"][:2]
+    cycle = [float(r["duration_s"]) for r in stored if r["duration_s"] is not None]
+    return {
+        "inspections": len(stored),
+        "threshold": threshold,
+        "run_s": round(t_run, 1),
+        "cycle_ms_median": round(1e3 * statistics.median(cycle), 1) if cycle else None,
+        "same_as_endpoint": agree,
+        "failed": sum(r["decision"] == "failed" for r in stored),
+        **score(rows),
+    }
+
+
+def run(data_dir: Path, *, plan: Plan = FULL, workdir: Path | None = None, rounds: int = 1,
+        cell: bool = True) -> dict[str, Any]:  # fmt: skip
     """Run the protocol (module docstring); returns the figures."""
     from backend.api.deps import runtime_of
     from backend.auth import create_user
@@ -186,10 +322,13 @@ def run(data_dir: Path, *, plan: Plan = FULL, workdir: Path | None = None) -> di
     from backend.settings import Settings
     from vision.recognition import recognise
 
+    if isinstance(rounds, bool) or not isinstance(rounds, int) or not 1 <= rounds <= 20:
+        raise ValueError(f"rounds must be an integer in 1..20, got {rounds!r}")
     folder = coil_folder(data_dir)
     tmp_ctx = tempfile.TemporaryDirectory() if workdir is None else None
     work = Path(tmp_ctx.name) if tmp_ctx is not None else workdir
     assert work is not None
+    load = [round(x, 2) for x in os.getloadavg()]
     try:
         settings = Settings(
             database_url=f"sqlite+aiosqlite:///{work / 'recorded.db'}",
@@ -217,6 +356,7 @@ def run(data_dir: Path, *, plan: Plan = FULL, workdir: Path | None = None) -> di
                 await db.dispose()
 
         token = asyncio.run(user())
+        queries = [(o, k) for o, k in plan.known_queries() + plan.unknown_queries()]
         with _server(settings) as (base, app):
             client = httpx.Client(base_url=base, headers={"Authorization": f"Bearer {token}"},
                                   timeout=300)  # fmt: skip
@@ -226,33 +366,6 @@ def run(data_dir: Path, *, plan: Plan = FULL, workdir: Path | None = None) -> di
             _say("waiting for the product to choose its threshold")
             status = wait_for_threshold(client, 1800)
             t_threshold = time.perf_counter() - t0 - t_upload
-            queries = [(o, k) for o, k in plan.known_queries() + plan.unknown_queries()]
-            rows: list[tuple[str | None, dict[str, Any]]] = []
-            t_endpoint: list[float] = []
-            t_server: list[float] = []
-            for n, (o, k) in enumerate(queries, 1):
-                name = f"obj{o}__{k}.png"
-                data = _png(folder / name)
-                t1 = time.perf_counter()
-                r = client.post("/api/recognition/recognise",
-                                files=[("images", (name, data, "image/png"))],
-                                data={"viewpoint": "1", "store": "true"})  # fmt: skip
-                t_endpoint.append(time.perf_counter() - t1)
-                r.raise_for_status()
-                rows.append((_truth(o), r.json()["data"][0]))
-                t_server.append(r.json()["durations"]["total"])
-                _progress("recognising through the endpoint", n, len(queries))
-            # The endpoint without storing (every 4th query): what storage costs.
-            t_nostore: list[float] = []
-            for o, k in queries[::4]:
-                name = f"obj{o}__{k}.png"
-                data = _png(folder / name)
-                t1 = time.perf_counter()
-                r = client.post("/api/recognition/recognise",
-                                files=[("images", (name, data, "image/png"))],
-                                data={"viewpoint": "1", "store": "false"})  # fmt: skip
-                t_nostore.append(time.perf_counter() - t1)
-                r.raise_for_status()
             # The library on the same images, index and thresholds, in the same process.
             rt = runtime_of(app)
             assert rt is not None
@@ -266,26 +379,32 @@ def run(data_dir: Path, *, plan: Plan = FULL, workdir: Path | None = None) -> di
                     await db.dispose()
 
             choice = asyncio.run(choice_now())
-            lib_rows: list[tuple[str | None, dict[str, Any]]] = []
-            t_library: list[float] = []
-            for n, (o, k) in enumerate(queries, 1):
-                grey = cv2.imread(str(folder / f"obj{o}__{k}.png"), cv2.IMREAD_COLOR)
-                rgb = np.ascontiguousarray(grey[:, :, ::-1])
-                t1 = time.perf_counter()
+
+            def library(rgb: np.ndarray) -> Any:
                 with rt.live_index.reading() as index:
-                    rec = recognise(index, rgb, viewpoint=1, threshold=choice)
-                t_library.append(time.perf_counter() - t1)
-                lib_rows.append((_truth(o), {"decision": rec.decision, "model": rec.model,
-                                             "best_model": rec.best_model}))  # fmt: skip
-                _progress("recognising with the library", n, len(queries))
+                    return recognise(index, rgb, viewpoint=1, threshold=choice)
+
+            passes = [time_round(client, folder, queries, library, round_no=r)
+                      for r in range(rounds)]  # fmt: skip
             stored = client.get("/api/inspections", params={"limit": 1}).json()
             client.close()
+        first = passes[0]
+        expected = {f"obj{o}__{k}.png": _key(res)
+                    for (o, k), (_t, res) in zip(queries, first["rows"], strict=True)}  # fmt: skip
+        same = all(
+            _key(res) == expected[f"obj{o}__{k}.png"]
+            for p in passes[1:]
+            for (o, k), (_t, res) in zip(queries, p["rows"], strict=True)
+        )
+        cell_res = recorded_cell(settings, token, folder, work, queries, expected) if cell else None
+        load_after = [round(x, 2) for x in os.getloadavg()]
     finally:
         if tmp_ctx is not None:
             tmp_ctx.cleanup()
     d = status["settings"]["detail"]
-    endpoint_ms = 1e3 * statistics.median(t_endpoint)
-    library_ms = 1e3 * statistics.median(t_library)
+    ratios = [p["time_ratio"] for p in passes]
+    per_round = {k: [p["ms"][k] for p in passes] for k in first["ms"]}
+    med = {k: round(statistics.median(v), 2) for k, v in per_round.items()}
     return {
         "plan": {
             "train_step_deg": 5 * plan.train_step,
@@ -300,43 +419,70 @@ def run(data_dir: Path, *, plan: Plan = FULL, workdir: Path | None = None) -> di
         "threshold_s": round(t_threshold, 2),
         "threshold_runs": status["runs"],
         "threshold_superseded": status["superseded"],
-        "endpoint": score(rows),
-        "library": score(lib_rows),
-        "endpoint_ms_per_image": round(endpoint_ms, 2),
-        "library_ms_per_image": round(library_ms, 2),
-        "server_ms_per_image": round(1e3 * statistics.median(t_server), 2),
-        "endpoint_nostore_ms_per_image": round(1e3 * statistics.median(t_nostore), 2),
-        "time_ratio": round(endpoint_ms / library_ms, 3),
+        "endpoint": score(first["rows"]),
+        "library": score(first["lib_rows"]),
+        "rounds": rounds,
+        "rounds_identical": same,
+        "endpoint_ms_per_image": med["endpoint"],
+        "library_ms_per_image": med["library"],
+        "server_ms_per_image": med["handler"],
+        "store_ms_per_image": med["store"],
+        "endpoint_nostore_ms_per_image": med["nostore"],
+        "time_ratio": round(statistics.median(ratios), 3),
+        "time_ratios": ratios,
+        "ms_per_round": per_round,
         "stored_rows": stored["count"],
+        "recorded_cell": cell_res,
+        "load_average": {"before": load, "after": load_after, "cpus": os.cpu_count()},
         "targets": TARGETS,
     }
 
 
 def table(res: dict[str, Any]) -> str:
     """The figures side by side with the library baseline and the targets."""
-    e, lib = res["endpoint"], res["library"]
+    e, lib, c = res["endpoint"], res["library"], res["recorded_cell"]
+    la = res["load_average"]
     lines = [
         f"COIL-20: objects 1-10 trained at {res['plan']['train_step_deg']} deg spacing "
         f"({res['trained_views']} views uploaded in {res['upload_s']} s); threshold "
         f"{res['threshold']:.4f} chosen by the product in {res['threshold_s']} s "
         f"({res['threshold_runs']} recomputation(s), {res['threshold_superseded']} stopped by "
         f"a later upload): {res['rule']}",
-        f"queries: {e['known']} untrained views of objects 1-10, {e['unknown']} views of 11-15",
+        f"queries: {e['known']} untrained views of objects 1-10, {e['unknown']} views of 11-15"
+        f"; {res['rounds']} timed round(s), answers identical in every round: "
+        f"{res['rounds_identical']}",
+        f"load average {la['before'][0]:.1f} at the start, {la['after'][0]:.1f} at the end, "
+        f"{la['cpus']} CPUs",
         "",
-        f"{'':28s}{'endpoint':>12s}{'library':>12s}{'target':>10s}",
-        f"{'known top-1':28s}{e['top1']:>12.2%}{lib['top1']:>12.2%}{'>= 99 %':>10s}",
-        f"{'false rejects':28s}{e['false_rejects']:>12.2%}{lib['false_rejects']:>12.2%}"
-        f"{'<= 5 %':>10s}",
-        f"{'false accepts':28s}{e['false_accepts']:>12.2%}{lib['false_accepts']:>12.2%}"
-        f"{'<= 2 %':>10s}",
-        f"{'misrecognised (count)':28s}{e['misrecognised']:>12d}{lib['misrecognised']:>12d}",
+        f"{'':28s}{'endpoint':>12s}{'library':>12s}{'rec. cell':>12s}{'target':>10s}",
+    ]
+    cell = c or {}
+
+    def row(label: str, key: str, target: str) -> str:
+        cv = f"{cell[key]:>12.2%}" if c else f"{'-':>12s}"
+        return f"{label:28s}{e[key]:>12.2%}{lib[key]:>12.2%}{cv}{target:>10s}"
+
+    lines += [
+        row("known top-1", "top1", ">= 99 %"),
+        row("false rejects", "false_rejects", "<= 5 %"),
+        row("false accepts", "false_accepts", "<= 2 %"),
+        f"{'misrecognised (count)':28s}{e['misrecognised']:>12d}{lib['misrecognised']:>12d}"
+        + (f"{c['misrecognised']:>12d}" if c else ""),
         f"{'time per image, ms (median)':28s}{res['endpoint_ms_per_image']:>12.1f}"
         f"{res['library_ms_per_image']:>12.1f}",
         f"{'  of which in the handler':28s}{res['server_ms_per_image']:>12.1f}",
+        f"{'  of which storing the row':28s}{res['store_ms_per_image']:>12.1f}",
         f"{'  without storing the row':28s}{res['endpoint_nostore_ms_per_image']:>12.1f}",
-        f"{'endpoint / library':28s}{res['time_ratio']:>12.2f}{'':>12s}{'<= 1.5':>10s}",
-        f"stored inspection rows: {res['stored_rows']}",
+        f"{'endpoint / library':28s}{res['time_ratio']:>12.2f}{'':>24s}{'<= 1.5':>10s}"
+        f"   (rounds: {', '.join(f'{r:.2f}' for r in res['time_ratios'])})",
+        f"stored inspection rows (uploads): {res['stored_rows']}",
     ]
+    if c:
+        lines.append(
+            f"recorded cell: {c['inspections']} inspections in one run of {c['run_s']} s "
+            f"(cycle {c['cycle_ms_median']} ms median), {c['failed']} failed; the same "
+            f"decision and model as the endpoint for {c['same_as_endpoint']} of them"
+        )
     for a in res["advice"]:
         lines.append(f"advice: {a}")
     return "\n".join(lines)
@@ -346,6 +492,8 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--json", action="store_true", help="print JSON on the last line")
     p.add_argument("--short", action="store_true", help="subsampled queries (tests)")
+    p.add_argument("--rounds", type=int, default=1, help="timed passes (1-20; median ratio)")
+    p.add_argument("--no-cell", action="store_true", help="leave out the recorded cell's run")
     p.add_argument("--data-dir", type=Path, default=None, help="default: the settings'")
     args = p.parse_args(argv)
     from backend.settings import Settings
@@ -353,7 +501,8 @@ def main(argv: list[str] | None = None) -> None:
     data_dir = args.data_dir or Settings().data_dir
     if not data_dir.is_absolute():
         data_dir = (Path(__file__).resolve().parents[1] / data_dir).resolve()
-    res = run(data_dir, plan=SHORT if args.short else FULL)
+    res = run(data_dir, plan=SHORT if args.short else FULL, rounds=args.rounds,
+              cell=not args.no_cell)  # fmt: skip
     print(table(res))
     if args.json:
         print(json.dumps(res))

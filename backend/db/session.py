@@ -64,7 +64,11 @@ class Database:
             raise ValueError(f"pool_timeout_s must be within (0, 300] s, got {pool_timeout_s!r}")
         #: How long a session waits for a connection (and a request for an API slot), s.
         self.pool_timeout_s = wait_s
-        kwargs: dict[str, object] = {"echo": echo, "pool_pre_ping": True}
+        # A pooled PostgreSQL connection may have been dropped by the server: ping it at
+        # checkout.  A SQLite connection cannot be dropped (the file's side files are
+        # checked at checkout instead, below), and a ping costs every session a round
+        # trip to the driver's thread.
+        kwargs: dict[str, object] = {"echo": echo, "pool_pre_ping": not url.startswith("sqlite")}
         path = make_url(url).database
         if path not in (None, "", ":memory:"):  # a pool of connections
             kwargs.update(pool_size=POOL_SIZE, max_overflow=POOL_OVERFLOW, pool_timeout=wait_s)

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from datetime import datetime
-from typing import Any
+from typing import Any, cast
 
-from sqlalchemy import delete, func, insert, select
+from sqlalchemy import Table, delete, func, insert, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.db.models import (
@@ -23,6 +23,7 @@ from backend.db.models import (
     InspectionStage,
 )
 from backend.db.session import Database
+from backend.db.types import utcnow
 from vision.errors import InvalidInput, NotFound
 
 __all__ = ["PICK_OUTCOMES", "InspectionRecord", "ViewRecord", "get_image", "get_inspection",
@@ -118,7 +119,8 @@ async def store(
                 )
                 if earlier is not None:
                     return int(earlier)
-        return await _write(session, cell_id, rec, retention=retention, scene=scene)
+        (iid,) = await _write(session, cell_id, [rec], retention=retention, scene=scene)
+        return iid
 
 
 async def store_all(
@@ -126,70 +128,114 @@ async def store_all(
 ) -> list[int]:
     """Write several records (with their stage rows, report records and images) in one
     transaction: all or none; returns their ids in order."""
+    if not records:
+        return []
     async with db.session() as session:
-        return [await _write(session, cell_id, rec, retention=retention) for rec in records]
+        return await _write(session, cell_id, records, retention=retention)
+
+
+def _columns(cell_id: int, rec: InspectionRecord) -> dict[str, Any]:
+    """The ``inspections`` column values of one record."""
+    return {
+        "cell_id": cell_id,
+        "started_at": rec.started_at,
+        "finished_at": rec.finished_at,
+        "decision": Decision(rec.decision),
+        "model_id": rec.model_id,
+        "model_name": rec.model_name,
+        "score": rec.score,
+        "viewpoints_visited": list(rec.viewpoints),
+        "object_pose": None if rec.pose is None else rec.pose.get("T_base_obj"),
+        "duration_s": round(
+            sum(rec.durations.values()) if rec.duration_s is None else rec.duration_s, 4
+        ),
+        "note": rec.reason[:2000],
+        "policy": rec.policy,
+        "reason": rec.reason,
+        "durations": rec.durations,
+        "scores": rec.scores,
+        "pose": rec.pose,
+        "pick": rec.pick,
+        "truth": rec.truth,
+        "source": rec.source,
+        "recipe_id": rec.recipe_id,
+        "recipe_name": None if rec.recipe_name is None else rec.recipe_name[:64],
+    }
+
+
+#: Rows per multi-row ``INSERT`` on SQLite (21 bound values each, far below its limit).
+SQLITE_ROWS_PER_INSERT = 200
+
+
+async def _insert_rows(session: AsyncSession, values: list[dict[str, Any]]) -> list[int]:
+    """Insert ``inspections`` rows; their ids in the order of ``values``.
+
+    PostgreSQL batches the rows and orders the returned ids itself (SQLAlchemy's
+    "insertmanyvalues").  On SQLite that would be one statement per row, so the rows go in
+    one multi-row ``INSERT`` per chunk: SQLite inserts them one after the other, each
+    getting a rowid larger than any before it (the writer holds the database's lock), so
+    the returned ids sorted are the rows' ids in order.
+    """
+    table = cast(Table, Inspection.__table__)
+    if session.get_bind().dialect.name != "sqlite" or len(values) == 1:
+        got = await session.execute(
+            insert(table).returning(table.c.id, sort_by_parameter_order=True), values
+        )
+        return [int(i) for i in got.scalars().all()]
+    ids: list[int] = []
+    for k in range(0, len(values), SQLITE_ROWS_PER_INSERT):
+        chunk = values[k : k + SQLITE_ROWS_PER_INSERT]
+        got = await session.execute(insert(table).values(chunk).returning(table.c.id))
+        ids += sorted(int(i) for i in got.scalars().all())
+    return ids
 
 
 async def _write(
     session: AsyncSession,
     cell_id: int,
-    rec: InspectionRecord,
+    records: list[InspectionRecord],
     *,
     retention: str,
     scene: bytes | None = None,
-) -> int:
-    """Add one record's rows in ``session`` (the caller's transaction); its id."""
+) -> list[int]:
+    """Add the records' rows in ``session`` (the caller's transaction); their ids in order.
+
+    Each table gets one batched statement for all the records (the rows with ``RETURNING``
+    their ids, then images, stage rows and report records), and nothing written is read
+    back: storing a result costs a few statements however many records there are.
+    ``scene`` (a 3D recording) belongs to a single record.
+    """
     from backend.reports.blocks import append as append_records
     from backend.reports.retention import keeps_images
     from backend.reports.stages import stage_rows
 
-    keep = keeps_images(retention, rec.decision)
-    row = Inspection(
-        cell_id=cell_id,
-        started_at=rec.started_at,
-        finished_at=rec.finished_at,
-        decision=Decision(rec.decision),
-        model_id=rec.model_id,
-        model_name=rec.model_name,
-        score=rec.score,
-        viewpoints_visited=list(rec.viewpoints),
-        object_pose=None if rec.pose is None else rec.pose.get("T_base_obj"),
-        duration_s=round(
-            sum(rec.durations.values()) if rec.duration_s is None else rec.duration_s, 4
-        ),
-        note=rec.reason[:2000],
-        policy=rec.policy,
-        reason=rec.reason,
-        durations=rec.durations,
-        scores=rec.scores,
-        pose=rec.pose,
-        pick=rec.pick,
-        truth=rec.truth,
-        source=rec.source,
-        recipe_id=rec.recipe_id,
-        recipe_name=None if rec.recipe_name is None else rec.recipe_name[:64],
-    )
-    for v in rec.views if keep else ():
-        row.images.append(
-            InspectionImage(viewpoint=v.viewpoint, image_jpeg=v.jpeg, scores=v.scores)
-        )
-    session.add(row)
-    await session.flush()
-    stages = stage_rows(row.id, {"cell_id": cell_id, "started_at": rec.started_at,
-                                 "decision": rec.decision, "model_name": rec.model_name,
-                                 "policy": rec.policy, "durations": rec.durations})  # fmt: skip
+    if scene is not None and len(records) != 1:
+        raise ValueError(f"a scene belongs to one record, got {len(records)}")
+    values = [_columns(cell_id, rec) for rec in records]
+    ids = await _insert_rows(session, values)
+    if len(ids) != len(records):
+        raise RuntimeError(f"stored {len(ids)} inspection rows for {len(records)} records")
+    now = utcnow()
+    images: list[dict[str, Any]] = []
+    stages: list[dict[str, Any]] = []
+    for iid, rec, row in zip(ids, records, values, strict=True):
+        if keeps_images(retention, rec.decision):
+            images.extend(
+                {"inspection_id": iid, "viewpoint": v.viewpoint, "image_jpeg": v.jpeg,
+                 "scores": v.scores, "created_at": now}
+                for v in rec.views
+            )  # fmt: skip
+        stages.extend(stage_rows(iid, row | {"decision": rec.decision}))
+    if images:
+        await session.execute(insert(cast(Table, InspectionImage.__table__)), images)
     if stages:
-        await session.execute(insert(InspectionStage), stages)
-    await append_records(session, [{
-        "cell_id": cell_id, "started_at": rec.started_at, "decision": rec.decision,
-        "model_name": rec.model_name, "policy": rec.policy, "duration_s": row.duration_s,
-        "score": rec.score, "durations": rec.durations,
-        "viewpoints_visited": row.viewpoints_visited, "truth": rec.truth,
-    }])  # fmt: skip
-    if keep and scene:
-        session.add(InspectionScene(inspection_id=row.id, scene=scene, size_bytes=len(scene)))
+        await session.execute(insert(cast(Table, InspectionStage.__table__)), stages)
+    await append_records(session, [row | {"decision": rec.decision}
+                                   for row, rec in zip(values, records, strict=True)])  # fmt: skip
+    if scene and keeps_images(retention, records[0].decision):
+        session.add(InspectionScene(inspection_id=ids[0], scene=scene, size_bytes=len(scene)))
         await session.flush()
-    return int(row.id)
+    return ids
 
 
 def pick_outcome(pick: Any, decision: str) -> dict[str, Any]:

@@ -134,14 +134,21 @@ def _insert(session: AsyncSession, table: Any) -> Any:
 
 
 async def _name_ids(session: AsyncSession, names: set[str]) -> dict[str, int]:
+    """The id of every name in ``names``, adding the missing ones (read first: after the
+    first records of a model and policy, every name is there and one statement does)."""
     if not names:
         return {}
-    ins = _insert(session, ReportName.__table__)
-    await session.execute(
-        ins.on_conflict_do_nothing(index_elements=["name"]), [{"name": n} for n in sorted(names)]
-    )
-    rows = await session.execute(select(ReportName.id, ReportName.name).where(ReportName.name.in_(names)))  # fmt: skip
-    return {str(n): int(i) for i, n in rows.all()}
+    sel = select(ReportName.id, ReportName.name)
+    ids = {str(n): int(i) for i, n in (await session.execute(sel.where(ReportName.name.in_(names)))).all()}  # fmt: skip
+    missing = sorted(names - set(ids))
+    if missing:
+        ins = _insert(session, ReportName.__table__)
+        await session.execute(
+            ins.on_conflict_do_nothing(index_elements=["name"]), [{"name": n} for n in missing]
+        )
+        rows = await session.execute(sel.where(ReportName.name.in_(missing)))
+        ids.update({str(n): int(i) for i, n in rows.all()})
+    return ids
 
 
 def parts(data: bytes, n: int, new: bytes, k: int) -> list[tuple[int, bytes]]:
@@ -178,9 +185,13 @@ async def append(session: AsyncSession, rows: Sequence[dict[str, Any]]) -> None:
         _insert(session, tb).on_conflict_do_nothing(index_elements=["cell_id", "start_s", "part"]),
         [{"cell_id": c, "start_s": s, "part": 0, "n": 0, "data": b""} for c, s in keys],
     )
+    # SQLite has one writer at a time (the insert above took its lock); PostgreSQL locks
+    # rows, so part 0 is locked as the hour's lock before its last part is read.
+    lock_rows = session.get_bind().dialect.name != "sqlite"
     for c, s in keys:
         hour = (tb.c.cell_id == c, tb.c.start_s == s)
-        await session.execute(select(tb.c.id).where(*hour, tb.c.part == 0).with_for_update())
+        if lock_rows:
+            await session.execute(select(tb.c.id).where(*hour, tb.c.part == 0).with_for_update())
         bid, part, n, data = (
             await session.execute(
                 select(tb.c.id, tb.c.part, tb.c.n, tb.c.data)

@@ -125,3 +125,65 @@ def test_the_cli_recognises_a_folder(coil_cell, tmp_path):
     r = _cli(["recognise", str(Path(shots) / "missing.png"), "--url", srv.base, "--token", viewer],
              settings)  # fmt: skip
     assert r.returncode == 2 and "does not exist" in r.stderr
+
+
+#: Stored through the endpoint and the CLI: objects 1-10 at untrained angles, and 11-15.
+STORED = [(1, 3), (4, 41), (9, 69), (11, 10), (13, 50), (15, 7)]
+
+
+def _check_stored_row(client: httpx.Client, answer: dict, obj: int) -> None:
+    """The inspection row ``store=true`` made of one answer: what the answer said, kept."""
+    r = client.get(f"/api/inspections/{answer['inspection_id']}")
+    assert r.status_code == 200, r.text
+    row = r.json()
+    assert row["source"] == "upload" and row["policy"] == "image", row
+    assert row["decision"] == answer["decision"] and row["model"] == answer["model"], row
+    assert row["scores"] == {s["model"]: s["score"] for s in answer["scores"]}, row
+    assert row["viewpoints_visited"] == [answer["viewpoint"]] == [1]
+    assert answer["name"] in row["reason"]
+    assert set(row["durations"]) == {"acquire", "features", "match", "decide"}
+    if obj <= 10:
+        assert row["decision"] == "recognized" and row["model"] == f"obj{obj}", row
+        assert row["model_id"] is not None and row["score"] > answer["threshold"]
+        image = row["pose"]["image"]
+        assert (
+            round(image["x_px"], 2) == answer["pose"]["x_px"]
+            and image["view_id"] == answer["view_id"]
+        )
+    else:
+        assert row["decision"] != "recognized" and row["model"] is None, row
+    # The image with the matched outline drawn, as the cell's own inspections keep theirs.
+    r = client.get(row["images"][0])
+    assert r.status_code == 200 and r.content[:2] == b"\xff\xd8", r.headers
+
+
+def test_stored_results_are_inspection_rows(coil_cell, tmp_path):
+    srv, client, _viewer, folder, _status, settings = coil_cell
+    operator = _token(settings, "olga", "operator")
+    before = client.get("/api/inspections", params={"limit": 1}).json()["count"]
+    files = [("images", (f"obj{o}__{k}.png", (folder / f"obj{o}__{k}.png").read_bytes(),
+                         "image/png")) for o, k in STORED]  # fmt: skip
+    r = httpx.post(f"{srv.base}/api/recognition/recognise", files=files, data={"store": "true"},
+                   headers={"Authorization": f"Bearer {operator}"}, timeout=TIMEOUT_S)  # fmt: skip
+    assert r.status_code == 200, r.text
+    answers = r.json()["data"]
+    assert len(answers) == len(STORED)
+    for (o, _k), answer in zip(STORED, answers, strict=True):
+        _check_stored_row(client, answer, o)
+    # The CLI over a folder with --store, as a subprocess with the operator's token.
+    shots = tmp_path / "stored"
+    shots.mkdir()
+    for o, k in STORED:
+        shutil.copy(folder / f"obj{o}__{k}.png", shots / f"obj{o}__{k}.png")
+    r = _cli(["recognise", str(shots), "--url", srv.base, "--token", operator, "--store",
+              "--json"], settings)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    by_name = {d["name"]: d for d in json.loads(r.stdout.strip().splitlines()[-1])["data"]}
+    assert sorted(by_name) == sorted(f"obj{o}__{k}.png" for o, k in STORED)
+    for o, k in STORED:
+        cli_answer = by_name[f"obj{o}__{k}.png"]
+        _check_stored_row(client, cli_answer, o)
+        rest = answers[STORED.index((o, k))]
+        assert cli_answer["scores"] == rest["scores"], (cli_answer, rest)
+    after = client.get("/api/inspections", params={"limit": 1}).json()["count"]
+    assert after == before + 2 * len(STORED)

@@ -1,6 +1,6 @@
 """``benchmarks/recorded.py`` in its short form: COIL-20 trained through the product at 20
-degree spacing, a subsample of queries through the endpoint and through the library, one
-table and one JSON line."""
+degree spacing, a subsample of queries through the endpoint and through the library, the
+same queries replayed by a recorded cell's inspection run, one table and one JSON line."""
 
 from __future__ import annotations
 
@@ -22,7 +22,8 @@ def test_recorded_benchmark_short(data_dir, capsys) -> None:
     lines = out.out.strip().splitlines()
     res = json.loads(lines[-1])
     assert "known top-1" in out.out and "endpoint / library" in out.out
-    assert "recognising through the endpoint" in out.err  # progress shown
+    assert "round 1: endpoint and library" in out.err  # progress shown
+    assert "recorded cell: inspecting" in out.err
     e, lib = res["endpoint"], res["library"]
     assert res["trained_views"] == 180 and e["known"] == lib["known"] == 60
     assert e["unknown"] == 15 and res["stored_rows"] == e["known"] + e["unknown"]
@@ -33,3 +34,13 @@ def test_recorded_benchmark_short(data_dir, capsys) -> None:
     assert abs(e["false_accept_count"] - lib["false_accept_count"]) <= 1
     assert e["top1"] >= 0.9
     assert res["endpoint_ms_per_image"] > 0 and res["library_ms_per_image"] > 0
+    assert res["time_ratios"] == [res["time_ratio"]] and res["store_ms_per_image"] > 0
+    assert len(res["load_average"]["before"]) == 3
+    # The recorded cell: every image of the recording inspected once, in its order, and
+    # decided as the endpoint decided it.
+    cell = res["recorded_cell"]
+    assert cell["inspections"] == e["known"] + e["unknown"] and cell["failed"] == 0
+    assert cell["known"] == 60 and cell["unknown"] == 15
+    assert cell["top1"] >= 0.9 and cell["false_accept_count"] <= 1
+    assert cell["same_as_endpoint"] >= cell["inspections"] - 2
+    assert "recorded cell:" in out.out
