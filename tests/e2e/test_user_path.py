@@ -72,6 +72,18 @@ def cell(tmp_path_factory):
 def token(cell) -> str:
     """The token ``visioncell serve`` printed: the line after '... token (user ...):'."""
     lines = cell.log.read_text().splitlines()
+    # What the README's "What you will see" shows, line for line, with nothing between.
+    at = next(k for k, line in enumerate(lines) if line.startswith("VisionCell "))
+    banner = lines[at : at + 9]
+    viser = cell.viser.rsplit(":", 1)[1]
+    assert re.fullmatch(r"VisionCell \S+  cell=cell-1 driver=sim camera=sim", banner[0]), banner
+    assert banner[1:4] == [f"  console   {cell.base}/",
+                           f"  REST API  {cell.base}/api   (docs: {cell.base}/docs)",
+                           f"  3D view   http://127.0.0.1:{viser}/"], banner  # fmt: skip
+    assert banner[4] == "  engineer token (user 'engineer', valid until the next start):", banner
+    assert re.fullmatch(r"  vc_\S+", banner[5]), banner
+    assert banner[6:] == ["  (loopback demo: an engineer's; in production or on a network address,",
+                          "  the start-up token is an operator's)", "Press Ctrl-C to stop."], banner  # fmt: skip
     for k, line in enumerate(lines[:-1]):
         if re.search(r"\btoken \(user '[^']+'", line):
             assert "engineer token" in line, line  # a loopback demo: one token for the tour
@@ -181,6 +193,8 @@ def _teach_in_wizard(page, cell, auth, name: str, kind: str) -> dict:
         "() => document.querySelector('#teach-message').textContent.includes('station cleared')"
     )
     texts = []
+    # The last teach job's state line: each round's job has its own id.
+    before = page.text_content("#teach-state") or ""
     for k in range(rounds):
         assert f"Round {k + 1} of {rounds}" in page.text_content("#teach-round")
         if k == 0:  # the first round grabs the empty station, then waits for the object
@@ -196,11 +210,12 @@ def _teach_in_wizard(page, cell, auth, name: str, kind: str) -> dict:
             )
             page.click("#teach-start")
         page.wait_for_function(
-            "() => /teach job \\S+: (done|failed|cancelled|interrupted)/"
-            ".test(document.querySelector('#teach-state').textContent)",
+            "(before) => { const t = document.querySelector('#teach-state').textContent;"
+            " return t !== before && /teach job \\S+: (done|failed|cancelled|interrupted)/.test(t); }",
+            arg=before,
             timeout=TEACH_S * 1000,
         )
-        state = page.text_content("#teach-state")
+        state = before = page.text_content("#teach-state")
         assert state.endswith("done"), (state, page.text_content("#teach-message"))
         texts.append(page.text_content("#teach-result"))
     page.wait_for_function(

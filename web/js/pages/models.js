@@ -296,8 +296,9 @@ async function startTeach(ev) {
     ...(q("#teach-rolls").value === "one" ? { top_rolls_rad: [0] } : {}),
     reason: "taught in the console",
   };
+  setText(q("#teach-state"), `starting round ${rounds.k + 1} of ${rounds.n}…`);
   const r = await call("#teach-message", "POST", `/models/${selected.id}/teach`, body);
-  if (!r) return;
+  if (!r) { setText(q("#teach-state"), ""); return; }
   teachJob = r.job.id;
   q("#teach-steps").replaceChildren();
   q("#teach-result").replaceChildren();
