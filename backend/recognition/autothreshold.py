@@ -240,6 +240,10 @@ class ThresholdKeeper:
         message)`` follows its progress.  A change made meanwhile stops it: the outcome
         then says so and the keeper chooses again after the change."""
         async with self._lock:
+            # The teach's own changes (its views, its model's measured height) are notified
+            # through the event loop: let them arrive before this choice starts, so that only
+            # a change made while it runs stops it.
+            await asyncio.sleep(0)
             self._choosing = True
             self._superseded = False
             try:

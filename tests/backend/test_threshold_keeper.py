@@ -115,6 +115,9 @@ def test_a_teach_holds_the_keeper_and_chooses_once_through_it(tmp_path):
                 for _ in range(100):  # let the keeper's loop see the change (quiet_s is 0)
                     await asyncio.sleep(0)
                 assert keeper.status()["state"] == "waiting" and jobs.list() == []
+                # The teach's last change (its model's measured height) right before the
+                # choice: notified through the loop, it must not stop the choice.
+                live.put_model(IndexedModel(1, "m0", "m0", "default", "2d", None, height_m=0.1))
                 outcome = await keeper.choose(lambda f, msg: messages.append(msg))
             assert outcome.stored and not outcome.skipped and outcome.negatives == 1
             assert outcome.threshold is not None and outcome.threshold >= THRESHOLD_FLOOR

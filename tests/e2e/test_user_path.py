@@ -235,7 +235,7 @@ def test_teach_two_parts_and_a_wheel_in_the_wizard(cell, auth, page):
         height = page.text_content("#teach-height")
         assert "Part height" in height and "not known" not in height, height
         # The last round chose the threshold, and it is never 0.
-        thr = re.search(r"Threshold in force: ([0-9.]+)", taught[name]["text"])
+        thr = re.search(r"Threshold in force: (\d+\.\d+)", taught[name]["text"])
         assert thr and float(thr.group(1)) > 0.0, taught[name]["text"]
     # The wizard guided the 3D parts through more rounds than the wheel.
     assert taught[PART_A]["rounds"] == taught[PART_B]["rounds"] > taught[WHEEL]["rounds"] >= 1
