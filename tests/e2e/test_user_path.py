@@ -48,7 +48,8 @@ CLI_PART = "junction-box"  # a 3D part taught through the CLI
 RUN = (PART_A, WHEEL, PART_B, UNTRAINED, PART_B, PART_A)
 #: The objects' yaws on the belt: a seeded draw over the full circle (degrees).
 YAWS = random.Random(30).sample(range(-180, 180), len(RUN) + 2)
-SPACING_M = 0.5  # between objects on the belt (more than the top view sees of it)
+#: Between objects on the belt, as on the demo belt (more than the top view sees of it).
+SPACING_M = 0.42
 #: Bounds that only end a hang: the machine may be loaded by other work.
 TEACH_S = 1500.0
 RUN_S = 2400.0
@@ -270,9 +271,13 @@ def test_inspect_once_from_the_inspection_page(cell, auth, page):
 @pytest.mark.timeout(3600)  # a bound on a hang only: slow on a loaded machine
 def test_sorted_run_puts_each_part_in_its_bin(cell, auth, page):
     _clear_belt(cell, auth)
-    station = _station_m(cell, auth)
-    for k, (name, yaw) in enumerate(zip(RUN, YAWS, strict=False)):  # upstream, in this order
-        _put(cell, auth, name, station - 0.25 - SPACING_M * k, yaw)
+    conveyor = _get(cell, auth, "/sim/conveyor")["conveyor"]
+    station, length = float(conveyor["station_s_m"]), float(conveyor["length_m"])
+    # As the demo belt holds them: the first at the station, the others upstream in this
+    # order, the belt's own length apart at most (objects leaving it come back at its entry).
+    assert SPACING_M * len(RUN) <= length, (SPACING_M, length)
+    for k, (name, yaw) in enumerate(zip(RUN, YAWS, strict=False)):
+        _put(cell, auth, name, (station - SPACING_M * k) % length, yaw)
     before = {r["id"] for r in _rows(cell, auth)}
     page.goto(page.url.split("#")[0] + "#inspection")
     page.wait_for_selector("#inspection-page")
