@@ -410,7 +410,9 @@ def teach(
               "--token TOKEN",
               flush=True)  # fmt: skip
     elif guide:
-        print(f"all {guide['recommended']} rounds a {model['kind']} model needs are taught: it "
-              "is recognised at any yaw", flush=True)  # fmt: skip
+        n = guide["recommended"]
+        which = "the one round" if n == 1 else f"all {n} rounds"
+        print(f"{which} a {model['kind']} model needs {'is' if n == 1 else 'are'} taught: it is "
+              "recognised at any yaw", flush=True)  # fmt: skip
     for p in res["confusable_from_top"]:
         print(f"  alike from the top: {p['model']} ~ {p['confused_with']} ({p['rate']:.0%})")
