@@ -2,7 +2,8 @@
 
 Both ask the running cell (``--url``, ``--token`` of an operator) through the REST API and
 follow the job: ``once`` inspects the object at the station and prints the decision, the
-model, the score, the viewpoints and the pose; ``run`` starts continuous operation
+model, the score, the viewpoints, the pose, what became of the part (its bin) and how long
+it took; ``run`` starts continuous operation
 (``--count`` objects, or until Ctrl-C, which asks the cell to stop after the current one).
 Both take the cell's active recipe (``--recipe ID``: another one); ``--policy`` and
 ``--sort/--no-sort`` given override it.
@@ -56,8 +57,12 @@ def _line(row: dict[str, Any]) -> str:
     score = "" if row["score"] is None else f" score {row['score']:.2f}"
     vps = ",".join(str(v) for v in row["viewpoints_visited"])
     recipe = f" recipe {row['recipe']}" if row.get("recipe") else ""
+    # What became of the part (the bin it went to) and how long the inspection took, as the
+    # console, the reports and the CSV show them.
+    pick = (row.get("pick_outcome") or {}).get("text") or "not sorted"
+    took = "" if row.get("duration_s") is None else f"; {row['duration_s']:.2f} s"
     return (f"#{row['id']} {row['decision']} {row['model'] or '-'}{score} views [{vps}]{where}"
-            f"{recipe}: {row['reason']}")  # fmt: skip
+            f"{recipe}: {row['reason']}; {pick}{took}")  # fmt: skip
 
 
 @inspect_app.command("once")

@@ -349,9 +349,9 @@ def teach(
         str | None,
         typer.Option(
             "--round",
-            help="K/N: round K of N, the object turned to the K-th of N yaws over a half "
-            "turn (k * 180 / N deg from its first round's pose; the side views then see a "
-            "new pair of faces each round)",
+            help="K/N: round K of N, the object turned to the K-th of N yaws over the "
+            "whole turn ((K-1) * 360 / N deg from its first round's pose); each teach "
+            "prints the next round's command",
         ),
     ] = None,
 ) -> None:
@@ -359,6 +359,7 @@ def teach(
     if background not in ("grab", "stored"):
         raise _fail(f"--background must be 'grab' or 'stored', got {background!r}")
     yaw_rad = 0.0
+    last_round = True  # the automatic threshold is chosen at the end of the last round
     if round_ is not None:
         from backend.recognition.teach import MAX_ROUNDS, teach_yaws_rad
 
@@ -369,6 +370,7 @@ def teach(
         if not 1 <= n <= MAX_ROUNDS or not 1 <= k <= n:
             raise _fail(f"--round K/N needs 1 <= K <= N <= {MAX_ROUNDS}, got {round_!r}")
         yaw_rad = teach_yaws_rad(n)[k - 1]
+        last_round = k == n
         print(f"round {k}/{n}: the object turned by {math.degrees(yaw_rad):.1f} deg "
               "from its first round's pose", flush=True)  # fmt: skip
     vps = None
@@ -388,6 +390,7 @@ def teach(
         "wait_s": wait,
         "replace": replace,
         "yaw_rad": yaw_rad,
+        "threshold": last_round,
     }
     if vps is not None:
         body["viewpoints"] = vps
@@ -397,5 +400,19 @@ def teach(
         raise job_failure(job, "teach")
     res = job["result"]
     print(f"taught {len(res['views'])} views of {name!r}; threshold: {res['threshold']['reason']}")
+    guide = res.get("rounds") or {}
+    if guide.get("next_round"):
+        k, n = guide["next_round"], guide["recommended"]
+        print(f"round {guide['taught']} of the {n} a {model['kind']} model needs to be recognised "
+              f"at any yaw; next: turn the object to {guide['next_yaw_deg']:g} deg from its "
+              f"first round's pose, keep it at the station, and run\n"
+              f"  visioncell models teach {name} --round {k}/{n} --background stored "
+              "--token TOKEN",
+              flush=True)  # fmt: skip
+    elif guide:
+        n = guide["recommended"]
+        which = "the one round" if n == 1 else f"all {n} rounds"
+        print(f"{which} a {model['kind']} model needs {'is' if n == 1 else 'are'} taught: it is "
+              "recognised at any yaw", flush=True)  # fmt: skip
     for p in res["confusable_from_top"]:
         print(f"  alike from the top: {p['model']} ~ {p['confused_with']} ({p['rate']:.0%})")

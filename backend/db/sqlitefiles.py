@@ -38,6 +38,11 @@ from sqlalchemy.pool import AsyncAdaptedQueuePool
 __all__ = ["REGION_BYTES", "GuardedPool", "SideFileProblem", "check_side_files", "guarded_pool_for"]
 
 log = logging.getLogger(__name__)
+#: SQLAlchemy logs a pool's life ("Pool disposed", "Pool recreating") at INFO on a logger
+#: named after the pool's class, and keeps its own ``sqlalchemy`` loggers at WARNING; a
+#: pool class defined here logs under this module instead, so without this its lines land
+#: among ``visioncell serve``'s start-up banner.
+logging.getLogger(f"{__name__}.GuardedPool").setLevel(logging.WARNING)
 
 #: SQLite's WAL index grows in regions of 32 KiB.
 REGION_BYTES = 32 * 1024

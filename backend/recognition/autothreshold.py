@@ -14,7 +14,13 @@ recomputes the automatic threshold (:func:`backend.recognition.thresholds.recomp
   teach backgrounds;
 * skipped when the newest automatic choice was made from the same data (its stored
   ``signature``: the views, their models and the negatives), e.g. after a rename back or
-  when another cell of the plant already chose from the same views.
+  when another cell of the plant already chose from the same views;
+* held while a teach runs (:meth:`ThresholdKeeper.holding`): the teach stores its views and
+  then either chooses at once through the keeper (:meth:`ThresholdKeeper.choose`, the same
+  choice with the same negatives, so the keeper's own round after it is a skip) or leaves
+  the choice to the last of its rounds; a choice running when a teach begins stops (its
+  views are about to change) and runs again once the teach is over.  One choice runs at a
+  time, the keeper's or a teach's.
 
 The empty-belt backgrounds grabbed by this cell's teaches are negatives too.
 """
@@ -25,7 +31,8 @@ import asyncio
 import contextlib
 import hashlib
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -100,6 +107,11 @@ class ThresholdKeeper:
         self._pending = False
         self._superseded = False
         self._job: Job | None = None
+        self._choosing = False
+        self._lock = asyncio.Lock()
+        self._holds = 0
+        self._free = asyncio.Event()
+        self._free.set()
         #: Recomputations finished (skipped ones included), for the console and the tests.
         self.runs = 0
         #: Recomputations stopped by a change while they ran.
@@ -143,7 +155,23 @@ class ThresholdKeeper:
 
     def _running(self) -> bool:
         job = self._job
-        return job is not None and job.task is not None and not job.task.done()
+        return self._choosing or (job is not None and job.task is not None and not job.task.done())
+
+    @contextlib.asynccontextmanager
+    async def holding(self) -> AsyncIterator[None]:
+        """Hold the keeper's own recomputations for the block (a teach: its views are about
+        to change).  A recomputation running stops at its next held-out query and runs
+        again after the block; :meth:`choose` still runs inside it."""
+        self._holds += 1
+        self._free.clear()
+        if self._job is not None and self._job.task is not None and not self._job.task.done():
+            self._superseded = True
+        try:
+            yield
+        finally:
+            self._holds -= 1
+            if self._holds == 0:
+                self._free.set()
 
     def status(self) -> dict[str, Any]:
         """``state`` (``idle``, ``waiting``: changes seen, quiet period running; ``running``),
@@ -192,6 +220,7 @@ class ThresholdKeeper:
             await self._event.wait()
             try:
                 await self._quiet()
+                await self._free.wait()  # no teach running
                 self._pending = False
                 self._superseded = False
                 if len(self.live) == 0:  # nothing trained (a fresh cell): nothing to choose
@@ -205,20 +234,50 @@ class ThresholdKeeper:
             except Exception:  # keep listening whatever one round did
                 log.exception("automatic threshold round failed")
 
+    async def choose(self, report: Callable[[float, str], None]) -> thresholds.ThresholdOutcome:
+        """Choose the threshold now, as a round of the keeper would (the same negatives and
+        signature), for a teach that has just stored its views; ``report(fraction,
+        message)`` follows its progress.  A change made meanwhile stops it: the outcome
+        then says so and the keeper chooses again after the change."""
+        async with self._lock:
+            # The teach's own changes (its views, its model's measured height) are notified
+            # through the event loop: let them arrive before this choice starts, so that only
+            # a change made while it runs stops it.
+            await asyncio.sleep(0)
+            self._choosing = True
+            self._superseded = False
+            try:
+                return await self._choose(report)
+            except Superseded:
+                self.superseded += 1
+                outcome = await thresholds.deferred(self.db)
+                return replace(outcome, reason="not chosen: the views changed meanwhile; "
+                               "the automatic threshold follows them")  # fmt: skip
+            finally:
+                self._choosing = False
+
     async def _body(self, job: Job) -> dict[str, Any]:
-        job.report(0.0, "reading the negatives")
+        async with self._lock:
+            try:
+                outcome = await self._choose(job.report)
+            except Superseded:
+                self.superseded += 1
+                self._pending = True  # a teach began or the views changed: once more after it
+                self._event.set()
+                return {"superseded": True, "reason": "the views changed meanwhile: chosen again"}
+        self.runs += 1
+        self.last = outcome.public() | {"skipped": outcome.skipped}
+        return self.last
+
+    async def _choose(self, report: Callable[[float, str], None]) -> thresholds.ThresholdOutcome:
+        report(0.0, "reading the negatives")
         ids = await neg.negative_ids(self.db)
         backgrounds = list(self._backgrounds())
         sig = signature(self.live, ids, len(backgrounds))
         async with self.db.session() as session:
             row = await thresholds.latest_settings(session)
         if row is not None and row.chosen_by == "auto" and row.detail.get("signature") == sig:
-            out = {"skipped": True, "reason": "chosen from the same views and negatives already",
-                   "threshold": row.global_threshold, "in_force": row.global_threshold,
-                   "advice": list(row.detail.get("advice", []))}  # fmt: skip
-            self.runs += 1
-            self.last = out
-            return out
+            return thresholds.from_settings(row, "chosen from the same views and negatives already")
         images = await neg.load_negatives(self.db) + backgrounds
         loop = asyncio.get_running_loop()
 
@@ -226,18 +285,11 @@ class ThresholdKeeper:
             if self._superseded:
                 raise Superseded
             loop.call_soon_threadsafe(
-                job.report, 0.05 + 0.9 * done / max(total, 1), f"held-out query {done}/{total}"
+                report, 0.05 + 0.9 * done / max(total, 1), f"held-out query {done}/{total}"
             )
 
-        try:
-            outcome = await thresholds.recompute(
-                self.db, self.live, target_far=self.target_far, negatives=images,
-                signature=sig, progress=progress,
-            )  # fmt: skip
-        except Superseded:
-            self.superseded += 1
-            return {"superseded": True, "reason": "the views changed meanwhile: chosen again"}
-        self.runs += 1
-        out = {"skipped": False, **outcome.public(), "negatives": len(images)}
-        self.last = out
-        return out
+        outcome = await thresholds.recompute(
+            self.db, self.live, target_far=self.target_far, negatives=images,
+            signature=sig, progress=progress,
+        )  # fmt: skip
+        return replace(outcome, negatives=len(images))

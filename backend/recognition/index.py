@@ -514,7 +514,11 @@ class LiveIndex:
                 if self._index_row(model, row) and images and row[0] in images:
                     self._colour_from_png(row[0], *images[row[0]])
             self._generation += 1
-        self._changed()
+        # A sync that found the database as this index already is (this process's own
+        # writes move the change counter too) changed nothing: telling the listeners would
+        # stop the threshold choice running over these very views, again and again.
+        if not diff.empty:
+            self._changed()
         return True
 
     # -- changes (call after the database accepted them) ----------------------------------

@@ -41,6 +41,7 @@ __all__ = [
     "model_public",
     "parse_kind",
     "set_measured_geometry",
+    "taught_rounds",
     "update_model",
     "view_counts",
 ]
@@ -226,8 +227,29 @@ async def view_counts(session: AsyncSession, model_ids: list[int]) -> dict[int, 
     return out
 
 
-def model_public(row: ObjectModel, counts: dict[int, int] | None = None) -> dict[str, Any]:
-    """JSON form of a model (``counts``: trained views per viewpoint)."""
+async def taught_rounds(session: AsyncSession, model_ids: list[int]) -> dict[int, int]:
+    """``{model_id: teach rounds}``: the distinct object yaws of each model's top views (a
+    round turns the object; its camera rolls share the yaw)."""
+    if not model_ids:
+        return {}
+    rows = await session.execute(
+        select(TrainedView.model_id, func.count(func.distinct(TrainedView.yaw_rad)))
+        .where(TrainedView.model_id.in_(model_ids), TrainedView.viewpoint == 1)
+        .group_by(TrainedView.model_id)
+    )
+    out = dict.fromkeys(model_ids, 0)
+    for model_id, n in rows:
+        out[int(model_id)] = int(n)
+    return out
+
+
+def model_public(
+    row: ObjectModel, counts: dict[int, int] | None = None, rounds: int = 0
+) -> dict[str, Any]:
+    """JSON form of a model (``counts``: trained views per viewpoint; ``rounds``: its teach
+    rounds, :func:`taught_rounds`, shown beside the rounds its kind needs)."""
+    from backend.recognition.thresholds import recommended_rounds
+
     counts = counts or {}
     return {
         "id": row.id,
@@ -243,6 +265,7 @@ def model_public(row: ObjectModel, counts: dict[int, int] | None = None) -> dict
         "created_at": row.created_at.isoformat(),
         "views": sum(counts.values()),
         "views_per_viewpoint": {str(k): v for k, v in sorted(counts.items())},
+        "rounds": {"taught": int(rounds), "recommended": recommended_rounds(row.kind.value)},
     }
 
 

@@ -44,6 +44,7 @@ from backend import audit
 from backend.db.session import Database
 from backend.heavy import HeavyPool
 from backend.recognition import thresholds
+from backend.recognition.autothreshold import ThresholdKeeper
 from backend.recognition.geometry import (
     HeightMeasurement,
     Silhouette,
@@ -52,7 +53,7 @@ from backend.recognition.geometry import (
     measure_height,
 )
 from backend.recognition.index import IndexedModel, LiveIndex
-from backend.recognition.models import get_model, set_measured_geometry
+from backend.recognition.models import get_model, set_measured_geometry, taught_rounds
 from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
 from backend.recognition.views import ViewInput, add_views, view_public
 from robot.collision import CollisionWorld
@@ -70,6 +71,7 @@ __all__ = [
     "TeachOptions",
     "TeachTimeout",
     "plan_shots",
+    "rounds_guide",
     "run_teach",
     "teach_yaws_rad",
 ]
@@ -295,6 +297,7 @@ async def run_teach(
     heavy: HeavyPool | None = None,
     camera: PinholeCamera | None = None,
     T_ee_cam_seen: NDArray[np.float64] | None = None,
+    keeper: ThresholdKeeper | None = None,
 ) -> dict[str, Any]:
     """The teach job's body (module docstring); runs holding the arm.
 
@@ -317,7 +320,40 @@ async def run_teach(
         The camera mounting the images are measured with (default ``T_ee_cam``): the
         planner keeps the nominal mounting so the shots (and their stored backgrounds)
         stay the same, the measurement needs the best one known.
+    keeper : ThresholdKeeper, optional
+        The cell's automatic threshold keeper: held while the teach runs, and the choice
+        at its end is made through it (the same choice the keeper would make, once).
     """
+    if keeper is None:
+        return await _teach(job, cell=cell, db=db, live=live, model_id=model_id,
+                            options=options, point=point, T_ee_cam=T_ee_cam, store=store,
+                            world=world, by=by, heavy=heavy, camera=camera,
+                            T_ee_cam_seen=T_ee_cam_seen, keeper=None)  # fmt: skip
+    async with keeper.holding():
+        return await _teach(job, cell=cell, db=db, live=live, model_id=model_id,
+                            options=options, point=point, T_ee_cam=T_ee_cam, store=store,
+                            world=world, by=by, heavy=heavy, camera=camera,
+                            T_ee_cam_seen=T_ee_cam_seen, keeper=keeper)  # fmt: skip
+
+
+async def _teach(
+    job: Any,
+    *,
+    cell: Any,
+    db: Database,
+    live: LiveIndex,
+    model_id: int,
+    options: TeachOptions,
+    point: NDArray[np.float64],
+    T_ee_cam: NDArray[np.float64],
+    store: BackgroundStore,
+    world: CollisionWorld | None,
+    by: audit.By | None,
+    heavy: HeavyPool | None,
+    camera: PinholeCamera | None,
+    T_ee_cam_seen: NDArray[np.float64] | None,
+    keeper: ThresholdKeeper | None,
+) -> dict[str, Any]:
     T_seen = np.asarray(T_ee_cam if T_ee_cam_seen is None else T_ee_cam_seen, dtype=np.float64)
     async with db.session() as session:
         model = await get_model(session, model_id)
@@ -425,11 +461,18 @@ async def run_teach(
     ]
     geometry = await _measure(silhouettes, tops, camera, frame_size, float(point[2]))
     geometry_out = await _store_geometry(db, live, model_id, geometry)
-    if options.threshold:
+    async with db.session() as session:
+        taught = (await taught_rounds(session, [model_id]))[model_id]
+    if not options.threshold:
+        outcome = await thresholds.deferred(db)
+    elif keeper is not None:
+        job.report(1.0, "choosing the threshold")
+        outcome = await keeper.choose(
+            lambda f, msg: job.report(1.0, f"choosing the threshold: {msg}")
+        )
+    else:
         job.report(1.0, "choosing the threshold")
         outcome = await thresholds.recompute(db, live, heavy=heavy)
-    else:
-        outcome = await thresholds.deferred(db)
     return {
         "model": {"id": model_id, "name": name, "kind": kind},
         "views": [view_public(r) for r in rows],
@@ -437,7 +480,21 @@ async def run_teach(
         "geometry": geometry_out,
         "threshold": outcome.public(),
         "confusable_from_top": list(outcome.confusable),
+        "rounds": rounds_guide(taught, thresholds.recommended_rounds(kind)),
     }
+
+
+def rounds_guide(taught: int, recommended: int) -> dict[str, Any]:
+    """Where a model stands in its teach rounds (:data:`~backend.recognition.thresholds.
+    RECOMMENDED_ROUNDS` for its kind), for the wizard and the CLI: ``taught``,
+    ``recommended``, and while rounds remain ``next_round`` (1-based) and ``next_yaw_deg``,
+    the yaw to turn the object to, from its first round's pose (:func:`teach_yaws_rad`)."""
+    out: dict[str, Any] = {"taught": taught, "recommended": recommended,
+                           "next_round": None, "next_yaw_deg": None}  # fmt: skip
+    if taught < recommended:
+        out["next_round"] = taught + 1
+        out["next_yaw_deg"] = round(math.degrees(teach_yaws_rad(recommended)[taught]), 1)
+    return out
 
 
 def check_live_camera(cell: Any) -> None:
@@ -544,10 +601,12 @@ async def start_teach(
     heavy: HeavyPool | None = None,
     camera: PinholeCamera | None = None,
     mounting: NDArray[np.float64] | None = None,
+    keeper: ThresholdKeeper | None = None,
 ) -> Any:
     """Check what can be checked at once (the model exists, the arm is free), then start
     the teach as a motion job; returns the job.  ``heavy`` (the runtime's heavy-work pool)
-    runs the threshold choice at its end.
+    runs the threshold choice at its end, or ``keeper`` (the cell's automatic threshold
+    keeper, held while the teach runs) makes it.
 
     ``point`` defaults to the station point of the cell's conveyor; the camera mounting is
     the active hand-eye calibration of the cell, else the nominal one; the camera model
@@ -591,6 +650,7 @@ async def start_teach(
             heavy=heavy,
             camera=camera,
             T_ee_cam_seen=T_seen,
+            keeper=keeper,
         )
 
     params = {

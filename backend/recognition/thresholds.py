@@ -28,6 +28,7 @@ import asyncio
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -56,7 +57,9 @@ __all__ = [
     "current_choice",
     "deferred",
     "floored",
+    "from_settings",
     "latest_settings",
+    "recommended_rounds",
     "recompute",
     "settings_audit_value",
     "teach_rounds",
@@ -75,9 +78,24 @@ CONFUSABLE_RATE = 0.05
 #: an untrained part turned off a taught yaw scored up to 0.10-0.15 from the top: a bar
 #: below this lets untrained parts through as models.
 MIN_AUTO_THRESHOLD = 0.15
-#: Teach rounds (object yaws 45 deg apart) a model needs to be recognised at any yaw: the
-#: end-to-end campaigns named every trained object at random yaw with eight.
-RECOMMENDED_ROUNDS = 8
+#: Teach rounds (object yaws spread evenly over the whole turn) a model of each kind needs
+#: to be recognised at any yaw; the wizard and ``visioncell models teach`` guide to them.
+#: A 3d model is decided by its side views, which the 5-DOF arm can only take from two
+#: azimuths: a side view verifies an object turned some 20 deg off a taught yaw poorly,
+#: so the object itself must be shown at many yaws (the end-to-end campaigns named every
+#: trained object at random yaw with eight rounds, 111 of 120 plain parts with four).  A
+#: 2d model (a wheel) is decided from the top view, whose features are rotation
+#: invariant and which the teach already takes at three camera rolls: one round names it
+#: at any yaw.
+RECOMMENDED_ROUNDS: Mapping[str, int] = MappingProxyType({"2d": 1, "3d": 8})
+
+
+def recommended_rounds(kind: str) -> int:
+    """Teach rounds a model of ``kind`` (``"2d"`` or ``"3d"``) needs to be recognised at
+    any yaw (:data:`RECOMMENDED_ROUNDS`); raises ``ValueError`` for another kind."""
+    if kind not in RECOMMENDED_ROUNDS:
+        raise ValueError(f"kind must be '2d' or '3d', got {kind!r}")
+    return RECOMMENDED_ROUNDS[kind]
 
 
 @dataclass(frozen=True)
@@ -99,6 +117,10 @@ class ThresholdOutcome:
     """What to add (teach rounds, models) when the data cannot support the target rate."""
     floor: float | None = None
     """The floor the automatic threshold was raised to, None when the rule's own was kept."""
+    skipped: bool = False
+    """True when the choice in force had been made from the same data (nothing chosen)."""
+    negatives: int | None = None
+    """Negative images the choice scored as impostors (None when not told)."""
 
     def public(self) -> dict[str, Any]:
         return {
@@ -109,7 +131,27 @@ class ThresholdOutcome:
             "confusable_from_top": list(self.confusable),
             "advice": list(self.advice),
             "floor": self.floor,
+            "skipped": self.skipped,
+            "negatives": self.negatives,
         }
+
+
+def from_settings(row: RecognitionSettings, why: str) -> ThresholdOutcome:
+    """The outcome of a choice already in force (``row``, chosen automatically from the same
+    data), told as ``why``: its threshold, rule, advice and confusable pairs as stored."""
+    detail = row.detail or {}
+    floor = detail.get("floor")
+    return ThresholdOutcome(
+        False,
+        float(row.global_threshold),
+        float(row.global_threshold),
+        f"{why}: {detail.get('rule', '')}".rstrip(": "),
+        tuple(detail.get("confusable_from_top", ())),
+        tuple(str(a) for a in detail.get("advice", ())),
+        None if floor is None else float(floor),
+        skipped=True,
+        negatives=detail.get("negatives"),
+    )
 
 
 async def latest_settings(session: AsyncSession) -> RecognitionSettings | None:
@@ -341,6 +383,7 @@ def floored(
 def advice(
     rounds: Mapping[str, int],
     *,
+    recommended: Mapping[str, int] | None = None,
     impostors: int | None = None,
     target_far: float = DEFAULT_TARGET_FAR,
     reachable: bool = True,
@@ -351,6 +394,9 @@ def advice(
     ----------
     rounds : mapping of model name to int
         Teach rounds of each model (distinct object yaws of its top views).
+    recommended : mapping of model name to int, optional
+        Rounds each model needs (:func:`recommended_rounds` of its kind); a model not
+        listed needs a 3d model's.
     impostors : int, optional
         Impostor scores the rule had (one per trained view, scored against the other models).
     target_far : float
@@ -364,18 +410,22 @@ def advice(
             "Teach at least one more model: the automatic threshold is chosen from how the "
             "models score each other's views, so it needs two or more."
         )
-    short = sorted((n, r) for n, r in rounds.items() if r < RECOMMENDED_ROUNDS)
+    need = dict(recommended or {})
+    default = RECOMMENDED_ROUNDS["3d"]
+    short = sorted((n, r, need.get(n, default)) for n, r in rounds.items()
+                   if r < need.get(n, default))  # fmt: skip
     if short:
-        listed = ", ".join(f"{n} ({r} of {RECOMMENDED_ROUNDS})" for n, r in short)
+        listed = ", ".join(f"{n} ({r} of {k})" for n, r, k in short)
+        three = RECOMMENDED_ROUNDS["3d"]
         out.append(
-            f"Teach more rounds: a model is recognised at any yaw after {RECOMMENDED_ROUNDS} "
-            f"rounds, the object turned {360 // RECOMMENDED_ROUNDS} degrees between them; "
-            f"short of that: {listed}."
+            f"Teach more rounds: a 3d model is recognised at any yaw after {three} rounds, "
+            f"the object turned {360 // three} degrees between them (a 2d model after "
+            f"{RECOMMENDED_ROUNDS['2d']}); short of that: {listed}."
         )
     if not reachable and impostors is not None:
-        need = math.ceil(1.0 / target_far - 1.0)
+        n_imp = math.ceil(1.0 / target_far - 1.0)
         out.append(
-            f"A false-accept rate of {target_far * 100:g} % needs {need} views scored against "
+            f"A false-accept rate of {target_far * 100:g} % needs {n_imp} views scored against "
             f"other models; the trained views give {impostors}. More rounds or more models "
             f"add them; until then the threshold is the largest score another model's view "
             f"reached, and at least {MIN_AUTO_THRESHOLD:.2f}."
@@ -395,6 +445,12 @@ async def teach_rounds(session: AsyncSession) -> dict[str, int]:
     return {str(n): int(c) for n, c in rows}
 
 
+async def rounds_recommended(session: AsyncSession) -> dict[str, int]:
+    """Teach rounds every model needs, by its kind (:func:`recommended_rounds`)."""
+    rows = await session.execute(select(ObjectModel.name, ObjectModel.kind))
+    return {str(n): recommended_rounds(k.value) for n, k in rows}
+
+
 def _choose(
     snapshot: bytes,
     target_far: float,
@@ -409,12 +465,16 @@ def _choose(
 
 
 async def deferred(db: Database) -> ThresholdOutcome:
-    """What a teach that leaves the choice to a later round reports: the threshold in force."""
+    """What a teach that leaves the choice to a later round reports: the threshold in force
+    and the rounds still to teach."""
     async with db.session() as session:
         row = await latest_settings(session)
+        rounds = await teach_rounds(session)
+        need = await rounds_recommended(session)
     in_force = DEFAULT_THRESHOLD if row is None else row.global_threshold
+    tips = tuple(a for a in advice(rounds, recommended=need) if a.startswith("Teach more rounds"))
     return ThresholdOutcome(
-        False, None, in_force, "not chosen: deferred to the last round of this teach", ()
+        False, None, in_force, "not chosen: deferred to the last round of this teach", (), tips
     )
 
 
@@ -442,6 +502,7 @@ async def recompute(
         snapshot = index.to_bytes()  # a copy: the choice runs without the lock
     async with db.session() as session:
         rounds = await teach_rounds(session)
+        need = await rounds_recommended(session)
     try:
         if heavy is None:
             raw, n_views = await asyncio.to_thread(
@@ -454,10 +515,12 @@ async def recompute(
         async with db.session() as session:
             row = await latest_settings(session)
         in_force = DEFAULT_THRESHOLD if row is None else row.global_threshold
-        tips = _not_chosen_advice(str(exc)) + advice(rounds, target_far=target_far)
+        tips = _not_chosen_advice(str(exc)) + advice(rounds, recommended=need,
+                                                     target_far=target_far)  # fmt: skip
         return ThresholdOutcome(False, None, in_force, f"not chosen: {exc}", (), _unique(tips))
     choice, raised = unsupported_floored(raw)
-    tips = _unique(raw.advice + advice(rounds, impostors=len(raw.impostor), target_far=target_far,
+    tips = _unique(raw.advice + advice(rounds, recommended=need, impostors=len(raw.impostor),
+                                       target_far=target_far,
                                        reachable=raw.far_bound is not None))  # fmt: skip
     floor = MIN_AUTO_THRESHOLD if raised else None
     confusable = confusable_pairs(choice)

@@ -218,6 +218,9 @@ class Conveyor:
         self.travel_m = 0.0
         self._dwell_left = 0.0
         self._holding = False
+        #: Items at the station that were held and released (index mode): they go on.  An
+        #: item lying at the station that was never held (placed there) is held first.
+        self._released: set[int] = set()
         self.running = False
         self.speed_m_s = 0.0
         self.mode = "continuous"
@@ -297,16 +300,26 @@ class Conveyor:
         """Index mode: let the item waiting at the station go on now."""
         self._holding = False
         self._dwell_left = 0.0
+        self._released.update(self._at_station())
+
+    def _at_station(self) -> list[int]:
+        st = self.spec.station_s_m
+        return [i for i, it in self.items.items() if abs(st - it.s_m) <= 1e-9]
 
     def _next_gap(self) -> float | None:
+        """Belt travel until the next item to hold reaches the station: one upstream of it,
+        or one lying at it that was never held (0)."""
         st = self.spec.station_s_m
-        gaps = [st - it.s_m for it in self.items.values() if st - it.s_m > 1e-9]
+        gaps = [st - it.s_m for i, it in self.items.items()
+                if st - it.s_m > 1e-9 or (abs(st - it.s_m) <= 1e-9 and i not in self._released)]  # fmt: skip
         return min(gaps) if gaps else None
 
     def _move(self, ds: float) -> None:
         self.travel_m += ds
         for it in self.items.values():
             it.s_m += ds
+        if ds > 1e-9:  # a released item has left the station (it is held again next time)
+            self._released.intersection_update(self._at_station())
 
     def advance(self, dt_s: float) -> list[int]:
         """Run the belt for ``dt_s`` seconds; returns the ids of items removed at the end."""
@@ -320,6 +333,7 @@ class Conveyor:
                 remaining -= used
                 if self._dwell_left <= 1e-12:
                     self._holding = False
+                    self._released.update(self._at_station())
                 continue
             ds = self.speed_m_s * remaining
             if self.mode == "index":

@@ -268,16 +268,20 @@ def test_sim_driver_moves_with_tracking_errors_in_the_job(sim, roles):
 
 
 def test_conveyor_tells_where_the_station_is(sim, eng):
-    """The console places objects at the station: GET /api/sim/conveyor gives its position."""
+    """The console places objects at the station: GET /api/sim/conveyor gives its position,
+    and the belt's length (a user lays out objects along it)."""
     conv = sim.get("/api/sim/conveyor", headers=eng).json()["conveyor"]
-    station = sim.app.state.runtime.sim.config.layout.conveyor.station_s_m
-    assert conv["station_s_m"] == pytest.approx(station)
+    spec = sim.app.state.runtime.sim.config.layout.conveyor
+    assert conv["station_s_m"] == pytest.approx(spec.station_s_m)
+    assert (
+        conv["length_m"] == pytest.approx(spec.length_m) and conv["length_m"] > conv["station_s_m"]
+    )
     obj = sim.post(
         "/api/sim/objects",
         json={"name": "gear-housing", "position_along_belt_m": conv["station_s_m"]},
         headers=eng,
     ).json()["object"]
     try:
-        assert obj["position_along_belt_m"] == pytest.approx(station)
+        assert obj["position_along_belt_m"] == pytest.approx(spec.station_s_m)
     finally:
         sim.delete(f"/api/sim/objects/{obj['id']}", headers=eng)

@@ -146,6 +146,7 @@ def test_teach_and_inspect_commands_follow_their_jobs(cell: Server):
     # the job's progress, as it went (a 2d model's teach adds a side view for the height)
     assert re.search(r"%  view 1/\d+: viewpoint 1", out), out
     assert f"taught 3 views of {PART!r}" in out
+    assert "the one round a 2d model needs is taught" in out  # the rounds its kind needs
     assert "('" not in out  # no Python tuple in the threshold's reason
 
     # The object is still at the station: inspect it once, then a run of one object.

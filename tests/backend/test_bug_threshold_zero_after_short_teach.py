@@ -73,13 +73,18 @@ def test_a_measured_threshold_stands_and_an_unsupported_one_is_floored():
 
 
 def test_the_advice_names_what_to_add():
-    tips = advice({"a": 1, "b": 1}, impostors=10, reachable=False)
+    tips = advice({"a": 1, "b": 1}, impostors=10, reachable=False)  # kinds unknown: 3d's
     text = " ".join(tips)
-    assert f"a (1 of {RECOMMENDED_ROUNDS})" in text and "b (1 of" in text
+    assert f"a (1 of {RECOMMENDED_ROUNDS['3d']})" in text and "b (1 of" in text
     assert "needs 99 views" in text and "give 10" in text
     assert "45 degrees" in text
     assert advice({"a": 8, "b": 8}) == ()
     assert "one more model" in " ".join(advice({"a": 8}))
+    # Rounds by kind: a wheel (2d) taught once needs no more; a 3d part taught once does.
+    need = {"wheel": RECOMMENDED_ROUNDS["2d"], "part": RECOMMENDED_ROUNDS["3d"]}
+    text = " ".join(advice({"wheel": 1, "part": 1}, recommended=need))
+    assert "part (1 of 8)" in text and "wheel (" not in text, text
+    assert advice({"wheel": 1, "part": 8}, recommended=need) == ()
 
 
 def _cli_token(settings, name: str, role: str) -> str:
@@ -113,8 +118,9 @@ def test_two_one_round_teaches_leave_a_threshold_above_zero_and_advice(tmp_path)
         engine.clear_objects()
         engine.configure_conveyor(running=False, mode="index", dwell_s=None)
         results = []
-        for k, name in enumerate(("wheel-steel", "junction-box")):
-            r = client.post("/api/models", json={"name": name, "kind": "2d"}, headers=eng)
+        # A 3d part first (its teach grabs the backgrounds of every viewpoint), then a wheel.
+        for k, (name, kind) in enumerate((("junction-box", "3d"), ("wheel-steel", "2d"))):
+            r = client.post("/api/models", json={"name": name, "kind": kind}, headers=eng)
             assert r.status_code == 201, r.text
             mid = r.json()["id"]
             body = {"background": "grab" if k == 0 else "stored", "wait_s": 300, "yaw_rad": 0.0}
@@ -130,12 +136,23 @@ def test_two_one_round_teaches_leave_a_threshold_above_zero_and_advice(tmp_path)
             assert job["state"] == "done", job
             results.append(job["result"])
             engine.clear_objects()
+        # Each teach says where the model stands in the rounds its kind needs, and the next.
+        assert results[0]["rounds"] == {"taught": 1, "recommended": 8, "next_round": 2,
+                                        "next_yaw_deg": 45.0}  # fmt: skip
+        assert results[1]["rounds"] == {"taught": 1, "recommended": 1, "next_round": None,
+                                        "next_yaw_deg": None}  # fmt: skip
+        listed = {
+            m["name"]: m["rounds"] for m in client.get("/api/models", headers=eng).json()["data"]
+        }
+        assert listed == {"junction-box": {"taught": 1, "recommended": 8},
+                          "wheel-steel": {"taught": 1, "recommended": 1}}  # fmt: skip
         thr = results[-1]["threshold"]
         assert thr["stored"] is True, thr
         assert thr["in_force"] >= MIN_AUTO_THRESHOLD and thr["threshold"] >= MIN_AUTO_THRESHOLD
         assert thr["in_force"] > 0.0
         text = " ".join(thr["advice"])
-        assert "Teach more rounds" in text and f"(1 of {RECOMMENDED_ROUNDS})" in text, thr
+        assert "Teach more rounds" in text and "junction-box (1 of 8)" in text, thr
+        assert "wheel-steel (" not in text, thr  # one round is all a 2d model needs
         # The settings in force say the same (the wizard's threshold card reads them).
         s = client.get("/api/recognition/settings", headers=eng).json()
         assert s["chosen_by"] == "auto" and s["global_threshold"] >= MIN_AUTO_THRESHOLD
@@ -143,7 +160,7 @@ def test_two_one_round_teaches_leave_a_threshold_above_zero_and_advice(tmp_path)
         assert s["detail"]["rounds"] == {"wheel-steel": 1, "junction-box": 1}
         assert all(v >= MIN_AUTO_THRESHOLD for v in s["detail"]["per_model"].values())
         # A 2d model's teach took one side view for the height alone: stored top views only.
-        for res in results:
+        for res in results[1:]:
             assert {v["viewpoint"] for v in res["views"]} == {1}
             assert [s["viewpoint"] for s in res["shots"] if s["geometry_only"]] == [2]
             assert math.isfinite(res["geometry"]["measured"]["footprint_mm"][0])

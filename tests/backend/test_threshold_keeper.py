@@ -86,6 +86,58 @@ def test_many_changes_in_a_row_give_one_recomputation(tmp_path):
     asyncio.run(run())
 
 
+def test_a_teach_holds_the_keeper_and_chooses_once_through_it(tmp_path):
+    """While a teach runs the keeper waits (its views are about to change); the teach's
+    choice is the keeper's (the same negatives and signature), so the keeper's own round
+    after it is a skip, not the same work again."""
+    settings = make_settings(tmp_path)
+    migrate(settings)
+
+    async def run() -> None:
+        db = Database(settings.database_url)
+        live = LiveIndex()
+        jobs = JobManager()
+        belt = np.full((240, 320, 3), 90, np.uint8)
+        keeper = ThresholdKeeper(db, live, jobs, quiet_s=0.0, backgrounds=lambda: [belt])
+        keeper.start()
+        try:
+            models = [
+                IndexedModel(k + 1, f"m{k}", f"m{k}", "default", "2d", None) for k in range(2)
+            ]
+            messages: list[str] = []
+            async with keeper.holding():
+                vid = 0
+                for m in models:  # the teach stores its views
+                    base = textured_rgb(40 + m.id)
+                    for a in (-10, 0, 10):
+                        vid += 1
+                        live.add_view(m, vid, 1, live.extract(_turned(base, a), None))
+                for _ in range(100):  # let the keeper's loop see the change (quiet_s is 0)
+                    await asyncio.sleep(0)
+                assert keeper.status()["state"] == "waiting" and jobs.list() == []
+                # The teach's last change (its model's measured height) right before the
+                # choice: notified through the loop, it must not stop the choice.
+                live.put_model(IndexedModel(1, "m0", "m0", "default", "2d", None, height_m=0.1))
+                outcome = await keeper.choose(lambda f, msg: messages.append(msg))
+            assert outcome.stored and not outcome.skipped and outcome.negatives == 1
+            assert outcome.threshold is not None and outcome.threshold >= THRESHOLD_FLOOR
+            assert any(m.startswith("held-out query") for m in messages), messages
+            await asyncio.wait_for(keeper.settled(), TIMEOUT_S)
+            assert [j.kind for j in jobs.list()] == ["threshold"]
+            assert keeper.last is not None and keeper.last["skipped"] is True
+            async with db.session() as s:
+                row = await latest_settings(s)
+            assert row is not None and row.global_threshold == outcome.threshold
+            # A second choice from the same data is told from the settings in force.
+            again = await keeper.choose(lambda f, msg: None)
+            assert again.skipped and not again.stored and again.in_force == outcome.threshold
+        finally:
+            await keeper.stop()
+            await db.dispose()
+
+    asyncio.run(run())
+
+
 def _settled(client, headers, runs: int) -> dict:
     """The keeper's status once it has run at least ``runs`` times and is idle."""
     t0 = time.monotonic()

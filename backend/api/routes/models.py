@@ -138,6 +138,13 @@ class ModelUpdate(BaseModel):
     reason: Reason = None
 
 
+class TeachRounds(BaseModel):
+    taught: int = Field(description="Teach rounds: distinct object yaws of the top views")
+    recommended: int = Field(
+        description="Rounds a model of this kind needs to be recognised at any yaw"
+    )
+
+
 class ModelPublic(BaseModel):
     id: int
     name: str
@@ -152,6 +159,7 @@ class ModelPublic(BaseModel):
     created_at: datetime
     views: int
     views_per_viewpoint: dict[str, int]
+    rounds: TeachRounds
     indexed_views: int = Field(description="Views in the live index")
     stale_views: int = Field(description="Views refused by the index (stale features)")
 
@@ -187,8 +195,17 @@ class ViewList(BaseModel):
     count: int
 
 
-def _model_out(row: Any, counts: dict[int, int], live: LiveIndex) -> dict[str, Any]:
-    return _live_out(svc.model_public(row, counts), live)
+def _model_out(
+    row: Any, counts: dict[int, int], live: LiveIndex, rounds: int = 0
+) -> dict[str, Any]:
+    return _live_out(svc.model_public(row, counts, rounds), live)
+
+
+async def _counted_out(session: AsyncSession, row: Any, live: LiveIndex) -> dict[str, Any]:
+    """A model's public form with its view counts and teach rounds read now."""
+    counts = await svc.view_counts(session, [row.id])
+    rounds = await svc.taught_rounds(session, [row.id])
+    return _model_out(row, counts[row.id], live, rounds[row.id])
 
 
 def _live_out(public: dict[str, Any], live: LiveIndex) -> dict[str, Any]:
@@ -240,7 +257,8 @@ async def read_models(
     async def read(session: AsyncSession) -> tuple[list[dict[str, Any]], int]:
         rows, total = await svc.list_models(session, limit=limit, offset=offset, part=part)
         counts = await svc.view_counts(session, [r.id for r in rows])
-        return [svc.model_public(r, counts[r.id]) for r in rows], total
+        rounds = await svc.taught_rounds(session, [r.id for r in rows])
+        return [svc.model_public(r, counts[r.id], rounds[r.id]) for r in rows], total
 
     # The rows and view counts from the database, cached; the live index's part (in
     # memory, changed without a commit) per request.
@@ -294,8 +312,7 @@ async def read_model(
     _: ViewerUser, session: SessionDep, live: LiveIndexDep, model_id: ModelId
 ) -> dict[str, Any]:
     row = await svc.get_model(session, model_id)
-    counts = await svc.view_counts(session, [row.id])
-    return _model_out(row, counts[row.id], live)
+    return await _counted_out(session, row, live)
 
 
 @router.patch("/{model_id}", response_model=ModelPublic, summary="Change a model (engineer)")
@@ -321,8 +338,7 @@ async def update_model(
     )
     _before, row = await svc.update_model(db, model_id, fields, by=_by(user, body.reason))
     live.put_model(IndexedModel.of(row))
-    counts = await svc.view_counts(session, [row.id])
-    return _model_out(row, counts[row.id], live)
+    return await _counted_out(session, row, live)
 
 
 @router.delete(
@@ -366,6 +382,11 @@ class TeachIn(BaseModel):
     speed: float | None = Field(None, gt=0.0, le=1.0, allow_inf_nan=False)
     wait_s: float = Field(120.0, ge=0.0, le=teach_svc.MAX_WAIT_S, allow_inf_nan=False)
     replace: bool = Field(False, description="Replace the model's earlier views")
+    threshold: bool = Field(
+        True,
+        description="Choose the automatic threshold at the end (false: a later round of the "
+        "same teach chooses it; the threshold in force stays meanwhile)",
+    )
     point: list[float] | None = Field(
         None, min_length=3, max_length=3, description="Station point x, y, z in metres"
     )
@@ -408,6 +429,7 @@ async def teach_model(
         speed=body.speed,
         wait_s=body.wait_s,
         replace=body.replace,
+        threshold=body.threshold,
     )
     job = await teach_svc.start_teach(
         cell=cell,
@@ -425,6 +447,7 @@ async def teach_model(
         # simulator's), as inspections use them.
         camera=None if rt.nominal_camera is None else rt.nominal_camera.camera,
         mounting=None if rt.nominal_camera is None else rt.nominal_camera.T_ee_cam,
+        keeper=rt.threshold_keeper,
     )
     return {"job": job.public()}
 

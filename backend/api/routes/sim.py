@@ -201,9 +201,11 @@ ObjectId = Annotated[int, Path(ge=1, le=MAX_DB_ID, description="Object id, 1 .. 
     response_model=ConveyorOut,
 )
 async def read_conveyor(_: EngineerUser, sim: SimDep) -> dict[str, Any]:
-    # station_s_m: where along the belt the station is (the console places objects there).
-    station = float(sim.config.layout.conveyor.station_s_m)
-    return {"conveyor": {**sim.conveyor_state.as_dict(), "station_s_m": station}}
+    # station_s_m: where along the belt the station is (the console places objects there);
+    # length_m: the belt from entry to exit (objects leaving it come back at its entry).
+    spec = sim.config.layout.conveyor
+    return {"conveyor": {**sim.conveyor_state.as_dict(), "station_s_m": float(spec.station_s_m),
+                         "length_m": float(spec.length_m)}}  # fmt: skip
 
 
 @router.post(

@@ -21,9 +21,11 @@ let sim = null;            // {station_s_m, catalogue: [names]} when the cell is
 let camTimer = null;
 let generation = 0;
 // Teach rounds of the selected model: the object is turned by 360/N degrees between rounds,
-// so the model is recognised at any yaw (the server counts the distinct yaws it was taught).
-const DEFAULT_ROUNDS = 8;
-let rounds = { model: null, n: DEFAULT_ROUNDS, k: 0, baseYawDeg: 0 };
+// so the model is recognised at any yaw.  N is what the model's kind needs (the server's
+// `rounds.recommended`: a 3d model is decided by side views, which need the object shown at
+// many yaws; a 2d one by its rotation-invariant top view); the wizard resumes after the
+// rounds the model has (`rounds.taught`: the distinct yaws the server counts).
+let rounds = { model: null, n: 1, k: 0, baseYawDeg: 0 };
 
 const q = (sel) => (root ? $(sel, root) : null);
 
@@ -121,7 +123,13 @@ async function selectModel(id) {
     + `${m.stale_views ? `, ${m.stale_views} stale` : ""}. Threshold: ${m.threshold === null ? "automatic" : m.threshold.toFixed(3)}.`
     + ` Height: ${m.height_m === null ? "not known (teach it, or enter it below)" : `${(m.height_m * 1000).toFixed(1)} mm (${m.geometry_source || "stored"})`}.`);
   q("#model-height").value = m.height_m === null ? "" : (m.height_m * 1000).toFixed(1);
-  if (rounds.model !== m.id) resetRounds(m.id);
+  if (rounds.model !== m.id) {
+    const need = m.rounds.recommended;
+    q("#teach-rounds").value = String(need);
+    setText(q("#teach-rounds-why"), `(a ${m.kind} model needs ${need} round${need > 1 ? `s, ${Math.round(360 / need)}° apart,` : ""}`
+      + ` to be recognised at any yaw; ${m.name} has ${m.rounds.taught})`);
+    resetRounds(m.id, Math.min(m.rounds.taught, need));
+  }
   q("#model-threshold").value = m.threshold === null ? "" : String(m.threshold);
   const grid = q("#views-grid");
   releaseImages(grid);
@@ -193,9 +201,11 @@ function roundYawDeg(k, n) {
   return d > 180 ? d - 360 : d;
 }
 
-function resetRounds(modelId) {
-  const n = Number(q("#teach-rounds").value) || DEFAULT_ROUNDS;
-  rounds = { model: modelId, n: Math.min(12, Math.max(1, Math.round(n))), k: 0, baseYawDeg: Number(q("#place-yaw").value) || 0 };
+// Start the rounds of `modelId` over (or resume them after `k` taught ones) with the number
+// of rounds in the field.
+function resetRounds(modelId, k = 0) {
+  const n = Math.min(12, Math.max(1, Math.round(Number(q("#teach-rounds").value) || 1)));
+  rounds = { model: modelId, n, k: Math.min(k, n), baseYawDeg: Number(q("#place-yaw").value) || 0 };
   showRound();
 }
 
@@ -207,7 +217,7 @@ function showRound() {
   bar.value = Math.min(k, n);
   const done = k >= n;
   setText(q("#teach-round"), done
-    ? `All ${n} rounds taught: the model is taught at ${n} yaws, ${Math.round(360 / n)}° apart.`
+    ? `All ${n} round${n > 1 ? `s taught: the model is taught at ${n} yaws, ${Math.round(360 / n)}° apart` : " taught"}.`
     : `Round ${k + 1} of ${n}: the object turned ${roundYawDeg(k, n).toFixed(0)}° from its first round's pose`
       + (k > 0 ? " (turn it, keep it at the station; the stored backgrounds are used)." : "."));
   q("#teach-start").textContent = done ? "Teach again" : `Teach round ${k + 1} of ${n}`;
@@ -280,11 +290,15 @@ async function startTeach(ev) {
     replace: rounds.k === 0 && q("#teach-replace").checked,
     yaw_rad: (yawDeg * Math.PI) / 180,
     wait_s: 120,
+    // The threshold is chosen once, at the end of the last round (the cell's threshold
+    // keeper chooses it after every change anyway once the teach is over).
+    threshold: rounds.k + 1 >= rounds.n,
     ...(q("#teach-rolls").value === "one" ? { top_rolls_rad: [0] } : {}),
     reason: "taught in the console",
   };
+  setText(q("#teach-state"), `starting round ${rounds.k + 1} of ${rounds.n}…`);
   const r = await call("#teach-message", "POST", `/models/${selected.id}/teach`, body);
-  if (!r) return;
+  if (!r) { setText(q("#teach-state"), ""); return; }
   teachJob = r.job.id;
   q("#teach-steps").replaceChildren();
   q("#teach-result").replaceChildren();
@@ -479,10 +493,10 @@ function build() {
       el("li", {}, "Empty the station. ",
         el("button", { id: "sim-clear", type: "button", className: "small-button", hidden: true, on: { click: clearStation } }, "Clear the station (simulator)")),
       el("li", {}, "Teach in rounds, the object turned between them: ",
-        el("label", { className: "inline" }, el("input", { id: "teach-rounds", type: "number", min: 1, max: 12, step: 1, value: DEFAULT_ROUNDS, on: { change: changeRounds } }), " rounds"),
-        " (8 let the model be recognised at any yaw). ",
+        el("label", { className: "inline" }, el("input", { id: "teach-rounds", type: "number", min: 1, max: 12, step: 1, value: 1, on: { change: changeRounds } }), " rounds"),
+        " ", el("span", { id: "teach-rounds-why", className: "small" }), " ",
         el("span", { id: "teach-round", className: "small" }), " ",
-        el("progress", { id: "teach-rounds-progress", max: DEFAULT_ROUNDS, value: 0 })),
+        el("progress", { id: "teach-rounds-progress", max: 1, value: 0 })),
       el("li", {}, el("form", { id: "teach-form", className: "row", on: { submit: startTeach } },
         "Start teaching ", el("span", { id: "teach-kind", className: "small" }), ": ",
         el("select", { id: "teach-background" }, el("option", { value: "grab" }, "grab the empty background first"),
@@ -543,7 +557,11 @@ export default {
     generation++;
     root.append(build());
     applyRoles(root, ctx.role, ctx.rank);
-    listen(ctx.live, "job", (ev) => { if (ev.detail.kind === "teach") onTeachJob(ev.detail); });
+    listen(ctx.live, "job", (ev) => {
+      if (ev.detail.kind === "teach") onTeachJob(ev.detail);
+      // The automatic threshold keeper chose again (after a change of the views): show it.
+      else if (ev.detail.kind === "threshold" && ev.detail.state === "done") loadThresholds();
+    });
     listen(ctx.live, "open", (ev) => { if (ev.detail.reconnected) loadModels(); });
     loadModels().then(() => {
       if (!selected && models.length) selectModel(models[0].id);
