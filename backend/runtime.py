@@ -158,6 +158,8 @@ class CellRuntime:
         self.belt_background: Any = None
         #: The continuous inspection run, if one was started (``backend.inspection.service``).
         self.inspection_run: Any = None
+        #: The PLC links (OPC UA, Modbus TCP) the app's lifespan runs (``backend.plc``).
+        self.plc_links: Any = None
         #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).
         #: Successful sign-ins reused for 2 s (``backend.authcache``).
         self.auth_cache = AuthCache(refresh_ahead=settings.refresh_ahead)

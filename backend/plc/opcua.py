@@ -1,0 +1,506 @@
+"""The OPC UA server of the cell (asyncua), for a line's PLC and the plant's MES.
+
+Address space (namespace ``urn:visioncell:plc``), under ``Objects/VisionCell``, laid out as
+OPC 40100-1 (Machine Vision) lays out a vision system where it fits the cell:
+
+- ``StateMachine``: ``CurrentState`` (``Idle``, ``Ready``, ``Executing``, ``Error``,
+  ``Stopped by E-STOP``) and ``CurrentStateCode`` (:class:`SystemState`);
+- ``Status``: the handshake's flags (``TriggerEnabled``, ``TriggerReady``, ``Busy``,
+  ``ResultsValid``, ``Running``, ``EStop``), ``ErrorCode`` / ``ErrorText``, ``Triggers``,
+  ``QueuedResults``;
+- ``RecipeManagement``: ``ActiveRecipeId`` and the method ``SelectRecipe(UInt16)``;
+- ``ResultManagement/Result``: the presented result (``InspectionId``, ``TriggerNumber``,
+  ``Decision``, ``DecisionCode``, ``Model``, ``ModelId``, ``Score``, ``X_mm``, ``Y_mm``,
+  ``Yaw_deg``, ``Bin``, ``BinName``, ``Duration_s``) and the method
+  ``AcknowledgeResult(UInt32 inspection id)``; every presented result is also sent as an
+  ``InspectionResultEventType`` event from the ``VisionCell`` object;
+- methods ``EnableTrigger(Boolean)``, ``Trigger() -> UInt32``, ``StartRun(UInt32 count, 0:
+  until stopped)``, ``StopRun()``, ``Reset()``.
+
+A refused command answers ``BadUserAccessDenied`` (role too low) or ``BadInvalidState``
+(the handshake's error code and text say why).  OPC 40100's MachineVision nodeset and the DI
+nodeset it builds on are loaded (when found in the data directory) so that clients can
+browse the companion specification's types.
+
+Threading: asyncua builds its address space and parses the nodesets in long synchronous
+stretches (seconds), so the server runs on its own thread and event loop; commands hop to
+the cell's loop (``run_coroutine_threadsafe``), the handshake's changes hop back
+(``call_soon_threadsafe``).  Nothing here ever holds the cell's loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import contextvars
+import logging
+import math
+import threading
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlsplit
+
+from backend.db.models import Role
+from backend.plc.handshake import ErrorCode, Handshake, LinkUser, Snapshot
+from backend.plc.signin import Credentials
+
+__all__ = ["NAMESPACE", "OpcUaLink", "nodeset_files"]
+
+log = logging.getLogger(__name__)
+
+NAMESPACE = "urn:visioncell:plc"
+#: The nodesets loaded, in order (DI first: MachineVision builds on it).
+NODESETS = ("Opc.Ua.Di.NodeSet2.xml", "Opc.Ua.MachineVision.NodeSet2.xml")
+#: Longest wait for the server's thread to come up or go down, seconds (a hang's bound).
+START_BOUND_S = 300.0
+
+_session_user: contextvars.ContextVar[Any] = contextvars.ContextVar("opcua_user", default=None)
+
+
+def nodeset_files(data_dir: Path) -> list[Path]:
+    """The OPC 40100 nodesets under ``data_dir/opcua`` (empty when any is missing)."""
+    files = [data_dir / "opcua" / n for n in NODESETS]
+    return files if all(f.is_file() for f in files) else []
+
+
+def _mm(v: float | None) -> float:
+    return float("nan") if v is None else round(v * 1000.0, 2)
+
+
+def _deg(v: float | None) -> float:
+    return float("nan") if v is None else round(math.degrees(v), 2)
+
+
+@dataclass
+class _Var:
+    node: Any
+    vtype: Any
+    value: Any = None
+
+
+class OpcUaLink:
+    """The OPC UA server over one :class:`Handshake` (see the module docstring).
+
+    Parameters
+    ----------
+    handshake : Handshake
+        The link's handshake (on the cell's event loop).
+    credentials : Credentials
+        The live tokens for sign-in.
+    endpoint : str
+        ``opc.tcp://HOST:PORT[/PATH]``.
+    anonymous_read : bool
+        Let clients without a user read and subscribe (never call a method).
+    nodesets : list of Path
+        NodeSet2 files loaded at start, in order.
+    """
+
+    def __init__(self, handshake: Handshake, credentials: Credentials, *, endpoint: str,
+                 anonymous_read: bool = False, nodesets: list[Path] | None = None) -> None:  # fmt: skip
+        self.handshake = handshake
+        self.credentials = credentials
+        self.endpoint = endpoint
+        self.anonymous_read = anonymous_read
+        self.nodesets = list(nodesets or [])
+        self.load_s: float | None = None
+        """Seconds the nodesets took to load (after start)."""
+        self._cell_loop: asyncio.AbstractEventLoop | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._stop: asyncio.Event | None = None
+        self._snapshots: asyncio.Queue[Snapshot] | None = None
+        self._vars: dict[str, _Var] = {}
+        self._server: Any = None
+        self._events: Any = None
+        self._last_event_id = 0
+
+    # -- life cycle (cell loop) -------------------------------------------------------------
+    async def start(self) -> None:
+        """Start the server's thread and wait (without holding the loop) until it listens."""
+        self._cell_loop = asyncio.get_running_loop()
+        started: asyncio.Future[None] = self._cell_loop.create_future()
+
+        def done(exc: BaseException | None) -> None:
+            if not started.done():
+                started.set_exception(exc) if exc is not None else started.set_result(None)
+
+        def report(exc: BaseException | None) -> None:
+            assert self._cell_loop is not None
+            with contextlib.suppress(RuntimeError):  # the cell's loop closed
+                self._cell_loop.call_soon_threadsafe(done, exc)
+
+        self._thread = threading.Thread(
+            target=self._main, args=(report,), name="opcua", daemon=True
+        )
+        self._thread.start()
+        await asyncio.wait_for(started, START_BOUND_S)
+        self.handshake.add_listener(self._on_snapshot)
+
+    async def stop(self) -> None:
+        """Stop the server and join its thread (off the loop)."""
+        loop, stop = self._loop, self._stop
+        if loop is not None and stop is not None:
+            with contextlib.suppress(RuntimeError):
+                loop.call_soon_threadsafe(stop.set)
+        if self._thread is not None:
+            await asyncio.to_thread(self._thread.join, START_BOUND_S)
+            self._thread = None
+
+    def _on_snapshot(self, snap: Snapshot) -> None:
+        loop, q = self._loop, self._snapshots
+        if loop is not None and q is not None:
+            with contextlib.suppress(RuntimeError):
+                loop.call_soon_threadsafe(q.put_nowait, snap)
+
+    # -- the server's thread ---------------------------------------------------------------
+    def _main(self, report: Callable[[BaseException | None], None]) -> None:
+        loop = asyncio.new_event_loop()
+        self._loop = loop
+        try:
+            loop.run_until_complete(self._serve(report))
+        except BaseException as exc:  # reported to start(); logged if it came later
+            log.exception("OPC UA server stopped on an error")
+            report(exc)
+        finally:
+            loop.close()
+
+    async def _serve(self, report: Callable[[BaseException | None], None]) -> None:
+        from asyncua import Server, ua
+
+        # asyncua logs every request at INFO: the cell's log keeps its warnings only
+        logging.getLogger("asyncua").setLevel(max(logging.WARNING, log.getEffectiveLevel()))
+        self._stop = asyncio.Event()
+        self._snapshots = asyncio.Queue()
+        server = Server(user_manager=_UserManager(self.credentials, self.anonymous_read))
+        await server.init()
+        server.set_endpoint(self.endpoint)
+        server.set_server_name("VisionCell")
+        server.set_security_policy([ua.SecurityPolicyType.NoSecurity],
+                                   permission_ruleset=_ruleset(self.anonymous_read))  # fmt: skip
+        tokens = [ua.UserNameIdentityToken] + (
+            [ua.AnonymousIdentityToken] if self.anonymous_read else []
+        )
+        server.set_identity_tokens(tokens)
+        _hook_sessions(server, self._refresh_credentials)
+        t0 = time.perf_counter()
+        for path in self.nodesets:
+            await server.import_xml(str(path))
+        self.load_s = time.perf_counter() - t0
+        if self.nodesets:
+            log.info("OPC UA: loaded %d nodesets in %.2f s", len(self.nodesets), self.load_s)
+        await self._build(server)
+        self._server = server
+        async with server:
+            report(None)
+            log.info("OPC UA server listening on %s", self.endpoint)
+            writer = asyncio.get_running_loop().create_task(self._writer())
+            await self._stop.wait()
+            writer.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await writer
+
+    async def _refresh_credentials(self) -> None:
+        assert self._cell_loop is not None
+        fut = asyncio.run_coroutine_threadsafe(self.credentials.refresh(), self._cell_loop)
+        try:
+            await asyncio.wrap_future(fut)
+        except Exception:  # the database is down: the table read last is used
+            log.warning("OPC UA: could not re-read the sign-in table", exc_info=True)
+
+    async def _build(self, server: Any) -> None:
+        from asyncua import ua
+
+        idx = await server.register_namespace(NAMESPACE)
+        V = ua.VariantType
+        cell = await server.nodes.objects.add_object(idx, "VisionCell")
+        groups: dict[str, Any] = {}
+        for g in ("StateMachine", "Status", "RecipeManagement", "ResultManagement"):
+            groups[g] = await cell.add_object(idx, g)
+        groups["Result"] = await groups["ResultManagement"].add_object(idx, "Result")
+        spec = {
+            "StateMachine": [("CurrentState", "Idle", V.String), ("CurrentStateCode", 0, V.Int32)],
+            "Status": [("TriggerEnabled", False, V.Boolean), ("TriggerReady", False, V.Boolean),
+                       ("Busy", False, V.Boolean), ("ResultsValid", False, V.Boolean),
+                       ("Running", False, V.Boolean), ("EStop", False, V.Boolean),
+                       ("ErrorCode", 0, V.UInt16), ("ErrorText", "", V.String),
+                       ("Triggers", 0, V.UInt32), ("QueuedResults", 0, V.UInt32)],
+            "RecipeManagement": [("ActiveRecipeId", 0, V.UInt16)],
+            "Result": [("InspectionId", 0, V.UInt32), ("TriggerNumber", 0, V.UInt32),
+                       ("Decision", "", V.String), ("DecisionCode", 0, V.UInt16),
+                       ("Model", "", V.String), ("ModelId", 0, V.UInt32),
+                       ("Score", float("nan"), V.Double), ("X_mm", float("nan"), V.Double),
+                       ("Y_mm", float("nan"), V.Double), ("Yaw_deg", float("nan"), V.Double),
+                       ("Bin", 0, V.UInt16), ("BinName", "", V.String),
+                       ("Duration_s", 0.0, V.Double)],
+        }  # fmt: skip
+        for group, items in spec.items():
+            for name, value, vtype in items:
+                node = await groups[group].add_variable(idx, name, ua.Variant(value, vtype))
+                self._vars[name] = _Var(node, vtype, value)
+        self._events = await server.create_custom_event_type(
+            idx, "InspectionResultEventType", ua.ObjectIds.BaseEventType,
+            [("InspectionId", V.UInt32), ("TriggerNumber", V.UInt32), ("Decision", V.String),
+             ("Model", V.String), ("ModelId", V.UInt32), ("Score", V.Double), ("X_mm", V.Double),
+             ("Y_mm", V.Double), ("Yaw_deg", V.Double), ("Bin", V.UInt16),
+             ("Duration_s", V.Double)],
+        )  # fmt: skip
+        self._evgen = await server.get_event_generator(self._events, cell)
+        A = ua.Argument
+
+        def arg(name: str, vtype: Any) -> Any:
+            a = A()
+            a.Name, a.DataType, a.ValueRank = name, ua.NodeId(vtype.value), -1
+            return a
+
+        await cell.add_method(idx, "EnableTrigger", self._m_enable, [arg("Enable", V.Boolean)], [])
+        await cell.add_method(idx, "Trigger", self._m_trigger, [], [arg("TriggerNumber", V.UInt32)])
+        await cell.add_method(idx, "StartRun", self._m_start_run, [arg("Count", V.UInt32)], [])
+        await cell.add_method(idx, "StopRun", self._m_stop_run, [], [])
+        await cell.add_method(idx, "Reset", self._m_reset, [], [])
+        await groups["RecipeManagement"].add_method(
+            idx, "SelectRecipe", self._m_select, [arg("RecipeId", V.UInt16)], []
+        )
+        await groups["ResultManagement"].add_method(
+            idx, "AcknowledgeResult", self._m_ack, [arg("InspectionId", V.UInt32)],
+            [arg("Acknowledged", V.Boolean)],
+        )  # fmt: skip
+
+    async def _writer(self) -> None:
+        """Copy each handshake snapshot into the variables (only what changed) and send an
+        event for each newly presented result."""
+        from asyncua import ua
+
+        assert self._snapshots is not None
+        while True:
+            snap = await self._snapshots.get()
+            r = snap.result
+            values: dict[str, Any] = {
+                "CurrentState": snap.state.label, "CurrentStateCode": int(snap.state),
+                "TriggerEnabled": snap.trigger_enabled, "TriggerReady": snap.trigger_ready,
+                "Busy": snap.busy, "ResultsValid": snap.results_valid, "Running": snap.running,
+                "EStop": snap.estop, "ErrorCode": int(snap.error), "ErrorText": snap.error_text,
+                "Triggers": snap.triggers % 2**32, "QueuedResults": snap.queued,
+                "ActiveRecipeId": snap.recipe,
+            }  # fmt: skip
+            if r is not None:
+                values.update({
+                    "InspectionId": r.inspection_id % 2**32, "TriggerNumber": r.trigger % 2**32,
+                    "Decision": r.decision, "DecisionCode": r.decision_code,
+                    "Model": r.model or "", "ModelId": r.model_id,
+                    "Score": float("nan") if r.score is None else float(r.score),
+                    "X_mm": _mm(r.x_m), "Y_mm": _mm(r.y_m), "Yaw_deg": _deg(r.yaw_rad),
+                    "Bin": r.bin, "BinName": r.bin_name or "", "Duration_s": r.duration_s,
+                })  # fmt: skip
+            # the result's words first, its valid flag and the state after them
+            order = sorted(values, key=lambda k: k not in _RESULT_WORDS)
+            for name in order:
+                var = self._vars[name]
+                value = values[name]
+                same = var.value == value or (
+                    isinstance(value, float) and isinstance(var.value, float)
+                    and math.isnan(value) and math.isnan(var.value)
+                )  # fmt: skip
+                if same:
+                    continue
+                var.value = value
+                await self._server.write_attribute_value(
+                    var.node.nodeid, ua.DataValue(ua.Variant(value, var.vtype))
+                )
+            if r is not None and snap.results_valid and r.inspection_id != self._last_event_id:
+                self._last_event_id = r.inspection_id
+                ev = self._evgen.event
+                ev.InspectionId, ev.TriggerNumber = r.inspection_id % 2**32, r.trigger % 2**32
+                ev.Decision, ev.Model, ev.ModelId = r.decision, r.model or "", r.model_id
+                ev.Score = float("nan") if r.score is None else float(r.score)
+                ev.X_mm, ev.Y_mm, ev.Yaw_deg = _mm(r.x_m), _mm(r.y_m), _deg(r.yaw_rad)
+                ev.Bin, ev.Duration_s = r.bin, r.duration_s
+                ev.Severity = 100
+                await self._evgen.trigger(message=f"inspection {r.inspection_id}: {r.decision}")
+
+    # -- methods (server loop) ------------------------------------------------------------
+    async def _on_cell(self, make: Callable[[], Awaitable[Any]]) -> Any:
+        assert self._cell_loop is not None
+        fut = asyncio.run_coroutine_threadsafe(_as_coro(make), self._cell_loop)
+        return await asyncio.wrap_future(fut)
+
+    def _user(self) -> LinkUser | None:
+        user = _session_user.get()
+        role = getattr(user, "vc_role", None)
+        return None if role is None else LinkUser(str(user.name), role)
+
+    async def _command(self, need: Role, make: Callable[[LinkUser], Awaitable[bool]]) -> Any:
+        from asyncua import ua
+
+        user = self._user()
+        if user is None or int(user.role) < int(need):
+            who = "anonymous" if user is None else f"{user.name} ({user.role.name})"
+            log.info("OPC UA: %s refused: needs %s", who, need.name)
+            if user is not None:  # the error code tells the PLC why
+                await self._on_cell(lambda: make(user))
+            return ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
+        ok = await self._on_cell(lambda: make(user))
+        if ok is False:
+            snap = self.handshake.snapshot
+            code = (
+                ua.StatusCodes.BadUserAccessDenied
+                if snap.error is ErrorCode.ROLE_TOO_LOW
+                else ua.StatusCodes.BadInvalidState
+            )
+            return ua.StatusCode(code)
+        return ok
+
+    async def _m_enable(self, parent: Any, enable: Any) -> Any:
+        async def run(user: LinkUser) -> bool:
+            if int(user.role) < int(Role.operator):
+                self.handshake._fail(ErrorCode.ROLE_TOO_LOW, f"{user.name} may not enable triggers")
+                return False
+            self.handshake.set_trigger_enable(bool(_value(enable)))
+            return True
+
+        out = await self._command(Role.operator, run)
+        return out if not isinstance(out, bool) else []
+
+    async def _m_trigger(self, parent: Any) -> Any:
+        from asyncua import ua
+
+        out = await self._command(Role.operator, self.handshake.trigger)
+        if isinstance(out, bool):
+            return [ua.Variant(self.handshake.snapshot.triggers % 2**32, ua.VariantType.UInt32)]
+        return out
+
+    async def _m_start_run(self, parent: Any, count: Any) -> Any:
+        n = int(_value(count))
+        out = await self._command(Role.operator, lambda u: self.handshake.start_run(u, n or None))
+        return out if not isinstance(out, bool) else []
+
+    async def _m_stop_run(self, parent: Any) -> Any:
+        async def run(user: LinkUser) -> bool:
+            return self.handshake.stop_run(user)
+
+        out = await self._command(Role.operator, run)
+        return out if not isinstance(out, bool) else []
+
+    async def _m_reset(self, parent: Any) -> Any:
+        out = await self._command(Role.operator, self.handshake.reset)
+        return out if not isinstance(out, bool) else []
+
+    async def _m_select(self, parent: Any, recipe: Any) -> Any:
+        n = int(_value(recipe))
+        out = await self._command(Role.engineer, lambda u: self.handshake.select_recipe(u, n))
+        return out if not isinstance(out, bool) else []
+
+    async def _m_ack(self, parent: Any, inspection_id: Any) -> Any:
+        from asyncua import ua
+
+        iid = int(_value(inspection_id))
+
+        async def run(user: LinkUser) -> bool:
+            took = self.handshake.acknowledge(iid)
+            self.handshake.present_next()
+            return took
+
+        user = self._user()
+        if user is None:
+            return ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
+        if int(user.role) < int(Role.operator):
+            return ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
+        took = await self._on_cell(lambda: run(user))
+        return [ua.Variant(bool(took), ua.VariantType.Boolean)]
+
+
+_RESULT_WORDS = frozenset(
+    ("InspectionId", "TriggerNumber", "Decision", "DecisionCode", "Model", "ModelId", "Score",
+     "X_mm", "Y_mm", "Yaw_deg", "Bin", "BinName", "Duration_s")
+)  # fmt: skip
+
+
+async def _as_coro(make: Callable[[], Awaitable[Any]]) -> Any:
+    return await make()
+
+
+def _value(v: Any) -> Any:
+    return getattr(v, "Value", v)
+
+
+def _hook_sessions(server: Any, refresh: Callable[[], Awaitable[None]]) -> None:
+    """Re-read the sign-in table when a session is created (before it signs in), and make
+    the session's user known to the method callbacks of its calls."""
+    iserver = server.iserver
+    make = iserver.create_session
+
+    def create_session(*args: Any, **kwargs: Any) -> Any:
+        session = make(*args, **kwargs)
+        create, call = session.create_session, session.call
+
+        async def create_hooked(*a: Any, **kw: Any) -> Any:
+            await refresh()
+            return await create(*a, **kw)
+
+        async def call_hooked(params: Any) -> Any:
+            token = _session_user.set(session.user)
+            try:
+                return await call(params)
+            finally:
+                _session_user.reset(token)
+
+        session.create_session, session.call = create_hooked, call_hooked
+        return session
+
+    iserver.create_session = create_session
+
+
+def _ruleset(anonymous_read: bool) -> Any:
+    """Signed-in users read, subscribe and call (each method checks the role); anonymous
+    clients read and subscribe when allowed, nothing else; nobody changes the address space."""
+    from asyncua import ua
+    from asyncua.crypto.permission_rules import USER_TYPES, SimpleRoleRuleset, UserRole
+
+    rules = SimpleRoleRuleset()
+    users = {ua.NodeId(t) for t in USER_TYPES}
+    rules._permission_dict[UserRole.Admin] = set(users)
+    rules._permission_dict[UserRole.User] = set(users)
+    call = {ua.NodeId(ua.ObjectIds.CallRequest_Encoding_DefaultBinary),
+            ua.NodeId(ua.ObjectIds.WriteRequest_Encoding_DefaultBinary)}  # fmt: skip
+    rules._permission_dict[UserRole.Anonymous] = (users - call) if anonymous_read else {
+        ua.NodeId(t) for t in (ua.ObjectIds.CreateSessionRequest_Encoding_DefaultBinary,
+                               ua.ObjectIds.ActivateSessionRequest_Encoding_DefaultBinary,
+                               ua.ObjectIds.CloseSessionRequest_Encoding_DefaultBinary,
+                               ua.ObjectIds.GetEndpointsRequest_Encoding_DefaultBinary,
+                               ua.ObjectIds.FindServersRequest_Encoding_DefaultBinary,
+                               ua.ObjectIds.CloseSecureChannelRequest_Encoding_DefaultBinary)
+    }  # fmt: skip
+    return rules
+
+
+class _UserManager:
+    """asyncua's user manager over :class:`Credentials`."""
+
+    def __init__(self, credentials: Credentials, anonymous_read: bool) -> None:
+        self.credentials = credentials
+        self.anonymous_read = anonymous_read
+
+    def get_user(self, iserver: Any, username: Any = None, password: Any = None,
+                 certificate: Any = None) -> Any:  # fmt: skip
+        from asyncua.crypto.permission_rules import User, UserRole
+
+        if username is None and password is None:
+            if not self.anonymous_read:
+                return None
+            user = User(role=UserRole.Anonymous, name="anonymous")
+            user.vc_role = None  # type: ignore[attr-defined]
+            return user
+        cred = self.credentials.check(username, password)
+        if cred is None:
+            log.warning("OPC UA: sign-in refused for user name %r", str(username)[:64])
+            return None
+        user = User(role=UserRole.User, name=cred.name)
+        user.vc_role = cred.role  # type: ignore[attr-defined]
+        return user
+
+
+def endpoint_host(endpoint: str) -> str:
+    """The host of an ``opc.tcp://`` endpoint."""
+    return urlsplit(endpoint).hostname or ""
