@@ -54,6 +54,9 @@ def start_plc_cell(tmp_path: Path, data_dir: Path, *, opcua: bool = True, modbus
         h = {"Authorization": f"Bearer {tokens['engineer']}"}
         ids = {}
         with httpx.Client(base_url=server.base, timeout=TIMEOUT_S) as c:
+            for tok in tokens.values():  # signed in once: the E-STOP then accepts them
+                r = c.get("/api/robot/state", headers={"Authorization": f"Bearer {tok}"})
+                assert r.status_code == 200, r.text
             for obj in (1, 2):
                 r = c.post("/api/models", json={"name": f"obj{obj}", "kind": "2d", "threshold": 0.15},
                            headers=h)  # fmt: skip
