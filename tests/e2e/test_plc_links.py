@@ -316,12 +316,10 @@ def test_opcua_recipe_select_as_engineer(cell: PlcCell) -> None:
         plc = _opcua(cell, "engineer")
         await plc.connect()
         try:
-            try:
+            with contextlib.suppress(ua.uaerrors.BadInvalidState):
                 await plc.nodes["cell"].call_method(
                     plc.nodes["SelectRecipe"], ua.Variant(1, ua.VariantType.UInt16)
                 )
-            except ua.uaerrors.BadInvalidState:
-                pass
             code = await plc.nodes["ErrorCode"].read_value()
             active = await plc.nodes["ActiveRecipeId"].read_value()
             return int(code), int(active)
