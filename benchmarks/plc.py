@@ -26,9 +26,16 @@ Phases:
 
 The cell is the ideal arm with a folder camera replaying a COIL-20 image (two models taught
 from COIL-20 views), so the inspection itself is short and the protocols' overhead shows.
+
+4. ``--sim-objects`` > 0: the simulated cell (MuJoCo arm, camera and belt, two demo parts
+   taught, the demo's belt indexing them to the station): the simulated PLC starts a
+   continuous run of that many objects over Modbus (RUN bit) and then over OPC UA
+   (``StartRun``), acknowledges each result, and checks it against the simulator's truth
+   of the inspected object (the part's model, its x/y in the base frame).
+
 Run::
 
-    .venv/bin/python -m benchmarks.plc [--count 1000] [--estops 20] [--json]
+    .venv/bin/python -m benchmarks.plc [--count 1000] [--estops 20] [--sim-objects 6] [--json]
 """
 
 from __future__ import annotations
@@ -318,7 +325,152 @@ def run(args: argparse.Namespace, progress: Callable[[str], None]) -> dict[str, 
     }
 
 
+#: The demo parts the simulated cell's phase teaches and feeds.
+SIM_PARTS = ("wheel-5spoke", "gear-housing")
+
+
+def _sim_settings(tmp: Path) -> Any:
+    from backend.settings import Settings
+
+    return Settings(
+        database_url=f"sqlite+aiosqlite:///{tmp / 'sim.db'}",
+        var_dir=tmp / "var",
+        driver="sim",
+        camera="sim",
+        sim_demo=False,
+        time_scale=2.0,
+        secret_key=_SECRET,
+        view3d_enabled=False,
+        bootstrap_operator=False,
+        threshold_follow=False,
+        http_port=_free_port(),
+        viser_port=_free_port(),
+        opcua_endpoint=f"opc.tcp://127.0.0.1:{_free_port()}/visioncell",
+        modbus_port=_free_port(),
+    )
+
+
+async def _sim_runs(srv: Any, tokens: dict[str, str], n: int, ids: dict[int, str],
+                    progress: Callable[[str], None]) -> list[dict[str, Any]]:  # fmt: skip
+    """A run of ``n`` objects over each protocol; each result against the truth."""
+    import math
+
+    import httpx
+
+    from backend.plc.modbus import REGISTERS
+    from backend.plc.simplc import ModbusPlc, OpcUaPlc
+
+    s = srv.settings
+    op = {"Authorization": f"Bearer {tokens['operator']}"}
+    checked: list[dict[str, Any]] = []
+    async with httpx.AsyncClient(base_url=srv.base, timeout=_HANG_S) as client:
+
+        async def check(proto: str, res: dict[str, Any]) -> None:
+            iid = int(res["inspection_id"])
+            row = (await client.get(f"/api/inspections/{iid}", headers=op)).json()
+            truth = row.get("truth") or {}
+            name = ids.get(int(res["model_id"]))
+            err_mm = None
+            if truth.get("T_base_obj") and res.get("x_m") is not None:
+                T = truth["T_base_obj"]
+                err_mm = math.hypot(res["x_m"] - T[0][3], res["y_m"] - T[1][3]) * 1e3
+            checked.append({"protocol": proto, "inspection_id": iid, "plc_model": name,
+                            "truth": truth.get("name"), "correct": name == truth.get("name"),
+                            "xy_error_mm": err_mm})  # fmt: skip
+            progress(f"{proto}: inspection {iid}: {name} (truth {truth.get('name')}), "
+                     f"xy error {'-' if err_mm is None else f'{err_mm:.1f} mm'}")  # fmt: skip
+
+        plc = ModbusPlc("127.0.0.1", s.modbus_port, poll_s=0.01, bound_s=_HANG_S)
+        await plc.connect()
+        try:
+            await plc.write(REGISTERS["RUN_COUNT"], n)
+            await plc.set_bits(RUN=True)
+            for _ in range(n):
+                w = await plc.wait(lambda w: "RESULTS_VALID" in w["flags"], "a run's result")
+                await check("modbus", w)
+                await plc.acknowledge()
+            await plc.wait(lambda w: "RUNNING" not in w["flags"], "the run's end")
+            await plc.set_bits(RUN=False)
+        finally:
+            plc.close()
+        opc = OpcUaPlc(s.opcua_endpoint, user="plc-operator", password=tokens["operator"],
+                       bound_s=_HANG_S)  # fmt: skip
+        await opc.connect()
+        try:
+            from asyncua import ua
+
+            await opc.call("StartRun", ua.Variant(n, ua.VariantType.UInt32))
+            seen: list[int] = []
+            for _ in range(n):
+                await opc.wait(lambda v: v.get("ResultsValid") is True
+                               and v.get("InspectionId") not in seen, "a run's result")  # fmt: skip
+                res = await opc.read_result()
+                seen.append(res["inspection_id"])
+                await check("opcua", res)
+                await opc.acknowledge(res["inspection_id"])
+        finally:
+            await opc.close()
+    return checked
+
+
+def run_sim(args: argparse.Namespace, progress: Callable[[str], None]) -> dict[str, Any]:
+    """Phase 4 (see the module doc)."""
+    from backend.db.migrate import upgrade
+    from benchmarks.estop import _Server
+    from benchmarks.inspection import _teach_all
+    from robot.sim.demo import populate_demo
+
+    with tempfile.TemporaryDirectory(prefix="plc-sim-") as tmp:
+        settings = _sim_settings(Path(tmp))
+        upgrade(settings.database_url)
+        tokens = asyncio.run(_tokens(settings))
+        srv = _Server(settings)
+        srv.settings = settings
+        progress("starting the simulated cell with its PLC links")
+        srv.start()
+        try:
+            rt = srv.runtime
+            progress(f"teaching {', '.join(SIM_PARTS)} in the simulated cell")
+            teach_s, _ = srv.call(_teach_all(rt, list(SIM_PARTS)))
+            ids = srv.call(_model_ids(rt))
+            populate_demo(rt.sim, names=SIM_PARTS * 2)
+            checked = asyncio.run(_sim_runs(srv, tokens, args.sim_objects, ids, progress))
+        finally:
+            srv.stop()
+    errs = [c["xy_error_mm"] for c in checked if c["xy_error_mm"] is not None]
+    return {
+        "teach_s": teach_s,
+        "results": checked,
+        "correct": sum(c["correct"] for c in checked),
+        "n": len(checked),
+        "unique": len({c["inspection_id"] for c in checked}),
+        "xy_error_mm_p50": _q(errs, 0.5) if errs else None,
+        "xy_error_mm_max": max(errs) if errs else None,
+    }
+
+
+async def _model_ids(rt: Any) -> dict[int, str]:
+    from sqlalchemy import select
+
+    from backend.db.models import ObjectModel
+
+    async with rt.database.session() as session:
+        rows = (await session.execute(select(ObjectModel.id, ObjectModel.name))).all()
+    return {int(i): str(n) for i, n in rows}
+
+
 def _print(result: dict[str, Any]) -> None:
+    if "latency" in result:
+        _print_links(result)
+    sim = result.get("sim")
+    if sim:
+        out.print(f"simulated cell, continuous runs over Modbus and OPC UA: {sim['correct']}/{sim['n']} "
+                  f"results name the simulator's part ({sim['unique']} distinct inspections); "
+                  f"x/y error to the truth p50 {sim['xy_error_mm_p50'] or float('nan'):.1f} mm, "
+                  f"max {sim['xy_error_mm_max'] or float('nan'):.1f} mm")  # fmt: skip
+
+
+def _print_links(result: dict[str, Any]) -> None:
     t = Table(title=f"Trigger to result, {result['count']} rounds (REST is the baseline)")
     for c in ("protocol", "n", "p50 ms", "p95 ms", "p95 overhead ms", "target"):
         t.add_column(c, justify="right")
@@ -367,15 +519,28 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--count", type=int, default=1000, help="rounds (one trigger per protocol each)")
     p.add_argument("--estops", type=int, default=20)
+    p.add_argument(
+        "--sim-objects",
+        type=int,
+        default=6,
+        help="objects of each protocol's run in the simulated cell (0: skip)",
+    )
     p.add_argument("--data-dir", type=Path, default=None)
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
-    if not 1 <= args.count <= 100_000 or not 1 <= args.estops <= 1000:
-        p.error("--count must be in 1..100000 and --estops in 1..1000")
+    if (
+        not 0 <= args.count <= 100_000
+        or not 1 <= args.estops <= 1000
+        or not 0 <= args.sim_objects <= 1000
+    ):
+        p.error("--count must be in 0..100000, --estops in 1..1000, --sim-objects in 0..1000")
     import logging
 
     logging.basicConfig(level=logging.WARNING)
-    result = run(args, lambda m: err.print(f"[plc] {m}"))
+    progress = lambda m: err.print(f"[plc] {m}")  # noqa: E731
+    result = run(args, progress) if args.count else {}
+    if args.sim_objects:
+        result["sim"] = run_sim(args, progress)
     _print(result)
     if args.json:
         print(json.dumps(result, default=str))
