@@ -306,6 +306,7 @@ class Handshake:
                 log.exception("PLC link %s: a listener failed", self.name)
 
     def _fail(self, code: ErrorCode, text: str) -> bool:
+        """Set the error code and text (a refusal); returns False."""
         self._error, self._error_text = code, text[:200]
         log.info("PLC link %s: %s (%s)", self.name, code.name, text)
         self._changed()

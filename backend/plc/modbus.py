@@ -51,7 +51,7 @@ import math
 from typing import Any
 
 from backend.db.models import Role
-from backend.plc.handshake import Handshake, LinkUser, Snapshot
+from backend.plc.handshake import ErrorCode, Handshake, LinkUser, Snapshot
 
 __all__ = ["CONTROL_BITS", "REGISTERS", "STATUS_BITS", "ModbusLink", "decode_result", "encode"]
 
@@ -208,6 +208,10 @@ class ModbusLink:
     async def _command(self, old_control: int, regs: list[int]) -> None:
         hs, user = self.handshake, self.user
         new = regs[0]
+        if int(user.role) < int(Role.operator):
+            if new != old_control:  # a viewer's link reads; every command is refused
+                hs._fail(ErrorCode.ROLE_TOO_LOW, f"Modbus acts as {user.role.name}: read only")
+            return
 
         def rose(name: str) -> bool:
             return _bit(new, name) and not _bit(old_control, name)
