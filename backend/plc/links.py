@@ -1,8 +1,10 @@
 """Start and stop the PLC links the settings ask for (OPC UA, Modbus TCP) over a runtime.
 
 Both are off by default; :func:`plc_links` is entered by the app's lifespan
-(:func:`backend.app.create_app`) after the cell runtime, and exited before it.  A link that
-cannot start (its port taken) stops the start-up with a :class:`StartupError` naming it.
+(:func:`backend.app.create_app`) after the cell runtime, and exited before it.  The Modbus
+server binds at once (a port taken stops the start-up with a :class:`StartupError`); the
+OPC UA server comes up on its own thread a few seconds later (the console and the E-STOP do
+not wait for it; a failure is logged as an error).
 """
 
 from __future__ import annotations
@@ -57,11 +59,7 @@ async def plc_links(rt: Any) -> AsyncIterator[PlcLinks]:
                 anonymous_read=s.opcua_anonymous == "read-only",
                 nodesets=nodeset_files(s.data_dir) if s.opcua_nodesets else [],
             )  # fmt: skip
-            try:
-                await link.start()
-            except Exception as exc:
-                await link.stop()
-                raise StartupError(f"cannot serve OPC UA at {s.opcua_endpoint}: {exc}") from exc
+            await link.start()  # listening a few seconds later, off the cell's loop
             stack.push_async_callback(link.stop)
             links.opcua = link
             links.handshakes.append(hs)

@@ -116,31 +116,54 @@ class OpcUaLink:
         self._server: Any = None
         self._events: Any = None
         self._last_event_id = 0
+        self._ready: asyncio.Future[None] | None = None
+        self._stopping = False
+        self.error: str | None = None
+        """Why the server did not start (None: it did, or is starting)."""
 
     # -- life cycle (cell loop) -------------------------------------------------------------
     async def start(self) -> None:
-        """Start the server's thread and wait (without holding the loop) until it listens."""
+        """Start the server's thread and return at once: building the address space and
+        loading the nodesets take seconds, and the console, REST and the E-STOP must not wait
+        for them.  :meth:`wait_ready` waits (without holding the loop) until it listens; a
+        failure to start is logged as an error and kept in :attr:`error`."""
         self._cell_loop = asyncio.get_running_loop()
-        started: asyncio.Future[None] = self._cell_loop.create_future()
+        self._ready = self._cell_loop.create_future()
+        self.handshake.add_listener(self._on_snapshot)
 
-        def done(exc: BaseException | None) -> None:
-            if not started.done():
-                started.set_exception(exc) if exc is not None else started.set_result(None)
+        def settle(exc: BaseException | None) -> None:
+            if self._ready is not None and not self._ready.done():
+                if exc is None:
+                    self._ready.set_result(None)
+                else:
+                    self.error = f"{type(exc).__name__}: {exc}"
+                    log.error("OPC UA server at %s did not start: %s", self.endpoint, self.error)
+                    self._ready.set_exception(exc)
+                    self._ready.exception()  # retrieved: wait_ready re-raises it
 
         def report(exc: BaseException | None) -> None:
             assert self._cell_loop is not None
             with contextlib.suppress(RuntimeError):  # the cell's loop closed
-                self._cell_loop.call_soon_threadsafe(done, exc)
+                self._cell_loop.call_soon_threadsafe(settle, exc)
 
         self._thread = threading.Thread(
             target=self._main, args=(report,), name="opcua", daemon=True
         )
         self._thread.start()
-        await asyncio.wait_for(started, START_BOUND_S)
-        self.handshake.add_listener(self._on_snapshot)
+
+    async def wait_ready(self, timeout_s: float = START_BOUND_S) -> None:
+        """Wait until the server listens (its start-up error, or ``TimeoutError``)."""
+        assert self._ready is not None, "start() first"
+        await asyncio.wait_for(asyncio.shield(self._ready), timeout_s)
+
+    @property
+    def ready(self) -> bool:
+        """Whether the server listens now."""
+        return self._ready is not None and self._ready.done() and self._ready.exception() is None
 
     async def stop(self) -> None:
         """Stop the server and join its thread (off the loop)."""
+        self._stopping = True
         loop, stop = self._loop, self._stop
         if loop is not None and stop is not None:
             with contextlib.suppress(RuntimeError):
@@ -174,6 +197,8 @@ class OpcUaLink:
         logging.getLogger("asyncua").setLevel(max(logging.WARNING, log.getEffectiveLevel()))
         self._stop = asyncio.Event()
         self._snapshots = asyncio.Queue()
+        if self._stopping:
+            return
         server = Server(user_manager=_UserManager(self.credentials, self.anonymous_read))
         await server.init()
         server.set_endpoint(self.endpoint)
@@ -193,9 +218,12 @@ class OpcUaLink:
             log.info("OPC UA: loaded %d nodesets in %.2f s", len(self.nodesets), self.load_s)
         await self._build(server)
         self._server = server
+        if self._stopping:  # stopped while starting
+            return
         async with server:
             report(None)
             log.info("OPC UA server listening on %s", self.endpoint)
+            self._snapshots.put_nowait(self.handshake.snapshot)  # the state before the start
             writer = asyncio.get_running_loop().create_task(self._writer())
             await self._stop.wait()
             writer.cancel()

@@ -4,6 +4,8 @@ models taught over REST from COIL-20 views, so every inspection recognises obj2 
 
 from __future__ import annotations
 
+import socket
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,6 +17,19 @@ from tests.utils.recorded import coil_dir, coil_file, link_sequence
 
 #: One request's bound (a hang's, on a loaded machine).
 TIMEOUT_S = 60.0
+
+
+def _wait_listening(port: int, server: Server, bound_s: float = 300.0) -> None:
+    t0 = time.monotonic()
+    while True:
+        with socket.socket() as sock:
+            if sock.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        if server.proc.poll() is not None or time.monotonic() - t0 > bound_s:
+            raise RuntimeError(
+                f"the OPC UA server did not listen:\n{server.log.read_text()[-3000:]}"
+            )
+        time.sleep(0.2)
 
 
 @dataclass
@@ -48,6 +63,8 @@ def start_plc_cell(tmp_path: Path, data_dir: Path, *, opcua: bool = True, modbus
     }
     server = start_server(tmp_path, **extra)
     try:
+        if url is not None:  # the OPC UA server comes up on its own thread after the cell
+            _wait_listening(int(url.rsplit(":", 1)[1].split("/")[0]), server)
         tokens = {
             role: server.token(f"plc-{role}", role) for role in ("viewer", "operator", "engineer")
         }
