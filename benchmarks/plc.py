@@ -100,7 +100,6 @@ def _settings(tmp: Path, data_dir: Path) -> Any:
         viser_port=_free_port(),
         opcua_endpoint=f"opc.tcp://127.0.0.1:{_free_port()}/visioncell",
         modbus_port=_free_port(),
-        modbus_role="engineer",  # the changeover phase selects recipes over Modbus too
     )
 
 

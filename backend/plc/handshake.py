@@ -272,6 +272,7 @@ class Handshake:
             and run.job is not None
             and run.job.task is not None
             and not run.job.task.done()
+            and run.job.state.value == "running"
         )
 
     def _make(self) -> Snapshot:
@@ -383,6 +384,15 @@ class Handshake:
         sim = getattr(self.rt, "sim", None)
         return [] if sim is None else [b.name for b in sim.config.layout.bins]
 
+    async def _follow_recipe(self) -> None:
+        """Read the active recipe's number again (the console or another link may have
+        selected one): after each result, off the result's path."""
+        with contextlib.suppress(Exception):
+            number = await recipes.active_number(self.rt)
+            if number != self._recipe:
+                self._recipe = number
+                self._changed()
+
     def _offer(self, res: PlcResult) -> None:
         if res.inspection_id in self._seen:  # one inspection is offered once
             return
@@ -398,6 +408,7 @@ class Handshake:
         else:
             self._queue.append(res)
         self._changed()
+        self._spawn(self._follow_recipe())
 
     def acknowledge(self, inspection_id: int | None = None) -> bool:
         """The PLC took the presented result (``inspection_id``: only if it is that one).
@@ -433,9 +444,13 @@ class Handshake:
             return self._fail(ErrorCode.TRIGGER_WHILE_BUSY, "an inspection is going")
         try:
             opts = await recipes.options(self.rt)
-            self._run = service.start_run(self.rt, opts, count)
+            resolve = recipes.resolver(self.rt)  # a recipe selected mid-run: the next object
+            kw = {} if resolve is None else {"resolve": resolve}
+            self._run = service.start_run(self.rt, opts, count, **kw)
         except VisionCellError as exc:
             return self._fail(ErrorCode.NOT_READY, f"{exc.code}: {exc}")
+        # the job's end event goes out before its task is done: the state follows the task
+        self._run.job.task.add_done_callback(lambda _t: self._changed())
         self._error, self._error_text = ErrorCode.NONE, ""
         self._changed()
         return True
@@ -454,13 +469,14 @@ class Handshake:
         return True
 
     async def select_recipe(self, user: LinkUser, number: int) -> bool:
-        """Make recipe ``number`` the active one (engineers only)."""
-        if not self._allowed(user, Role.engineer):
+        """Make recipe ``number`` the active one (a line changeover: operators, as over REST;
+        only engineers create or change recipes, and not over the PLC links)."""
+        if not self._allowed(user, Role.operator):
             return self._fail(
-                ErrorCode.ROLE_TOO_LOW, f"{user.name} ({user.role.name}) may not change recipes"
+                ErrorCode.ROLE_TOO_LOW, f"{user.name} ({user.role.name}) may not select recipes"
             )
         try:
-            self._recipe = await recipes.select(self.rt, number, actor=user)
+            self._recipe = await recipes.select(self.rt, number, user=user, link=self.name)
         except recipes.RecipesUnavailable as exc:
             return self._fail(ErrorCode.RECIPES_UNAVAILABLE, str(exc))
         except VisionCellError as exc:
@@ -507,9 +523,3 @@ class Handshake:
         run = self._run
         if run is not None and run.job is not None and ev.job_id == run.job.id:
             self._changed()  # a run ended (or began): busy and state follow
-
-    def refresh_recipe(self, number: int) -> None:
-        """Note the active recipe's number (another link or the console changed it)."""
-        if number != self._recipe:
-            self._recipe = number
-            self._changed()

@@ -8,7 +8,8 @@ OPC 40100-1 (Machine Vision) lays out a vision system where it fits the cell:
 - ``Status``: the handshake's flags (``TriggerEnabled``, ``TriggerReady``, ``Busy``,
   ``ResultsValid``, ``Running``, ``EStop``), ``ErrorCode`` / ``ErrorText``, ``Triggers``,
   ``QueuedResults``;
-- ``RecipeManagement``: ``ActiveRecipeId`` and the method ``SelectRecipe(UInt16)``;
+- ``RecipeManagement``: ``ActiveRecipeId`` and the method ``SelectRecipe(UInt16)`` (a line
+  changeover: operators, as over REST);
 - ``ResultManagement/Result``: the presented result (``InspectionId``, ``TriggerNumber``,
   ``Decision``, ``DecisionCode``, ``Model``, ``ModelId``, ``Score``, ``X_mm``, ``Y_mm``,
   ``Yaw_deg``, ``Bin``, ``BinName``, ``Duration_s``) and the method
@@ -417,7 +418,7 @@ class OpcUaLink:
 
     async def _m_select(self, parent: Any, recipe: Any) -> Any:
         n = int(_value(recipe))
-        out = await self._command(Role.engineer, lambda u: self.handshake.select_recipe(u, n))
+        out = await self._command(Role.operator, lambda u: self.handshake.select_recipe(u, n))
         return out if not isinstance(out, bool) else []
 
     async def _m_ack(self, parent: Any, inspection_id: Any) -> Any:

@@ -2,9 +2,10 @@
 the inspection options a trigger or a run uses.
 
 Recipes live in ``backend.recipes.service`` (``active_recipe(rt)``, ``activate_number(rt,
-number, *, actor)``, ``options_for(recipe, overrides)``).  When that module is not present
-the links still trigger and run, with the default :class:`InspectOptions`, report recipe id
-0, and refuse a recipe selection with :class:`RecipesUnavailable` ("recipes not available").
+number, *, actor, role, reason)``, ``resolve_options(rt, overrides)``, ``follower(rt,
+overrides)``).  A build without that module still triggers and runs, with the default
+:class:`InspectOptions`, reports recipe 0, and refuses a selection with
+:class:`RecipesUnavailable` ("recipes not available").
 """
 
 from __future__ import annotations
@@ -13,11 +14,12 @@ import importlib
 from typing import Any
 
 from backend.inspection.service import InspectOptions
-from vision.errors import Conflict
+from vision.errors import Conflict, InvalidInput
 
-__all__ = ["MAX_RECIPE_NUMBER", "RecipesUnavailable", "active_number", "options", "select"]
+__all__ = ["MAX_RECIPE_NUMBER", "RecipesUnavailable", "active_number", "options", "resolver",
+           "select"]  # fmt: skip
 
-#: Largest recipe number a PLC can ask for (one unsigned 16-bit register).
+#: Largest recipe number a PLC can send (one unsigned 16-bit register).
 MAX_RECIPE_NUMBER = 65535
 
 
@@ -32,41 +34,36 @@ def _service() -> Any | None:
         return None
 
 
-def _number_of(recipe: Any) -> int:
-    if recipe is None:
-        return 0
-    n = recipe.get("number") if isinstance(recipe, dict) else getattr(recipe, "number", 0)
-    return int(n or 0)
-
-
 async def active_number(rt: Any) -> int:
     """Number of the cell's active recipe (0: none, or no recipes in this build)."""
     svc = _service()
     if svc is None:
         return 0
-    return _number_of(await svc.active_recipe(rt))
+    recipe = await svc.active_recipe(rt)
+    return 0 if recipe is None else int(recipe.number)
 
 
-async def select(rt: Any, number: int, *, actor: Any) -> int:
-    """Make recipe ``number`` the active one, as ``actor``; returns its number.
+async def select(rt: Any, number: int, *, user: Any, link: str) -> int:
+    """Make recipe ``number`` the active one, as ``user`` (a :class:`LinkUser`) over
+    ``link``; returns its number.
 
-    :class:`RecipesUnavailable` without recipes; the recipe service's own errors
-    (:class:`~vision.errors.NotFound` for an unknown number) otherwise.
+    :class:`RecipesUnavailable` without recipes; :class:`~vision.errors.InvalidInput` for a
+    number out of range, :class:`~vision.errors.NotFound` for one the cell has not.
     """
     if (
         isinstance(number, bool)
         or not isinstance(number, int)
         or not 1 <= number <= MAX_RECIPE_NUMBER
     ):
-        from vision.errors import InvalidInput
-
         raise InvalidInput(
             f"recipe number must be an integer in 1..{MAX_RECIPE_NUMBER}, got {number!r}"
         )
     svc = _service()
     if svc is None:
         raise RecipesUnavailable("recipes not available")
-    return _number_of(await svc.activate_number(rt, number, actor=actor)) or number
+    recipe = await svc.activate_number(rt, number, actor=user.name, role=user.role.name,
+                                       reason=f"selected over {link}")  # fmt: skip
+    return int(recipe.number)
 
 
 async def options(rt: Any) -> InspectOptions:
@@ -74,7 +71,11 @@ async def options(rt: Any) -> InspectOptions:
     svc = _service()
     if svc is None:
         return InspectOptions()
-    recipe = await svc.active_recipe(rt)
-    if recipe is None:
-        return InspectOptions()
-    return svc.options_for(recipe, {})
+    return await svc.resolve_options(rt, {})
+
+
+def resolver(rt: Any) -> Any | None:
+    """What a run started by a PLC reads its options from before each object (the active
+    recipe then), or None without recipes."""
+    svc = _service()
+    return None if svc is None else svc.follower(rt, {})

@@ -182,7 +182,7 @@ def test_modbus_estop_bit_and_reset(cell: PlcCell) -> None:
     asyncio.run(main())
 
 
-def test_modbus_refuses_writes_to_the_status_and_a_recipe_change_as_operator(cell: PlcCell) -> None:
+def test_modbus_refuses_writes_to_the_status(cell: PlcCell) -> None:
     async def main() -> None:
         plc = _modbus(cell)
         await plc.connect()
@@ -191,16 +191,52 @@ def test_modbus_refuses_writes_to_the_status_and_a_recipe_change_as_operator(cel
             assert rr.isError()  # illegal address: the status is the cell's
             rr = await plc.write(REGISTERS["INSPECTION_ID"], 7)
             assert rr.isError()
-            await plc.write(REGISTERS["RECIPE_REQUEST"], 2)
-            await plc.set_bits(RECIPE_SELECT=True)
             w = await plc.read()
-            assert w["error"] == ErrorCode.ROLE_TOO_LOW  # Modbus acts as operator by default
-            await plc.set_bits(RECIPE_SELECT=False)
+            assert w["status"] != 0xFFFF and "ONLINE" in w["flags"]
         finally:
             await _idle_modbus(plc)
             plc.close()
 
     asyncio.run(main())
+
+
+def test_modbus_acting_as_a_viewer_refuses_every_command(tmp_path) -> None:
+    """``VISIONCELL_MODBUS_ROLE=viewer``: the PLC reads the state; a trigger, a run, a
+    recipe selection are refused with error 10 (role too low) and start nothing."""
+    from tests.e2e.conftest import start_server
+    from tests.utils.factories import free_port
+
+    port = free_port()
+    server = start_server(tmp_path, VISIONCELL_MODBUS_PORT=str(port), VISIONCELL_MODBUS_ROLE="viewer",
+                          VISIONCELL_VIEW3D_ENABLED="false")  # fmt: skip
+
+    async def main() -> None:
+        plc = ModbusPlc("127.0.0.1", port, bound_s=BOUND_S)
+        await plc.connect()
+        try:
+            w = await plc.read()
+            assert "ONLINE" in w["flags"] and w["error"] == 0
+            for bits in ({"TRIGGER_ENABLE": True}, {"TRIGGER": True}, {"RUN": True},
+                         {"RECIPE_SELECT": True}):  # fmt: skip
+                await plc.set_bits(**bits)
+                w = await plc.read()
+                assert w["error"] == ErrorCode.ROLE_TOO_LOW, bits
+                assert not w["flags"] & {"TRIGGER_ACK", "BUSY", "RUNNING", "TRIGGER_ENABLED"}
+                await plc.set_bits(**{k: False for k in bits})
+            assert w["triggers"] == 0
+        finally:
+            plc.close()
+
+    try:
+        asyncio.run(main())
+        jobs = httpx.get(
+            f"{server.base}/api/jobs",
+            timeout=TIMEOUT_S,
+            headers={"Authorization": f"Bearer {server.token('v', 'viewer')}"},
+        ).json()
+        assert not [j for j in jobs["data"] if j["kind"].startswith("inspect")]
+    finally:
+        server.stop()
 
 
 def test_opcua_wrong_credentials_are_refused(cell: PlcCell) -> None:
@@ -240,13 +276,18 @@ def test_opcua_viewer_reads_and_may_not_trigger(cell: PlcCell) -> None:
             await plc.wait(lambda v: v.get("ErrorCode") == ErrorCode.ROLE_TOO_LOW, "the error code")
         finally:
             await plc.close()
+        viewer = _opcua(cell, "viewer")
+        await viewer.connect()
+        try:
+            with pytest.raises(BadUserAccessDenied):  # a changeover is an operator's
+                await viewer.nodes["cell"].call_method(
+                    viewer.nodes["SelectRecipe"], ua.Variant(1, ua.VariantType.UInt16)
+                )
+        finally:
+            await viewer.close()
         op = _opcua(cell, "operator")
         await op.connect()
         try:
-            with pytest.raises(BadUserAccessDenied):  # recipes are an engineer's
-                await op.nodes["cell"].call_method(
-                    op.nodes["SelectRecipe"], ua.Variant(1, ua.VariantType.UInt16)
-                )
             await op.call("Reset")
         finally:
             await op.close()
@@ -309,11 +350,11 @@ def test_opcua_run_results_each_seen_once(cell: PlcCell) -> None:
     assert len(set(ids)) == 5 and ids == sorted(ids)
 
 
-def test_opcua_recipe_select_as_engineer(cell: PlcCell) -> None:
+def test_opcua_recipe_select(cell: PlcCell) -> None:
     from asyncua import ua
 
     async def main() -> tuple[int, int]:
-        plc = _opcua(cell, "engineer")
+        plc = _opcua(cell, "operator")
         await plc.connect()
         try:
             with contextlib.suppress(ua.uaerrors.BadInvalidState):
