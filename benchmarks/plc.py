@@ -148,6 +148,12 @@ async def _rest_trigger(client: Any, headers: dict[str, str]) -> tuple[float, in
     return time.perf_counter() - t0, int(job["result"]["inspection_id"])
 
 
+def _call(srv: Any, coro: Any, bound_s: float = 3600.0) -> Any:
+    """Run ``coro`` on the server's loop; wait for it (teaching on a loaded machine takes
+    minutes: ``bound_s`` only bounds a hang)."""
+    return asyncio.run_coroutine_threadsafe(coro, srv.loop).result(bound_s)
+
+
 def _q(xs: list[float], q: float) -> float:
     s = sorted(xs)
     return s[min(len(s) - 1, max(0, round(q * (len(s) - 1))))]
@@ -292,7 +298,7 @@ def run(args: argparse.Namespace, progress: Callable[[str], None]) -> dict[str, 
         srv.start()
         start_s = time.perf_counter() - t0
         links = srv.runtime.plc_links
-        srv.call(links.opcua.wait_ready())
+        _call(srv, links.opcua.wait_ready())
         opcua_ready_s = time.perf_counter() - t0
         try:
             with httpx.Client(base_url=srv.base, timeout=_HANG_S) as c:
@@ -430,12 +436,12 @@ def run_sim(args: argparse.Namespace, progress: Callable[[str], None]) -> dict[s
         srv.settings = settings
         progress("starting the simulated cell with its PLC links")
         srv.start()
-        srv.call(srv.runtime.plc_links.opcua.wait_ready())
+        _call(srv, srv.runtime.plc_links.opcua.wait_ready())
         try:
             rt = srv.runtime
             progress(f"teaching {', '.join(SIM_PARTS)} in the simulated cell")
-            teach_s, _ = srv.call(_teach_all(rt, list(SIM_PARTS)))
-            ids = srv.call(_model_ids(rt))
+            teach_s, _ = _call(srv, _teach_all(rt, list(SIM_PARTS)))
+            ids = _call(srv, _model_ids(rt))
             populate_demo(rt.sim, names=SIM_PARTS * 2)
             checked = asyncio.run(_sim_runs(srv, tokens, args.sim_objects, ids, progress))
         finally:
