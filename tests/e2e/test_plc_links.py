@@ -200,15 +200,36 @@ def test_modbus_refuses_writes_to_the_status(cell: PlcCell) -> None:
     asyncio.run(main())
 
 
-def test_modbus_acting_as_a_viewer_refuses_every_command(tmp_path) -> None:
+def test_read_only_links_refuse_every_command(tmp_path) -> None:
     """``VISIONCELL_MODBUS_ROLE=viewer``: the PLC reads the state; a trigger, a run, a
-    recipe selection are refused with error 10 (role too low) and start nothing."""
+    recipe selection are refused with error 10 (role too low) and start nothing.
+    ``VISIONCELL_OPCUA_ANONYMOUS=read-only``: a client without a user reads and subscribes,
+    and may call no method."""
+    from asyncua import ua
+    from asyncua.ua.uaerrors import UaError
+
     from tests.e2e.conftest import start_server
     from tests.utils.factories import free_port
+    from tests.utils.plccell import _wait_listening
 
-    port = free_port()
+    port, opc_port = free_port(), free_port()
+    url = f"opc.tcp://127.0.0.1:{opc_port}/visioncell"
     server = start_server(tmp_path, VISIONCELL_MODBUS_PORT=str(port), VISIONCELL_MODBUS_ROLE="viewer",
-                          VISIONCELL_VIEW3D_ENABLED="false")  # fmt: skip
+                          VISIONCELL_OPCUA_ENDPOINT=url, VISIONCELL_OPCUA_ANONYMOUS="read-only",
+                          VISIONCELL_OPCUA_NODESETS="false", VISIONCELL_VIEW3D_ENABLED="false")  # fmt: skip
+
+    async def anonymous() -> None:
+        plc = OpcUaPlc(url, user=None, password=None, bound_s=BOUND_S)
+        await plc.connect()
+        try:
+            await plc.wait(lambda v: "CurrentState" in v, "the state")
+            assert await plc.nodes["Triggers"].read_value() == 0
+            for name, args in (("Trigger", ()), ("Reset", ()),
+                               ("StartRun", (ua.Variant(1, ua.VariantType.UInt32),))):  # fmt: skip
+                with pytest.raises(UaError):
+                    await plc.call(name, *args)
+        finally:
+            await plc.close()
 
     async def main() -> None:
         plc = ModbusPlc("127.0.0.1", port, bound_s=BOUND_S)
@@ -229,6 +250,8 @@ def test_modbus_acting_as_a_viewer_refuses_every_command(tmp_path) -> None:
 
     try:
         asyncio.run(main())
+        _wait_listening(opc_port, server)
+        asyncio.run(anonymous())
         jobs = httpx.get(
             f"{server.base}/api/jobs",
             timeout=TIMEOUT_S,
