@@ -58,6 +58,7 @@ async def plc_links(rt: Any) -> AsyncIterator[PlcLinks]:
                 hs, creds, endpoint=s.opcua_endpoint,
                 anonymous_read=s.opcua_anonymous == "read-only",
                 nodesets=nodeset_files(s.data_dir) if s.opcua_nodesets else [],
+                throttle=rt.signin_throttle,
             )  # fmt: skip
             await link.start()  # listening a few seconds later, off the cell's loop
             stack.push_async_callback(link.stop)

@@ -97,15 +97,19 @@ class OpcUaLink:
         Let clients without a user read and subscribe (never call a method).
     nodesets : list of Path
         NodeSet2 files loaded at start, in order.
+    throttle : SignInThrottle, optional
+        Failed sign-ins per client address (the cell's, shared with REST).
     """
 
     def __init__(self, handshake: Handshake, credentials: Credentials, *, endpoint: str,
-                 anonymous_read: bool = False, nodesets: list[Path] | None = None) -> None:  # fmt: skip
+                 anonymous_read: bool = False, nodesets: list[Path] | None = None,
+                 throttle: Any = None) -> None:  # fmt: skip
         self.handshake = handshake
         self.credentials = credentials
         self.endpoint = endpoint
         self.anonymous_read = anonymous_read
         self.nodesets = list(nodesets or [])
+        self.throttle = throttle
         self.load_s: float | None = None
         """Seconds the nodesets took to load (after start)."""
         self._cell_loop: asyncio.AbstractEventLoop | None = None
@@ -210,7 +214,7 @@ class OpcUaLink:
             [ua.AnonymousIdentityToken] if self.anonymous_read else []
         )
         server.set_identity_tokens(tokens)
-        _hook_sessions(server, self._refresh_credentials)
+        _hook_sessions(server, self._refresh_credentials, self.throttle)
         t0 = time.perf_counter()
         for path in self.nodesets:
             await server.import_xml(str(path))
@@ -454,15 +458,38 @@ def _value(v: Any) -> Any:
     return getattr(v, "Value", v)
 
 
-def _hook_sessions(server: Any, refresh: Callable[[], Awaitable[None]]) -> None:
-    """Re-read the sign-in table when a session is created (before it signs in), and make
-    the session's user known to the method callbacks of its calls."""
+def _hook_sessions(server: Any, refresh: Callable[[], Awaitable[None]], throttle: Any) -> None:
+    """Re-read the sign-in table when a session is created (before it signs in), count
+    failed sign-ins per client address in the cell's sign-in ``throttle`` (shared with REST,
+    the console and the 3D view: a blocked address is refused before its credentials are
+    looked at), and make the session's user known to the method callbacks of its calls."""
+    from asyncua import ua
+    from asyncua.common.utils import ServiceError
+
+    refused = {ua.StatusCodes.BadUserAccessDenied, ua.StatusCodes.BadIdentityTokenInvalid,
+               ua.StatusCodes.BadIdentityTokenRejected}  # fmt: skip
     iserver = server.iserver
     make = iserver.create_session
 
     def create_session(*args: Any, **kwargs: Any) -> Any:
         session = make(*args, **kwargs)
-        create, call = session.create_session, session.call
+        create, call, activate = session.create_session, session.call, session.activate_session
+        peer = session.name[0] if isinstance(session.name, tuple) else str(session.name)
+        client = f"opcua:{peer}"
+
+        def activate_hooked(*a: Any, **kw: Any) -> Any:
+            if throttle is not None:
+                try:
+                    throttle.check(client)
+                except Exception:
+                    log.warning("OPC UA: sign-in from %s refused: too many failures", peer)
+                    raise ServiceError(ua.StatusCodes.BadUserAccessDenied) from None
+            try:
+                return activate(*a, **kw)
+            except ServiceError as exc:
+                if throttle is not None and exc.code in refused:
+                    throttle.failure(client)
+                raise
 
         async def create_hooked(*a: Any, **kw: Any) -> Any:
             await refresh()
@@ -476,6 +503,7 @@ def _hook_sessions(server: Any, refresh: Callable[[], Awaitable[None]]) -> None:
                 _session_user.reset(token)
 
         session.create_session, session.call = create_hooked, call_hooked
+        session.activate_session = activate_hooked
         return session
 
     iserver.create_session = create_session

@@ -204,7 +204,7 @@ def test_read_only_links_refuse_every_command(tmp_path) -> None:
     """``VISIONCELL_MODBUS_ROLE=viewer``: the PLC reads the state; a trigger, a run, a
     recipe selection are refused with error 10 (role too low) and start nothing.
     ``VISIONCELL_OPCUA_ANONYMOUS=read-only``: a client without a user reads and subscribes,
-    and may call no method."""
+    and may call no method.  Failed OPC UA sign-ins block the address as REST's do."""
     from asyncua import ua
     from asyncua.ua.uaerrors import UaError
 
@@ -248,10 +248,25 @@ def test_read_only_links_refuse_every_command(tmp_path) -> None:
         finally:
             plc.close()
 
+    async def throttled(token: str) -> None:
+        for _ in range(5):  # VISIONCELL_SIGNIN_MAX_FAILURES's default
+            plc = OpcUaPlc(url, user="reader", password="vc_" + "y" * 43, bound_s=BOUND_S)
+            with pytest.raises(UaError):
+                await plc.connect()
+            with contextlib.suppress(Exception):
+                await plc.close()
+        plc = OpcUaPlc(url, user="reader", password=token, bound_s=BOUND_S)
+        with pytest.raises(UaError):  # the address is blocked: even the right token
+            await plc.connect()
+        with contextlib.suppress(Exception):
+            await plc.close()
+
     try:
         asyncio.run(main())
         _wait_listening(opc_port, server)
         asyncio.run(anonymous())
+        asyncio.run(throttled(server.token("reader", "viewer")))
+        assert "refused: too many failures" in server.log.read_text()
         jobs = httpx.get(
             f"{server.base}/api/jobs",
             timeout=TIMEOUT_S,

@@ -57,6 +57,8 @@ def start_plc_cell(tmp_path: Path, data_dir: Path, *, opcua: bool = True, modbus
         "VISIONCELL_DATA_DIR": str(data_dir),
         "VISIONCELL_VIEW3D_ENABLED": "false",
         "VISIONCELL_THRESHOLD_FOLLOW": "false",
+        # the tests of refused sign-ins must not block the others' address
+        "VISIONCELL_SIGNIN_MAX_FAILURES": "100",
         **({"VISIONCELL_OPCUA_ENDPOINT": url} if url else {}),
         **({"VISIONCELL_MODBUS_PORT": str(port)} if port else {}),
         **env,
