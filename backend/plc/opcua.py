@@ -204,13 +204,14 @@ class OpcUaLink:
         self._snapshots = asyncio.Queue()
         if self._stopping:
             return
-        server = Server(user_manager=_UserManager(self.credentials, self.anonymous_read))
+        manager: Any = _UserManager(self.credentials, self.anonymous_read)
+        server = Server(user_manager=manager)
         await server.init()
         server.set_endpoint(self.endpoint)
         server.set_server_name("VisionCell")
         server.set_security_policy([ua.SecurityPolicyType.NoSecurity],
                                    permission_ruleset=_ruleset(self.anonymous_read))  # fmt: skip
-        tokens = [ua.UserNameIdentityToken] + (
+        tokens: list[type] = [ua.UserNameIdentityToken] + (
             [ua.AnonymousIdentityToken] if self.anonymous_read else []
         )
         server.set_identity_tokens(tokens)
@@ -253,7 +254,7 @@ class OpcUaLink:
         for g in ("StateMachine", "Status", "RecipeManagement", "ResultManagement"):
             groups[g] = await cell.add_object(idx, g)
         groups["Result"] = await groups["ResultManagement"].add_object(idx, "Result")
-        spec = {
+        spec: dict[str, list[tuple[str, Any, Any]]] = {
             "StateMachine": [("CurrentState", "Idle", V.String), ("CurrentStateCode", 0, V.Int32)],
             "Status": [("TriggerEnabled", False, V.Boolean), ("TriggerReady", False, V.Boolean),
                        ("Busy", False, V.Boolean), ("ResultsValid", False, V.Boolean),
@@ -373,7 +374,7 @@ class OpcUaLink:
             log.info("OPC UA: %s refused: needs %s", who, need.name)
             if user is not None:  # the error code tells the PLC why
                 await self._on_cell(lambda: make(user))
-            return ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
+            return _status(ua.StatusCodes.BadUserAccessDenied)
         ok = await self._on_cell(lambda: make(user))
         if ok is False:
             snap = self.handshake.snapshot
@@ -382,7 +383,7 @@ class OpcUaLink:
                 if snap.error is ErrorCode.ROLE_TOO_LOW
                 else ua.StatusCodes.BadInvalidState
             )
-            return ua.StatusCode(code)
+            return _status(code)
         return ok
 
     async def _m_enable(self, parent: Any, enable: Any) -> Any:
@@ -437,9 +438,9 @@ class OpcUaLink:
 
         user = self._user()
         if user is None:
-            return ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
+            return _status(ua.StatusCodes.BadUserAccessDenied)
         if int(user.role) < int(Role.operator):
-            return ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
+            return _status(ua.StatusCodes.BadUserAccessDenied)
         took = await self._on_cell(lambda: run(user))
         return [ua.Variant(bool(took), ua.VariantType.Boolean)]
 
@@ -448,6 +449,13 @@ _RESULT_WORDS = frozenset(
     ("InspectionId", "TriggerNumber", "Decision", "DecisionCode", "Model", "ModelId", "Score",
      "X_mm", "Y_mm", "Yaw_deg", "Bin", "BinName", "Duration_s")
 )  # fmt: skip
+
+
+def _status(code: int) -> Any:
+    """An OPC UA status code answer (asyncua types the code as its UInt32 alias)."""
+    from asyncua import ua
+
+    return ua.StatusCode(code)  # type: ignore[arg-type]
 
 
 async def _as_coro(make: Callable[[], Awaitable[Any]]) -> Any:
@@ -515,20 +523,22 @@ def _ruleset(anonymous_read: bool) -> Any:
     from asyncua import ua
     from asyncua.crypto.permission_rules import USER_TYPES, SimpleRoleRuleset, UserRole
 
+    def ids(types: Any) -> set[Any]:
+        return {ua.NodeId(t) for t in types}
+
+    oid = ua.ObjectIds
     rules = SimpleRoleRuleset()
-    users = {ua.NodeId(t) for t in USER_TYPES}
+    users = ids(USER_TYPES)
     rules._permission_dict[UserRole.Admin] = set(users)
     rules._permission_dict[UserRole.User] = set(users)
-    call = {ua.NodeId(ua.ObjectIds.CallRequest_Encoding_DefaultBinary),
-            ua.NodeId(ua.ObjectIds.WriteRequest_Encoding_DefaultBinary)}  # fmt: skip
-    rules._permission_dict[UserRole.Anonymous] = (users - call) if anonymous_read else {
-        ua.NodeId(t) for t in (ua.ObjectIds.CreateSessionRequest_Encoding_DefaultBinary,
-                               ua.ObjectIds.ActivateSessionRequest_Encoding_DefaultBinary,
-                               ua.ObjectIds.CloseSessionRequest_Encoding_DefaultBinary,
-                               ua.ObjectIds.GetEndpointsRequest_Encoding_DefaultBinary,
-                               ua.ObjectIds.FindServersRequest_Encoding_DefaultBinary,
-                               ua.ObjectIds.CloseSecureChannelRequest_Encoding_DefaultBinary)
-    }  # fmt: skip
+    calls = ids((oid.CallRequest_Encoding_DefaultBinary, oid.WriteRequest_Encoding_DefaultBinary))
+    session_only = ids((oid.CreateSessionRequest_Encoding_DefaultBinary,
+                        oid.ActivateSessionRequest_Encoding_DefaultBinary,
+                        oid.CloseSessionRequest_Encoding_DefaultBinary,
+                        oid.GetEndpointsRequest_Encoding_DefaultBinary,
+                        oid.FindServersRequest_Encoding_DefaultBinary,
+                        oid.CloseSecureChannelRequest_Encoding_DefaultBinary))  # fmt: skip
+    rules._permission_dict[UserRole.Anonymous] = (users - calls) if anonymous_read else session_only
     return rules
 
 
