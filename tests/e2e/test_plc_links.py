@@ -431,3 +431,39 @@ def test_modbus_refusal_never_wedges_the_link(cell: PlcCell) -> None:
             plc.close()
 
     asyncio.run(main())
+
+
+def test_opcua_result_events_one_per_result(cell: PlcCell) -> None:
+    """An MES subscribed to the cell's InspectionResultEventType gets one event per result,
+    with the result's id and words."""
+    from backend.plc.opcua import NAMESPACE
+
+    async def main() -> tuple[list, list]:
+        plc = _opcua(cell, "operator")
+        await plc.connect()
+        events: list = []
+        try:
+            idx = await plc.client.get_namespace_index(NAMESPACE)
+            etype = await plc.client.nodes.base_event_type.get_child(
+                [f"{idx}:InspectionResultEventType"]
+            )
+
+            class Handler:
+                def event_notification(self, event) -> None:
+                    events.append(event)
+
+            sub = await plc.client.create_subscription(10, Handler())
+            await sub.subscribe_events(plc.nodes["cell"], etype)
+            got = [await plc.trigger() for _ in range(2)]
+            t0 = asyncio.get_running_loop().time()
+            while len(events) < 2 and asyncio.get_running_loop().time() - t0 < BOUND_S:
+                await asyncio.sleep(0.05)
+            return got, events
+        finally:
+            await plc.close()
+
+    got, events = asyncio.run(main())
+    assert [e.InspectionId for e in events] == [t.result["inspection_id"] for t in got]
+    for e, t in zip(events, got, strict=True):
+        assert e.Decision == "recognized" and e.Model == "obj2"
+        assert e.TriggerNumber == t.result["trigger"] and e.ModelId == cell.model_ids["obj2"]
