@@ -321,6 +321,13 @@ class Settings(BaseSettings):
         description="OPC UA clients without a user: refused ('off'), or allowed to read and "
         "subscribe, never to call a method ('read-only').",
     )
+    opcua_security: Literal["none", "encrypt", "both"] = Field(
+        "both",
+        description="OPC UA security policies offered: 'none' (None: user names and tokens "
+        "cross the network in clear), 'encrypt' (Basic256Sha256, SignAndEncrypt only), or "
+        "'both'.  The server's certificate and key are made at first start under "
+        "var_dir/opcua (self-signed; replace them with the plant's).",
+    )
     opcua_nodesets: bool = Field(
         True,
         description="Load OPC 40100's MachineVision and the DI NodeSet2 files from "

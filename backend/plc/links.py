@@ -59,6 +59,8 @@ async def plc_links(rt: Any) -> AsyncIterator[PlcLinks]:
                 anonymous_read=s.opcua_anonymous == "read-only",
                 nodesets=nodeset_files(s.data_dir) if s.opcua_nodesets else [],
                 throttle=rt.signin_throttle,
+                security=s.opcua_security,
+                cert_dir=s.var_dir / "opcua",
             )  # fmt: skip
             await link.start()  # listening a few seconds later, off the cell's loop
             stack.push_async_callback(link.stop)

@@ -53,6 +53,10 @@ __all__ = ["NAMESPACE", "OpcUaLink", "nodeset_files"]
 log = logging.getLogger(__name__)
 
 NAMESPACE = "urn:visioncell:plc"
+#: The server's application URI (in its certificate).
+APP_URI = "urn:visioncell:server"
+#: Most OPC UA sessions at once.
+MAX_SESSIONS = 64
 #: The nodesets loaded, in order (DI first: MachineVision builds on it).
 NODESETS = ("Opc.Ua.Di.NodeSet2.xml", "Opc.Ua.MachineVision.NodeSet2.xml")
 #: Longest wait for the server's thread to come up or go down, seconds (a hang's bound).
@@ -99,17 +103,24 @@ class OpcUaLink:
         NodeSet2 files loaded at start, in order.
     throttle : SignInThrottle, optional
         Failed sign-ins per client address (the cell's, shared with REST).
+    security : {"none", "encrypt", "both"}
+        Security policies offered: None, Basic256Sha256 SignAndEncrypt, or both.
+    cert_dir : Path, optional
+        Where the server's certificate and key are kept (made at first start).
     """
 
     def __init__(self, handshake: Handshake, credentials: Credentials, *, endpoint: str,
                  anonymous_read: bool = False, nodesets: list[Path] | None = None,
-                 throttle: Any = None) -> None:  # fmt: skip
+                 throttle: Any = None, security: str = "none",
+                 cert_dir: Path | None = None) -> None:  # fmt: skip
         self.handshake = handshake
         self.credentials = credentials
         self.endpoint = endpoint
         self.anonymous_read = anonymous_read
         self.nodesets = list(nodesets or [])
         self.throttle = throttle
+        self.security = security
+        self.cert_dir = cert_dir
         self.load_s: float | None = None
         """Seconds the nodesets took to load (after start)."""
         self._cell_loop: asyncio.AbstractEventLoop | None = None
@@ -208,9 +219,18 @@ class OpcUaLink:
         server = Server(user_manager=manager)
         await server.init()
         server.set_endpoint(self.endpoint)
+        await server.set_application_uri(APP_URI)
         server.set_server_name("VisionCell")
-        server.set_security_policy([ua.SecurityPolicyType.NoSecurity],
-                                   permission_ruleset=_ruleset(self.anonymous_read))  # fmt: skip
+        policies = []
+        if self.security in ("none", "both"):
+            policies.append(ua.SecurityPolicyType.NoSecurity)
+        if self.security in ("encrypt", "both"):
+            await self._load_certificate(server)
+            policies.append(ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt)
+        server.set_security_policy(policies, permission_ruleset=_ruleset(self.anonymous_read))
+        from asyncua.server.internal_session import InternalSession
+
+        InternalSession.max_connections = MAX_SESSIONS
         tokens: list[type] = [ua.UserNameIdentityToken] + (
             [ua.AnonymousIdentityToken] if self.anonymous_read else []
         )
@@ -235,6 +255,23 @@ class OpcUaLink:
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await writer
+
+    async def _load_certificate(self, server: Any) -> None:
+        """The server's certificate and key under ``cert_dir`` (self-signed, made once)."""
+        from asyncua.crypto.cert_gen import setup_self_signed_certificate
+        from cryptography.x509.oid import ExtendedKeyUsageOID
+
+        if self.cert_dir is None:
+            raise ValueError("an encrypting security policy needs a folder for the certificate")
+        self.cert_dir.mkdir(parents=True, exist_ok=True)
+        key, cert = self.cert_dir / "server-key.pem", self.cert_dir / "server-cert.der"
+        host = endpoint_host(self.endpoint) or "localhost"
+        await setup_self_signed_certificate(
+            key, cert, APP_URI, host, [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
+            {"commonName": "VisionCell OPC UA server", "organizationName": "VisionCell"},
+        )  # fmt: skip
+        await server.load_certificate(str(cert))
+        await server.load_private_key(str(key))
 
     async def _refresh_credentials(self) -> None:
         assert self._cell_loop is not None

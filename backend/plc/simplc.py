@@ -16,11 +16,30 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from backend.plc.modbus import CONTROL_BITS, N_REGISTERS, STATUS_AT, STATUS_BITS, decode_result
 
-__all__ = ["ModbusPlc", "OpcUaPlc", "PlcRefused", "Triggered"]
+__all__ = ["ModbusPlc", "OpcUaPlc", "PlcRefused", "Triggered", "make_client_certificate"]
+
+#: The simulated PLC's application URI (in its certificate).
+CLIENT_URI = "urn:visioncell:simulated-plc"
+
+
+async def make_client_certificate(folder: Path) -> tuple[Path, Path]:
+    """A self-signed client certificate and key for :class:`OpcUaPlc` (made once in
+    ``folder``)."""
+    from asyncua.crypto.cert_gen import setup_self_signed_certificate
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    folder.mkdir(parents=True, exist_ok=True)
+    key, cert = folder / "plc-key.pem", folder / "plc-cert.der"
+    await setup_self_signed_certificate(key, cert, CLIENT_URI, "localhost",
+                                        [ExtendedKeyUsageOID.CLIENT_AUTH],
+                                        {"commonName": "simulated PLC"})  # fmt: skip
+    return cert, key
+
 
 #: Status words read in one request (registers 10..28).
 _N_STATUS = N_REGISTERS - STATUS_AT
@@ -146,10 +165,14 @@ class OpcUaPlc:
 
     def __init__(self, url: str, *, user: str | None, password: str | None,
                  bound_s: float = 600.0, publish_ms: float = 10.0,
+                 certificate: tuple[Path, Path] | None = None,
                  clock: Callable[[], float] = time.perf_counter) -> None:  # fmt: skip
         from asyncua import Client
 
         self.client = Client(url, timeout=30)
+        self.certificate = certificate
+        """(certificate, private key) of the client: connect over Basic256Sha256
+        SignAndEncrypt (None: the None policy)."""
         if user is not None:
             self.client.set_user(user)
             self.client.set_password(password or "")
@@ -167,6 +190,10 @@ class OpcUaPlc:
         from backend.plc.opcua import NAMESPACE
 
         self._changed = asyncio.Event()
+        if self.certificate is not None:
+            cert, key = self.certificate
+            self.client.application_uri = CLIENT_URI
+            await self.client.set_security_string(f"Basic256Sha256,SignAndEncrypt,{cert},{key}")
         await self.client.connect()
         idx = await self.client.get_namespace_index(NAMESPACE)
         cell = await self.client.nodes.objects.get_child([f"{idx}:VisionCell"])

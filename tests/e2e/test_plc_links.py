@@ -467,3 +467,25 @@ def test_opcua_result_events_one_per_result(cell: PlcCell) -> None:
     for e, t in zip(events, got, strict=True):
         assert e.Decision == "recognized" and e.Model == "obj2"
         assert e.TriggerNumber == t.result["trigger"] and e.ModelId == cell.model_ids["obj2"]
+
+
+def test_opcua_encrypted_channel(cell: PlcCell, tmp_path) -> None:
+    """Over Basic256Sha256 SignAndEncrypt (offered by default beside None) the sign-in's
+    token travels encrypted; the handshake is the same."""
+    from backend.plc.simplc import make_client_certificate
+
+    async def main():
+        cert = await make_client_certificate(tmp_path / "pki")
+        assert cell.opcua_url is not None
+        plc = OpcUaPlc(cell.opcua_url, user="plc-operator", password=cell.tokens["operator"],
+                       bound_s=BOUND_S, certificate=cert)  # fmt: skip
+        await plc.connect()
+        try:
+            policy = plc.client.security_policy.URI
+            return policy, await plc.trigger()
+        finally:
+            await plc.close()
+
+    policy, t = asyncio.run(main())
+    assert policy.endswith("#Basic256Sha256")
+    assert t.result["decision"] == "recognized" and t.result["model"] == "obj2"
