@@ -328,6 +328,12 @@ class Settings(BaseSettings):
         "'both'.  The server's certificate and key are made at first start under "
         "var_dir/opcua (self-signed; replace them with the plant's).",
     )
+    opcua_user_certificates: Path | None = Field(
+        None,
+        description="Folder of user certificates, NAME.der or NAME.pem: an OPC UA client "
+        "signing in with one of them (an X509 identity token, over the encrypting policy) "
+        "acts as the enabled VisionCell user NAME; None: certificates sign nobody in.",
+    )
     opcua_nodesets: bool = Field(
         True,
         description="Load OPC 40100's MachineVision and the DI NodeSet2 files from "
@@ -527,6 +533,11 @@ class Settings(BaseSettings):
             )
         if self.camera_order == "manifest" and self.camera != "folder":
             raise ValueError("camera_order='manifest' is an order of the folder camera's images")
+        if self.opcua_user_certificates is not None and self.opcua_security == "none":
+            raise ValueError(
+                "opcua_user_certificates needs an encrypting policy: set opcua_security to "
+                "'encrypt' or 'both'"
+            )
         if self.http_port == self.viser_port and self.http_host == self.viser_host:
             raise ValueError(f"http_port and viser_port must differ, both are {self.http_port}")
         return self

@@ -52,7 +52,8 @@ async def plc_links(rt: Any) -> AsyncIterator[PlcLinks]:
             await hs.start()
             stack.push_async_callback(hs.stop)
             hs.set_trigger_enable(True)  # OPC UA triggers by method: enabled unless disabled
-            creds = Credentials(rt.database, s.secret_key.get_secret_value())
+            creds = Credentials(rt.database, s.secret_key.get_secret_value(),
+                                user_certificates=s.opcua_user_certificates)  # fmt: skip
             await creds.refresh(force=True)
             link = OpcUaLink(
                 hs, creds, endpoint=s.opcua_endpoint,

@@ -231,11 +231,13 @@ class OpcUaLink:
         from asyncua.server.internal_session import InternalSession
 
         InternalSession.max_connections = MAX_SESSIONS
-        tokens: list[type] = [ua.UserNameIdentityToken] + (
-            [ua.AnonymousIdentityToken] if self.anonymous_read else []
-        )
+        tokens: list[type] = [ua.UserNameIdentityToken]
+        if self.credentials.user_certificates is not None:
+            tokens.append(ua.X509IdentityToken)
+        if self.anonymous_read:
+            tokens.append(ua.AnonymousIdentityToken)
         server.set_identity_tokens(tokens)
-        _hook_sessions(server, self._refresh_credentials, self.throttle)
+        _hook_sessions(server, self._refresh_credentials, self.throttle, manager)
         t0 = time.perf_counter()
         for path in self.nodesets:
             await server.import_xml(str(path))
@@ -503,7 +505,8 @@ def _value(v: Any) -> Any:
     return getattr(v, "Value", v)
 
 
-def _hook_sessions(server: Any, refresh: Callable[[], Awaitable[None]], throttle: Any) -> None:
+def _hook_sessions(server: Any, refresh: Callable[[], Awaitable[None]], throttle: Any,
+                   manager: Any) -> None:  # fmt: skip
     """Re-read the sign-in table when a session is created (before it signs in), count
     failed sign-ins per client address in the cell's sign-in ``throttle`` (shared with REST,
     the console and the 3D view: a blocked address is refused before its credentials are
@@ -523,6 +526,11 @@ def _hook_sessions(server: Any, refresh: Callable[[], Awaitable[None]], throttle
         client = f"opcua:{peer}"
 
         def activate_hooked(*a: Any, **kw: Any) -> Any:
+            params = a[0] if a else kw.get("params")
+            token = getattr(params, "UserIdentityToken", None)
+            # the user manager is told which kind of identity it checks (asyncua hands it
+            # the channel's certificate with every kind); no await between here and there
+            manager.token_kind = "x509" if isinstance(token, ua.X509IdentityToken) else "other"
             if throttle is not None:
                 try:
                     throttle.check(client)
@@ -585,11 +593,21 @@ class _UserManager:
     def __init__(self, credentials: Credentials, anonymous_read: bool) -> None:
         self.credentials = credentials
         self.anonymous_read = anonymous_read
+        self.token_kind = "other"
+        """The identity token being checked: ``x509`` or another kind (set just before)."""
 
     def get_user(self, iserver: Any, username: Any = None, password: Any = None,
                  certificate: Any = None) -> Any:  # fmt: skip
         from asyncua.crypto.permission_rules import User, UserRole
 
+        if self.token_kind == "x509":
+            cred = None if certificate is None else self.credentials.check_certificate(certificate)
+            if cred is None:
+                log.warning("OPC UA: sign-in refused for a certificate of no user")
+                return None
+            user = User(role=UserRole.User, name=cred.name)
+            user.vc_role = cred.role  # type: ignore[attr-defined]
+            return user
         if username is None and password is None:
             if not self.anonymous_read:
                 return None

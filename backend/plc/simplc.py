@@ -27,17 +27,17 @@ __all__ = ["ModbusPlc", "OpcUaPlc", "PlcRefused", "Triggered", "make_client_cert
 CLIENT_URI = "urn:visioncell:simulated-plc"
 
 
-async def make_client_certificate(folder: Path) -> tuple[Path, Path]:
+async def make_client_certificate(folder: Path, name: str = "plc") -> tuple[Path, Path]:
     """A self-signed client certificate and key for :class:`OpcUaPlc` (made once in
-    ``folder``)."""
+    ``folder``, as ``NAME-cert.der`` and ``NAME-key.pem``)."""
     from asyncua.crypto.cert_gen import setup_self_signed_certificate
     from cryptography.x509.oid import ExtendedKeyUsageOID
 
     folder.mkdir(parents=True, exist_ok=True)
-    key, cert = folder / "plc-key.pem", folder / "plc-cert.der"
+    key, cert = folder / f"{name}-key.pem", folder / f"{name}-cert.der"
     await setup_self_signed_certificate(key, cert, CLIENT_URI, "localhost",
                                         [ExtendedKeyUsageOID.CLIENT_AUTH],
-                                        {"commonName": "simulated PLC"})  # fmt: skip
+                                        {"commonName": f"simulated PLC {name}"})  # fmt: skip
     return cert, key
 
 
@@ -173,6 +173,8 @@ class OpcUaPlc:
         self.certificate = certificate
         """(certificate, private key) of the client: connect over Basic256Sha256
         SignAndEncrypt (None: the None policy)."""
+        self.sign_in_with_certificate = certificate is not None and user is None
+        """No user name with a certificate: the certificate signs in (X509 identity)."""
         if user is not None:
             self.client.set_user(user)
             self.client.set_password(password or "")
@@ -194,6 +196,9 @@ class OpcUaPlc:
             cert, key = self.certificate
             self.client.application_uri = CLIENT_URI
             await self.client.set_security_string(f"Basic256Sha256,SignAndEncrypt,{cert},{key}")
+            if self.sign_in_with_certificate:  # the certificate is the identity too
+                await self.client.load_client_certificate(str(cert))
+                await self.client.load_private_key(str(key))
         await self.client.connect()
         idx = await self.client.get_namespace_index(NAMESPACE)
         cell = await self.client.nodes.objects.get_child([f"{idx}:VisionCell"])

@@ -204,7 +204,8 @@ def test_read_only_links_refuse_every_command(tmp_path) -> None:
     """``VISIONCELL_MODBUS_ROLE=viewer``: the PLC reads the state; a trigger, a run, a
     recipe selection are refused with error 10 (role too low) and start nothing.
     ``VISIONCELL_OPCUA_ANONYMOUS=read-only``: a client without a user reads and subscribes,
-    and may call no method.  Failed OPC UA sign-ins block the address as REST's do."""
+    and may call no method.  A user certificate signs its user in.  Failed OPC UA sign-ins
+    block the address as REST's do."""
     from asyncua import ua
     from asyncua.ua.uaerrors import UaError
 
@@ -214,9 +215,33 @@ def test_read_only_links_refuse_every_command(tmp_path) -> None:
 
     port, opc_port = free_port(), free_port()
     url = f"opc.tcp://127.0.0.1:{opc_port}/visioncell"
+    certs = tmp_path / "user-certs"
+    certs.mkdir()
     server = start_server(tmp_path, VISIONCELL_MODBUS_PORT=str(port), VISIONCELL_MODBUS_ROLE="viewer",
                           VISIONCELL_OPCUA_ENDPOINT=url, VISIONCELL_OPCUA_ANONYMOUS="read-only",
+                          VISIONCELL_OPCUA_USER_CERTIFICATES=str(certs),
                           VISIONCELL_OPCUA_NODESETS="false", VISIONCELL_VIEW3D_ENABLED="false")  # fmt: skip
+
+    async def certificate_sign_in() -> str:
+        """A certificate in the folder signs its user in (an operator: Reset is allowed);
+        one that is not there is refused."""
+        from backend.plc.simplc import make_client_certificate
+
+        cert, key = await make_client_certificate(tmp_path / "pki", "line-plc")
+        (certs / "line-plc.der").write_bytes(cert.read_bytes())
+        stranger = await make_client_certificate(tmp_path / "pki", "stranger")
+        plc = OpcUaPlc(url, user=None, password=None, bound_s=BOUND_S, certificate=stranger)
+        with pytest.raises(UaError):
+            await plc.connect()
+        with contextlib.suppress(Exception):
+            await plc.close()
+        plc = OpcUaPlc(url, user=None, password=None, bound_s=BOUND_S, certificate=(cert, key))
+        await plc.connect()
+        try:
+            await plc.call("Reset")  # an operator's method
+            return str(await plc.nodes["CurrentState"].read_value())
+        finally:
+            await plc.close()
 
     async def anonymous() -> None:
         plc = OpcUaPlc(url, user=None, password=None, bound_s=BOUND_S)
@@ -265,6 +290,8 @@ def test_read_only_links_refuse_every_command(tmp_path) -> None:
         asyncio.run(main())
         _wait_listening(opc_port, server)
         asyncio.run(anonymous())
+        server.token("line-plc", "operator")
+        assert asyncio.run(certificate_sign_in()) in ("Idle", "Ready")
         asyncio.run(throttled(server.token("reader", "viewer")))
         assert "refused: too many failures" in server.log.read_text()
         jobs = httpx.get(
