@@ -48,6 +48,12 @@ def test_bad_link_settings_are_refused(field: str, value: object) -> None:
         Settings(**{field: value})
 
 
+def test_certificate_sign_in_needs_an_encrypting_policy(tmp_path) -> None:
+    with pytest.raises(ValidationError, match="opcua_user_certificates"):
+        Settings(opcua_user_certificates=tmp_path, opcua_security="none")
+    assert Settings(opcua_user_certificates=tmp_path).opcua_security == "both"
+
+
 def test_a_link_off_loopback_needs_a_private_secret() -> None:
     with pytest.raises(ValidationError, match="SECRET_KEY"):
         Settings(modbus_port=5020, modbus_host="0.0.0.0")
