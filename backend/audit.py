@@ -1,5 +1,5 @@
 """The audit trail: every change of a threshold, object model, trained view, active
-calibration, user or token, with who, when, what, old and new value and why.
+calibration, recipe (and which one is active), user or token, with who, when, what, old and new value and why.
 
 :func:`record` adds the row to the session of the change itself, so the change and its row
 commit together or not at all (no change without its row, no row for a refused change).
@@ -39,7 +39,8 @@ __all__ = [
 
 #: What can be changed, and so recorded (``estop``: a press or reset of the emergency stop,
 #: recorded after the stop itself by :class:`backend.estoplog.EStopLog`).
-KINDS = ("threshold", "model", "view", "negative", "calibration", "user", "token", "estop")
+KINDS = ("threshold", "model", "view", "negative", "calibration", "user", "token", "estop",
+         "recipe")  # fmt: skip
 #: Longest reason a changing endpoint accepts (characters).
 MAX_REASON_LENGTH = 500
 #: Largest old or new value stored, bytes of JSON; a larger one is stored as a summary.

@@ -3,8 +3,8 @@
 (:mod:`backend.cli.users`), ``calibrate`` (:mod:`backend.cli.calibrate`), ``train-pca``
 (:mod:`backend.cli.features`), ``emulator`` (:mod:`backend.cli.emulator`), ``estop``
 (:mod:`backend.cli.estop`), ``models`` (:mod:`backend.cli.models`), ``inspect``
-(:mod:`backend.cli.inspect`), ``report`` (:mod:`backend.cli.report`) and ``recognise``
-(:mod:`backend.cli.recognise`)."""
+(:mod:`backend.cli.inspect`), ``recipes`` (:mod:`backend.cli.recipes`), ``report``
+(:mod:`backend.cli.report`) and ``recognise`` (:mod:`backend.cli.recognise`)."""
 
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from backend.cli.estop import estop
 from backend.cli.features import train_pca
 from backend.cli.inspect import register as register_inspect
 from backend.cli.models import register as register_models
+from backend.cli.recipes import register as register_recipes
 from backend.cli.recognise import register as register_recognise
 from backend.cli.report import register as register_report
 from backend.cli.serve import serve
@@ -39,6 +40,7 @@ app.add_typer(calibrate_app, name="calibrate")
 app.command("train-pca")(train_pca)
 register_models(app)
 register_inspect(app)
+register_recipes(app)
 register_report(app)
 register_recognise(app)
 

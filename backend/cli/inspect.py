@@ -4,6 +4,8 @@ Both ask the running cell (``--url``, ``--token`` of an operator) through the RE
 follow the job: ``once`` inspects the object at the station and prints the decision, the
 model, the score, the viewpoints and the pose; ``run`` starts continuous operation
 (``--count`` objects, or until Ctrl-C, which asks the cell to stop after the current one).
+Both take the cell's active recipe (``--recipe ID``: another one); ``--policy`` and
+``--sort/--no-sort`` given override it.
 """
 
 from __future__ import annotations
@@ -29,12 +31,20 @@ def register(app: typer.Typer) -> None:
     app.add_typer(inspect_app, name="inspect")
 
 
-def _body(policy: str, sort: bool, wait: float) -> dict[str, Any]:
-    if policy not in POLICIES:
+def _body(policy: str | None, sort: bool | None, wait: float,
+          recipe: int | None = None) -> dict[str, Any]:  # fmt: skip
+    """The request: the options given (the recipe's hold for the others)."""
+    if policy is not None and policy not in POLICIES:
         raise _fail(f"--policy must be one of {', '.join(POLICIES)}, got {policy!r}")
     if not (math.isfinite(wait) and 0.0 <= wait <= 600.0):
         raise _fail(f"--wait must be in [0, 600] s, got {wait!r}")
-    return {"policy": policy, "sort": sort, "wait_s": wait}
+    if recipe is not None and not 1 <= recipe <= 2**31 - 1:
+        raise _fail(f"--recipe must be a recipe id (1..{2**31 - 1}), got {recipe!r}")
+    body: dict[str, Any] = {"wait_s": wait}
+    for key, value in (("policy", policy), ("sort", sort), ("recipe", recipe)):
+        if value is not None:
+            body[key] = value
+    return body
 
 
 def _line(row: dict[str, Any]) -> str:
@@ -45,20 +55,29 @@ def _line(row: dict[str, Any]) -> str:
         where = f" at ({x * 1e3:.1f}, {y * 1e3:.1f}, {z * 1e3:.1f}) mm yaw {math.degrees(pose['yaw_rad']):.1f} deg"
     score = "" if row["score"] is None else f" score {row['score']:.2f}"
     vps = ",".join(str(v) for v in row["viewpoints_visited"])
-    return f"#{row['id']} {row['decision']} {row['model'] or '-'}{score} views [{vps}]{where}: {row['reason']}"
+    recipe = f" recipe {row['recipe']}" if row.get("recipe") else ""
+    return (f"#{row['id']} {row['decision']} {row['model'] or '-'}{score} views [{vps}]{where}"
+            f"{recipe}: {row['reason']}")  # fmt: skip
 
 
 @inspect_app.command("once")
 def once(
     token: Annotated[str, typer.Option(help="Operator token", envvar="VISIONCELL_TOKEN")],
     url: Annotated[str | None, typer.Option(help="Cell URL (default: from the settings)")] = None,
-    policy: Annotated[str, typer.Option(help=", ".join(POLICIES))] = "two-views",
-    sort: Annotated[bool, typer.Option(help="Pick and sort into the part's bin")] = False,
+    policy: Annotated[
+        str | None, typer.Option(help=", ".join(POLICIES) + " (default: the recipe's)")
+    ] = None,
+    sort: Annotated[
+        bool | None, typer.Option(help="Pick and sort into the part's bin (default: the recipe's)")
+    ] = None,
+    recipe: Annotated[
+        int | None, typer.Option(help="Recipe id to use (default: the active recipe)")
+    ] = None,
     wait: Annotated[float, typer.Option(help="Longest wait for the object, s")] = 60.0,
 ) -> None:
     """Inspect the object at the station and print the stored result."""
     base = cell_api(url)
-    job = job_of(request(f"{base}/inspections", token, "POST", _body(policy, sort, wait)))
+    job = job_of(request(f"{base}/inspections", token, "POST", _body(policy, sort, wait, recipe)))
     job = follow_job(base, token, job)
     if job["state"] != "done":
         raise job_failure(job, "inspection")
@@ -69,8 +88,15 @@ def once(
 def run(
     token: Annotated[str, typer.Option(help="Operator token", envvar="VISIONCELL_TOKEN")],
     url: Annotated[str | None, typer.Option(help="Cell URL (default: from the settings)")] = None,
-    policy: Annotated[str, typer.Option(help=", ".join(POLICIES))] = "two-views",
-    sort: Annotated[bool, typer.Option(help="Pick and sort into the part's bin")] = False,
+    policy: Annotated[
+        str | None, typer.Option(help=", ".join(POLICIES) + " (default: the recipe's)")
+    ] = None,
+    sort: Annotated[
+        bool | None, typer.Option(help="Pick and sort into the part's bin (default: the recipe's)")
+    ] = None,
+    recipe: Annotated[
+        int | None, typer.Option(help="Recipe id to use (default: the active recipe)")
+    ] = None,
     count: Annotated[
         int | None, typer.Option(help="Objects to inspect (default: until Ctrl-C)")
     ] = None,
@@ -80,7 +106,7 @@ def run(
     if count is not None and not 1 <= count <= 10_000:
         raise _fail(f"--count must be in 1..10000, got {count!r}")
     base = cell_api(url)
-    body = {**_body(policy, sort, wait), "count": count}
+    body = {**_body(policy, sort, wait, recipe), "count": count}
     job = job_of(request(f"{base}/inspection/run", token, "POST", body))
     # The run's own inspections: those started since the job was created, each printed once.
     since = urllib.parse.urlencode({"since": job["created_at"], "limit": 50})

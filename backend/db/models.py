@@ -51,6 +51,8 @@ __all__ = [
     "NegativeImage",
     "ObjectKind",
     "ObjectModel",
+    "Recipe",
+    "RecipeSelection",
     "RecognitionSettings",
     "ReportBlock",
     "ReportName",
@@ -360,6 +362,10 @@ class Inspection(Base):
     #: Where the images came from: ``cell`` (the arm's camera) or ``upload`` (an image sent
     #: to ``POST /api/recognition/recognise``).
     source: Mapped[str] = mapped_column(String(16), server_default="cell", default="cell")
+    #: The recipe the inspection ran under (None: none; no foreign key, so the row keeps it
+    #: after the recipe is deleted) and its name then.
+    recipe_id: Mapped[int | None] = mapped_column(Integer, default=None)
+    recipe_name: Mapped[str | None] = mapped_column(String(64), default=None)
 
     images: Mapped[list[InspectionImage]] = relationship(
         back_populates="inspection", cascade="all, delete-orphan"
@@ -487,7 +493,8 @@ class AuditEntry(Base):
     __table_args__ = (
         Index("ix_audit_log_kind_entity", "kind", "entity_id"),
         CheckConstraint(
-            "kind IN ('threshold', 'model', 'view', 'negative', 'calibration', 'user', 'token', 'estop')",
+            "kind IN ('threshold', 'model', 'view', 'negative', 'calibration', 'user', 'token', "
+            "'estop', 'recipe')",
             name="kind",
         ),
     )
@@ -578,3 +585,46 @@ class ReportBlock(Base):
     __table_args__ = (
         UniqueConstraint("cell_id", "start_s", "part", name="uq_report_blocks_cell_start"),
     )
+
+
+class Recipe(Base):
+    """A named inspection configuration of one cell (:mod:`backend.recipes`): the options a
+    run takes from it, the models in play and their bins; a PLC selects it by ``number``."""
+
+    __tablename__ = "recipes"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    cell_id: Mapped[int] = mapped_column(ForeignKey("cells.id", ondelete="CASCADE"), index=True)
+    name: Mapped[str] = mapped_column(String(64))
+    #: 1..9999, unique per cell: what a PLC selects the recipe by.
+    number: Mapped[int] = mapped_column(Integer)
+    description: Mapped[str] = mapped_column(Text, default="")
+    #: policy, max_views, sort, threshold (None: the cell's thresholds), belt_mode, speed,
+    #: balance_light (:class:`backend.recipes.model.RecipeOptions`).
+    options: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    #: Names of the models in play (empty: every trained model).
+    models: Mapped[list[Any]] = mapped_column(JSON, default=list)
+    #: Model name -> bin name (models not named keep their part's bin).
+    bins: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    __table_args__ = (
+        UniqueConstraint("cell_id", "name", name="uq_recipes_cell_name"),
+        UniqueConstraint("cell_id", "number", name="uq_recipes_cell_number"),
+        CheckConstraint("number >= 1 AND number <= 9999", name="number_range"),
+    )
+
+
+class RecipeSelection(Base):
+    """The active recipe of a cell: at most one row per cell (its primary key)."""
+
+    __tablename__ = "recipe_selections"
+
+    cell_id: Mapped[int] = mapped_column(
+        ForeignKey("cells.id", ondelete="CASCADE"), primary_key=True
+    )
+    recipe_id: Mapped[int] = mapped_column(ForeignKey("recipes.id", ondelete="CASCADE"))
+    activated_at: Mapped[datetime] = mapped_column(default=utcnow)
+    #: Who selected it (user name, ``cli``, or a PLC link's name).
+    activated_by: Mapped[str] = mapped_column(String(64), default="")

@@ -68,6 +68,9 @@ class InspectionRecord:
     the sum of ``durations``."""
     views: tuple[ViewRecord, ...] = ()
     source: str = "cell"
+    #: The recipe the inspection ran under (:mod:`backend.recipes`), id and name then.
+    recipe_id: int | None = None
+    recipe_name: str | None = None
 
     def __post_init__(self) -> None:
         if self.decision not in DECISIONS:
@@ -163,6 +166,8 @@ async def _write(
         pick=rec.pick,
         truth=rec.truth,
         source=rec.source,
+        recipe_id=rec.recipe_id,
+        recipe_name=None if rec.recipe_name is None else rec.recipe_name[:64],
     )
     for v in rec.views if keep else ():
         row.images.append(
@@ -245,6 +250,8 @@ def inspection_public(row: Inspection, n_images: int | None = None) -> dict[str,
         "pick_outcome": pick_outcome(row.pick, row.decision.value),
         "truth": row.truth,
         "source": row.source,
+        "recipe_id": row.recipe_id,
+        "recipe": row.recipe_name,
         "images": [f"/api/inspections/{row.id}/images/{k}.jpg" for k in range(n)],
     }
 

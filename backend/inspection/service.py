@@ -41,7 +41,7 @@ import functools
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from datetime import timedelta
 from typing import Any
@@ -89,6 +89,10 @@ log = logging.getLogger(__name__)
 #: Longest wait for an object at the station, seconds; most objects in one run.
 MAX_WAIT_S = 600.0
 MAX_COUNT = 10_000
+#: Most models one set of options (a recipe) may name.
+MAX_RECIPE_MODELS = 200
+#: Belt modes a recipe may set (:data:`robot.sim.world.CONVEYOR_MODES`).
+BELT_MODES = ("index", "continuous")
 #: Why an inspection cannot start before a teach (the console links its Models page on the
 #: error's code, ``nothing_trained``).
 NOT_TRAINED = (
@@ -112,6 +116,9 @@ class InspectionDone(CellEvent):
     T_base_obj: tuple[tuple[float, ...], ...] | None
     T_base_cams: tuple[tuple[tuple[float, ...], ...], ...]
     pick: dict[str, Any] | None = None
+    #: The recipe the inspection ran under (id, name; None: none).
+    recipe_id: int | None = None
+    recipe: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -124,6 +131,8 @@ class InspectionDone(CellEvent):
             "T_base_obj": None if self.T_base_obj is None else [list(r) for r in self.T_base_obj],
             "T_base_cams": [[list(r) for r in T] for T in self.T_base_cams],
             "pick": self.pick,
+            "recipe_id": self.recipe_id,
+            "recipe": self.recipe,
         }
 
 
@@ -148,6 +157,19 @@ class InspectOptions:
         Scale the views' channels back to the light the models were taught under, by the
         belt's colour round the object (:mod:`vision.recognition.light`); off only to
         measure what it does.
+    models : tuple of str
+        The models in play (empty: every trained model): an object recognised as another
+        model is ``unknown`` (and goes to the reject bin when sorting).
+    bins : tuple of (model, bin) pairs
+        The bin each named model is sorted into, instead of its part's bin.
+    threshold : float, optional
+        A fixed global score threshold in [0, 1] (None: the cell's thresholds in force,
+        automatic or as set).
+    belt_mode : {"index", "continuous"}, optional
+        The belt's mode to set before the object comes (None: the belt as it is); needs a
+        conveyor the cell can configure (the simulator's).
+    recipe_id, recipe_name : optional
+        The recipe these options came from (:mod:`backend.recipes`), stored on the row.
     """
 
     policy: str = "two-views"
@@ -156,6 +178,12 @@ class InspectOptions:
     wait_s: float = 60.0
     speed: float | None = None
     balance_light: bool = True
+    models: tuple[str, ...] = ()
+    bins: tuple[tuple[str, str], ...] = ()
+    threshold: float | None = None
+    belt_mode: str | None = None
+    recipe_id: int | None = None
+    recipe_name: str | None = None
 
     def __post_init__(self) -> None:
         if self.policy not in POLICIES:
@@ -173,6 +201,66 @@ class InspectOptions:
         sp = self.speed
         if sp is not None and (isinstance(sp, bool) or not (math.isfinite(sp) and 0.0 < sp <= 1.0)):
             raise InvalidInput(f"speed must be in (0, 1], got {sp!r}")
+        if (
+            not isinstance(self.models, tuple)
+            or not all(isinstance(m, str) and 1 <= len(m) <= 64 for m in self.models)
+            or len(self.models) > MAX_RECIPE_MODELS
+        ):
+            raise InvalidInput(f"models must be a tuple of at most {MAX_RECIPE_MODELS} names, "
+                               f"got {self.models!r}"[:300])  # fmt: skip
+        if not isinstance(self.bins, tuple) or len(self.bins) > MAX_RECIPE_MODELS or not all(
+            isinstance(p, tuple) and len(p) == 2 and all(isinstance(x, str) and 1 <= len(x) <= 64
+                                                         for x in p) for p in self.bins
+        ):  # fmt: skip
+            raise InvalidInput(f"bins must be (model, bin) name pairs, got {self.bins!r}"[:300])
+        t = self.threshold
+        if t is not None and (
+            isinstance(t, bool) or not isinstance(t, int | float) or not 0.0 <= t <= 1.0
+        ):
+            raise InvalidInput(f"threshold must be in [0, 1] or null (automatic), got {t!r}")
+        if self.belt_mode not in (None, *BELT_MODES):
+            raise InvalidInput(
+                f"belt_mode must be one of {', '.join(BELT_MODES)} or null, got {self.belt_mode!r}"
+            )
+
+    def bin_of(self, model: str | None) -> str | None:
+        """The bin these options send ``model`` to (None: its part's bin)."""
+        return next((b for m, b in self.bins if m == model), None) if model else None
+
+
+#: Where a run reads its options again before each object (the active recipe's, with the
+#: request's explicit options over them: :func:`backend.recipes.service.follower`).
+Resolve = Callable[[], Awaitable[InspectOptions]]
+
+
+async def resolved(resolve: Resolve | None, opts: InspectOptions) -> InspectOptions:
+    """The options ``resolve`` gives now; ``opts`` (those in force) when there is no
+    ``resolve`` or it fails (a database outage, the recipe deleted): the object is
+    inspected as the one before, said in the log."""
+    if resolve is None:
+        return opts
+    try:
+        return await resolve()
+    except Exception:  # the run goes on with the options it has
+        log.warning("could not read the recipe again: keeping the options in force", exc_info=True)
+        return opts
+
+
+def check_belt_mode(rt: Any, opts: InspectOptions) -> None:
+    """:class:`Conflict` when the options set a belt mode and the cell's conveyor cannot
+    be configured (only the simulator's can today)."""
+    if opts.belt_mode is not None and rt.sim is None:
+        raise Conflict(
+            f"{'recipe ' + repr(opts.recipe_name) if opts.recipe_name else 'the options'} sets"
+            f" the belt to {opts.belt_mode} mode, and this cell's conveyor cannot be configured"
+        )
+
+
+def apply_belt_mode(rt: Any, opts: InspectOptions) -> None:
+    """Set the belt to the options' mode (nothing when they set none or it is so already)."""
+    check_belt_mode(rt, opts)
+    if opts.belt_mode is not None and rt.sim.conveyor_state.mode != opts.belt_mode:
+        rt.sim.configure_conveyor(mode=opts.belt_mode)
 
 
 class CarriedAway(VisionCellError):
@@ -705,7 +793,8 @@ def _carried(rt: Any, found: NDArray[np.float64], travel0: float, speed_m_s: flo
 
 async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
                          tracker: Any = None, waiting: Waiting | None = None,
-                         db_wait_s: float | None = None) -> dict[str, Any] | None:  # fmt: skip
+                         db_wait_s: float | None = None,
+                         resolve: Resolve | None = None) -> dict[str, Any] | None:  # fmt: skip
     """Inspect the next part at the station and store the result (module docstring).
 
     First the part is found (:func:`_find`): waiting for it is not an inspection, so it
@@ -724,6 +813,9 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
     unavailable); any failure inside becomes a ``failed`` row with its reason; the row is
     stored with retries until the database takes it, in the transaction that removes the
     marker.
+
+    ``resolve`` (a run following a recipe): the options are read again once the part is
+    found, so a recipe selected while the run waited applies to this part.
     """
     cell = ctx.rt.cell
     report = (lambda f, m: job.report(f, m)) if job is not None else (lambda f, m: None)
@@ -742,6 +834,7 @@ async def inspect_object(ctx: _Ctx, opts: InspectOptions, job: Any = None, *,
                             waiting=waiting)  # fmt: skip
     if found is None:
         return None
+    opts = await resolved(resolve, opts)
     t_start = found.t_start
     started = utcnow() - timedelta(seconds=time.monotonic() - t_start)
     views: list[results.ViewRecord] = []
@@ -853,7 +946,8 @@ async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[
         policy=opts.policy, model_id=state["model_id"], model_name=state["model"],
         score=state["score"], viewpoints=tuple(state["viewpoints"]), scores=state["scores"],
         pose=state["pose"], durations=durations, pick=state["pick"], truth=state["truth"],
-        views=tuple(views), duration_s=duration,
+        views=tuple(views), duration_s=duration, recipe_id=opts.recipe_id,
+        recipe_name=opts.recipe_name,
     )  # fmt: skip
     scene = await state["scene"].finish() if state.get("scene") is not None else None
     db = ctx.rt.database
@@ -869,6 +963,7 @@ async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[
         iid, rec.decision, rec.model_name, rec.reason, rec.score, rec.viewpoints,
         None if pose is None else tuple(tuple(r) for r in pose["T_base_obj"]),
         tuple(tuple(tuple(float(v) for v in r) for r in T) for T in cams), rec.pick,
+        rec.recipe_id, rec.recipe_name,
     )  # fmt: skip
     ctx.rt.bus.publish(ev)
 
@@ -955,6 +1050,10 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, plan: _TopPlan, part: F
                       side.roi.reason)  # fmt: skip
         return side_query(apply_gain(side.frame.rgb, gain), side.roi)
 
+    if opts.threshold is not None:
+        choice = thresholds.choice_from_detail(
+            float(opts.threshold), {"rule": f"fixed by recipe {opts.recipe_name or ''}".strip()}
+        )
     state["stage"] = "recognition"
     t = time.monotonic()
     with live.reading() as index:
@@ -980,7 +1079,11 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, plan: _TopPlan, part: F
                                         {"segmentation": how, "decision": r.decision,
                                          "light_gain": state["light_gain"],
                                          "scores": {k: round(float(s), 4) for k, s in r.scores.items()}}))  # fmt: skip
-    if res.decision == "recognized":
+    if res.decision == "recognized" and opts.models and res.model not in opts.models:
+        state["decision"], state["score"] = "unknown", float(res.score)
+        state["reason"] = (f"{res.model} scored {res.score:.2f}: not a model of recipe "
+                           f"{opts.recipe_name or '(options)'}")  # fmt: skip
+    elif res.decision == "recognized":
         state["decision"], state["model"], state["score"] = (
             "recognized",
             res.model,
@@ -1430,10 +1533,16 @@ class _WholeImage:
     method: str = WHOLE_IMAGE_NOTE
 
 
-def _bin_for(rt: Any, part: str | None) -> Any:
+def _bin_for(rt: Any, part: str | None, named: str | None = None) -> Any:
+    """The bin of ``part`` (``named``: the options' bin for the model, when it names one
+    the cell has), the reject bin when none takes it; None in a cell without bins."""
     if rt.sim is None:
         return None
     bins = rt.sim.config.layout.bins
+    if named is not None:
+        b = next((b for b in bins if b.name == named), None)
+        if b is not None:
+            return b
     for b in bins:
         if part is not None and part in b.parts:
             return b
@@ -1459,7 +1568,7 @@ async def _pick_unknown(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any],
     if why is not None:
         m = rt.live_index.model_of_name(state["model"]) if state["model"] else None
         part = None if m is None else m.part
-    b = _bin_for(rt, part)
+    b = _bin_for(rt, part, opts.bin_of(state["model"]) if why is not None else None)
     if b is None:
         return {"sorted": True, "ok": False,
                 "reason": NO_BINS if rt.sim is None else "no reject bin in this cell"}  # fmt: skip
@@ -1497,7 +1606,8 @@ async def _pick(ctx: _Ctx, opts: InspectOptions, state: dict[str, Any], pose: Ob
     if m is not None:
         part = m.part
     q0 = np.asarray(cell.driver.state.q, dtype=np.float64)
-    b = _bin_for(rt, part if state["decision"] == "recognized" else None)
+    ok = state["decision"] == "recognized"
+    b = _bin_for(rt, part if ok else None, opts.bin_of(state["model"]) if ok else None)
     drop = ctx.station + np.array([0.0, 0.0, 0.3]) if b is None else np.asarray(b.drop_point)
     try:
         plan = await asyncio.to_thread(plan_pick_place, q0, pose.T_base_obj, height, drop,
@@ -1530,6 +1640,8 @@ class InspectionRun:
 
     options: InspectOptions
     count: int | None
+    #: Reads the options again before each object (None: ``options`` throughout).
+    resolve: Resolve | None = None
     done: int = 0
     ids: list[int] = field(default_factory=list)
     stop_requested: bool = False
@@ -1637,17 +1749,21 @@ def _check_ready(rt: Any) -> None:
 
 
 async def start_inspection(rt: Any, opts: InspectOptions) -> Any:
-    """Start a job inspecting the object at the station; returns the job."""
+    """Start a job inspecting the object at the station; returns the job.  The options'
+    belt mode (a recipe's) is set before the part is looked for."""
     _check_ready(rt)
+    check_belt_mode(rt, opts)
     ctx = await context(rt)
 
     async def body(job: Any) -> dict[str, Any]:
+        apply_belt_mode(rt, opts)
         out = await inspect_object(ctx, opts, job, db_wait_s=opts.wait_s)
         assert out is not None  # only a run's wait can be stopped
         return {"inspection": out, "inspection_id": out["id"]}
 
     return rt.jobs.start("inspect", body, motion=True,
-                         params={"policy": opts.policy, "sort": opts.sort, "camera_model": ctx.source})  # fmt: skip
+                         params={"policy": opts.policy, "sort": opts.sort, "camera_model": ctx.source,
+                                 "recipe": opts.recipe_name})  # fmt: skip
 
 
 def readiness(rt: Any) -> list[str]:
@@ -1692,8 +1808,14 @@ async def hold_until_ready(rt: Any, job: Any, *, max_s: float | None = None) -> 
         await b.sleep()
 
 
-def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun:
-    """Start continuous operation (a job); :func:`stop_run` ends it after the current object."""
+def start_run(
+    rt: Any, opts: InspectOptions, count: int | None, *, resolve: Resolve | None = None
+) -> InspectionRun:
+    """Start continuous operation (a job); :func:`stop_run` ends it after the current object.
+
+    ``resolve`` (a run following the active recipe): the options are read again before
+    each object (its belt mode set then) and once the part is found, so a recipe selected
+    between two objects applies to the next one; ``opts`` are those of the first."""
     if count is not None and (
         isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= MAX_COUNT
     ):
@@ -1707,7 +1829,8 @@ def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun
     ):
         raise Conflict("an inspection run is already going: stop it first")
     _check_ready(rt)
-    run = InspectionRun(opts, count)
+    check_belt_mode(rt, opts)
+    run = InspectionRun(opts, count, resolve)
 
     async def body(job: Any) -> dict[str, Any]:
         ctx = await recovery.retry_database(
@@ -1726,11 +1849,14 @@ def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun
         try:
             while not run.stop_requested and (count is None or run.done < count):
                 await hold_until_ready(rt, job)
+                run.options = await resolved(resolve, run.options)
                 progress = 0.0 if count is None else run.done / count
                 waiting = Waiting(report=lambda m, p=progress: job.report(p, m),
                                   stopped=lambda: run.stop_requested, forever=True)  # fmt: skip
                 try:
-                    out = await inspect_object(ctx, opts, None, tracker=tracker, waiting=waiting)
+                    apply_belt_mode(rt, run.options)
+                    out = await inspect_object(ctx, run.options, None, tracker=tracker,
+                                               waiting=waiting, resolve=resolve)  # fmt: skip
                 except NotReady:
                     raise
                 except (VisionCellError, ValueError) as exc:  # looking for a part failed
@@ -1759,7 +1885,8 @@ def start_run(rt: Any, opts: InspectOptions, count: int | None) -> InspectionRun
                 "stopped": run.stop_requested}  # fmt: skip
 
     run.job = rt.jobs.start("inspection-run", body, motion=True,
-                            params={"policy": opts.policy, "sort": opts.sort, "count": count})  # fmt: skip
+                            params={"policy": opts.policy, "sort": opts.sort, "count": count,
+                                    "recipe": opts.recipe_name})  # fmt: skip
     rt.inspection_run = run
     return run
 

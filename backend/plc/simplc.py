@@ -284,8 +284,11 @@ class OpcUaPlc:
         number = int(await self.call("Trigger"))
 
         def answered(v: dict[str, Any]) -> bool:
+            # a trigger refused answers the call with an error; once taken, only the
+            # inspection's failure (6) or an E-STOP (4) ends it without a result (an older
+            # refusal's code may still be in the subscription's values)
             mine = v.get("ResultsValid") is True and v.get("TriggerNumber") == number
-            return mine or (v.get("ErrorCode", 0) != 0 and not v.get("Busy"))
+            return mine or (v.get("ErrorCode", 0) in (4, 6) and not v.get("Busy"))
 
         await self.wait(answered, "result")
         latency = self.clock() - t0

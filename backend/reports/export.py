@@ -29,11 +29,12 @@ __all__ = ["FIELDS", "MAX_EXPORT_ROWS", "PAGE_ROWS", "check_export", "export_csv
 #: Columns of the export, in order (the API contract), then ``viewpoints``, the pick's
 #: ``bin``, ``pick`` (its outcome, :data:`backend.inspection.results.PICK_OUTCOMES`),
 #: ``pick_detail`` (the sentence the console shows) and ``source`` (``cell`` or ``upload``:
-#: an image sent to the recognise endpoint), added at the end so that consumers reading the
-#: columns by position keep working.
+#: an image sent to the recognise endpoint), then ``recipe_id`` and ``recipe`` (the recipe
+#: the inspection ran under, empty for none), added at the end so that consumers reading
+#: the columns by position keep working.
 FIELDS = ("id", "cell", "started_at", "finished_at", "decision", "model", "score", "policy",
           "views", "duration_s", "reason", "x_mm", "y_mm", "yaw_deg", "truth_name", "viewpoints",
-          "bin", "pick", "pick_detail", "source")  # fmt: skip
+          "bin", "pick", "pick_detail", "source", "recipe_id", "recipe")  # fmt: skip
 PAGE_ROWS = 1000
 MAX_EXPORT_ROWS = 1_000_000
 
@@ -71,6 +72,8 @@ def _row(r: Any) -> dict[str, Any]:
         "pick": picked["outcome"],
         "pick_detail": picked["text"],
         "source": getattr(r, "source", "cell"),
+        "recipe_id": getattr(r, "recipe_id", None),
+        "recipe": getattr(r, "recipe_name", None),
     }
 
 
@@ -111,6 +114,8 @@ async def export_rows(db: Database, f: ReportFilters) -> AsyncIterator[dict[str,
                     _I.truth,
                     _I.pick,
                     _I.source,
+                    _I.recipe_id,
+                    _I.recipe_name,
                 )
                 .join(Cell, Cell.id == _I.cell_id)
                 .where(*conds, _I.id > last)

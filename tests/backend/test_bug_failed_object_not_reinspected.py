@@ -81,7 +81,8 @@ async def test_the_run_looks_again_after_a_failure_and_holds_while_not_ready(mon
     async def fake_context(rt):
         return SimpleNamespace()
 
-    async def fake_inspect(ctx, opts, job=None, *, tracker=None, waiting=None, db_wait_s=None):
+    async def fake_inspect(ctx, opts, job=None, *, tracker=None, waiting=None, db_wait_s=None,
+                           resolve=None):  # fmt: skip
         belt = cell.conveyors[0]
         seen.append((belt.calls.count("release"), cell.camera_ok))
         assert tracker is not None and waiting.forever  # a run waits for parts until stopped

@@ -97,7 +97,8 @@ async def test_a_run_looks_again_when_looking_for_a_part_fails_and_ends_when_set
     async def fake_context(rt):
         return SimpleNamespace()
 
-    async def fake_inspect(ctx, opts, job=None, *, tracker=None, waiting=None, db_wait_s=None):
+    async def fake_inspect(ctx, opts, job=None, *, tracker=None, waiting=None, db_wait_s=None,
+                           resolve=None):  # fmt: skip
         out = next(outcomes)
         if isinstance(out, Exception):
             raise out

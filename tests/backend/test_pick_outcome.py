@@ -93,7 +93,7 @@ def test_the_bin_is_in_the_rows_and_the_csv(client, headers, settings):
     r = client.get("/api/reports/export.csv", headers=op)
     assert r.status_code == 200
     table = list(csv.reader(io.StringIO(r.text)))
-    assert tuple(table[0]) == FIELDS and table[0][-4:-1] == ["bin", "pick", "pick_detail"]
+    assert tuple(table[0]) == FIELDS and table[0][16:20] == ["bin", "pick", "pick_detail", "source"]
     assert table[0][:16] == ["id", "cell", "started_at", "finished_at", "decision", "model",
                              "score", "policy", "views", "duration_s", "reason", "x_mm", "y_mm",
                              "yaw_deg", "truth_name", "viewpoints"]  # fmt: skip

@@ -170,6 +170,7 @@ FULL_HD_CONTROLS = {
     "cell": ("#estop", "#home", "#speed", "#joints", "#view3d", "#camera"),
     "inspection": ("#insp-once", "#insp-run", "#insp-policy", "#insp-stop"),
     "models": ("#models-table", "#new-model-form", "#global-threshold", "#global-save"),
+    "recipes": ("#recipes-table", "#recipe-form", "#recipe-save"),
     "recognise": ("#recognise-file", "#recognise-run", "#recognise-canvas", "#threshold-rule"),
     "reports": ("#rep-filters", "#rep-apply", "#rep-from", "#rep-to", "#rep-count"),
     "calibration": ("#calib-sessions", "#calib-refresh", "#calib-auto-form", "#calib-auto-start"),

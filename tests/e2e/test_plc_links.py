@@ -415,28 +415,62 @@ def test_opcua_run_results_each_seen_once(cell: PlcCell) -> None:
     assert len(set(ids)) == 5 and ids == sorted(ids)
 
 
-def test_opcua_recipe_select(cell: PlcCell) -> None:
+def test_recipe_changeover_over_both_links(cell: PlcCell) -> None:
+    """Two recipes (made by an engineer over REST); a PLC selects them by number between two
+    objects, over OPC UA (``SelectRecipe``) and Modbus (RECIPE_SELECT): the next result is
+    inspected under the recipe selected, as its row says; an unknown number is refused with
+    error 8 and changes nothing; a viewer may not select."""
     from asyncua import ua
+    from asyncua.ua.uaerrors import BadInvalidState, BadUserAccessDenied
 
-    async def main() -> tuple[int, int]:
-        plc = _opcua(cell, "operator")
+    ids = {}
+    for number, policy in ((11, "top-only"), (12, "two-views")):
+        r = _rest(cell, "POST", "/api/recipes", "engineer",
+                  json={"name": f"line-{number}", "number": number, "policy": policy})  # fmt: skip
+        assert r.status_code == 201, r.text
+        ids[number] = r.json()["id"]
+
+    async def main() -> list[tuple[int, int]]:
+        out = []
+        opc = _opcua(cell, "operator")
+        await opc.connect()
+        plc = _modbus(cell)
         await plc.connect()
         try:
-            with contextlib.suppress(ua.uaerrors.BadInvalidState):
-                await plc.nodes["cell"].call_method(
-                    plc.nodes["SelectRecipe"], ua.Variant(1, ua.VariantType.UInt16)
-                )
-            code = await plc.nodes["ErrorCode"].read_value()
-            active = await plc.nodes["ActiveRecipeId"].read_value()
-            return int(code), int(active)
+            await opc.call("Reset")
+            select = opc.nodes["SelectRecipe"]
+            await opc.nodes["cell"].call_method(select, ua.Variant(11, ua.VariantType.UInt16))
+            assert await opc.nodes["ActiveRecipeId"].read_value() == 11
+            out.append((11, (await opc.trigger()).result["inspection_id"]))
+            with pytest.raises(BadInvalidState):
+                await opc.nodes["cell"].call_method(select, ua.Variant(99, ua.VariantType.UInt16))
+            assert await opc.nodes["ErrorCode"].read_value() == ErrorCode.RECIPE_UNKNOWN
+            assert await opc.nodes["ActiveRecipeId"].read_value() == 11
+            await plc.write(REGISTERS["RECIPE_REQUEST"], 12)
+            await plc.set_bits(RECIPE_SELECT=True)
+            w = await plc.read()
+            assert w["recipe"] == 12 and w["error"] == 0
+            await plc.set_bits(RECIPE_SELECT=False)
+            out.append((12, (await plc.trigger()).result["inspection_id"]))
         finally:
-            await plc.close()
+            await _idle_modbus(plc)
+            plc.close()
+            await opc.close()
+        viewer = _opcua(cell, "viewer")
+        await viewer.connect()
+        try:
+            with pytest.raises(BadUserAccessDenied):
+                await viewer.nodes["cell"].call_method(
+                    viewer.nodes["SelectRecipe"], ua.Variant(11, ua.VariantType.UInt16)
+                )
+        finally:
+            await viewer.close()
+        return out
 
-    code, active = asyncio.run(main())
-    # without a recipe numbered 1 the selection is refused with its reason
-    assert code in (ErrorCode.RECIPES_UNAVAILABLE, ErrorCode.RECIPE_UNKNOWN, ErrorCode.NONE)
-    if code == ErrorCode.NONE:
-        assert active == 1
+    for number, iid in asyncio.run(main()):
+        row = _rest(cell, "GET", f"/api/inspections/{iid}", "viewer").json()
+        assert row["recipe_id"] == ids[number] and row["recipe"] == f"line-{number}", row
+        assert row["policy"] == ("top-only" if number == 11 else "two-views")
 
 
 def test_modbus_refusal_never_wedges_the_link(cell: PlcCell) -> None:
@@ -481,6 +515,7 @@ def test_opcua_result_events_one_per_result(cell: PlcCell) -> None:
 
             sub = await plc.client.create_subscription(10, Handler())
             await sub.subscribe_events(plc.nodes["cell"], etype)
+            await plc.call("Reset")
             got = [await plc.trigger() for _ in range(2)]
             t0 = asyncio.get_running_loop().time()
             while len(events) < 2 and asyncio.get_running_loop().time() - t0 < BOUND_S:

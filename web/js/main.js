@@ -1,7 +1,7 @@
 // VisionCell console: sign-in, the page registry and the hash router (Back/Forward work).
 //
 // Each page module exports a default object {id, title, minRole, mount(root, ctx), unmount()};
-// the router mounts the page named by the URL hash (#cell, #inspection, #models, #reports, #calibration, #audit) into #page-root and
+// the router mounts the page named by the URL hash (#cell, #inspection, #models, #recipes, #recognise, #reports, #calibration, #audit) into #page-root and
 // unmounts the previous one, which stops its timers and streams.
 
 import { api, ApiError, onTokenRefused, setToken } from "./api.js";
@@ -11,6 +11,7 @@ import cellPage from "./pages/cell.js";
 import calibrationPage from "./pages/calibration.js";
 import auditPage from "./pages/audit.js";
 import modelsPage from "./pages/models.js";
+import recipesPage from "./pages/recipes.js";
 import inspectionPage from "./pages/inspection.js";
 import reportsPage from "./pages/reports.js";
 import recognisePage from "./pages/recognise.js";
@@ -22,7 +23,7 @@ const RANKS = { viewer: 1, operator: 2, engineer: 3 };
 export const rank = (role) => RANKS[role] || 0;
 
 /** The pages, in menu order. */
-export const PAGES = [cellPage, inspectionPage, modelsPage, recognisePage, reportsPage, calibrationPage, auditPage];
+export const PAGES = [cellPage, inspectionPage, modelsPage, recipesPage, recognisePage, reportsPage, calibrationPage, auditPage];
 
 const live = new Live();
 let user = null;

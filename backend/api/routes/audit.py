@@ -18,7 +18,9 @@ router = APIRouter(prefix="/audit", tags=["audit"])
 Since = instant_query("From this time on, inclusive")
 Until = instant_query("Before this time, exclusive")
 
-Kind = Literal["threshold", "model", "view", "negative", "calibration", "user", "token", "estop"]
+Kind = Literal[
+    "threshold", "model", "view", "negative", "calibration", "user", "token", "estop", "recipe"
+]
 
 
 class AuditPublic(BaseModel):

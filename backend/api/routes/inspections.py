@@ -27,6 +27,7 @@ from backend.api.deps import (
 from backend.api.fastpath import FastRequest, Fresh
 from backend.api.types import DbId, Limit, Offset, instant_query
 from backend.inspection import results, service
+from backend.recipes import follower, resolve_options
 
 __all__ = ["router"]
 
@@ -39,7 +40,9 @@ Policy = Literal["naive", "top-only", "two-views", "best-next"]
 
 
 class InspectIn(BaseModel):
-    """Options of one inspection (see ``backend.inspection.service.InspectOptions``)."""
+    """Options of one inspection (see ``backend.inspection.service.InspectOptions``): the
+    active recipe's (or ``recipe``'s), with the options given here over them; without a
+    recipe, the defaults below."""
 
     model_config = ConfigDict(extra="forbid", strict=True)
 
@@ -55,18 +58,19 @@ class InspectIn(BaseModel):
     balance_light: bool = Field(
         True, description="Scale the views back to the teach light by the belt's colour"
     )
+    recipe: int | None = Field(
+        None, ge=1, le=2**31 - 1, description="Recipe id to use instead of the active one"
+    )
 
-    def options(self) -> service.InspectOptions:
-        return service.InspectOptions(**self.model_dump())
+    def overrides(self) -> dict[str, Any]:
+        """The options given explicitly (they override the recipe's)."""
+        return {k: getattr(self, k) for k in self.model_fields_set - {"recipe", "count"}}
 
 
 class RunIn(InspectIn):
     """Continuous operation: inspect objects until stopped, or ``count`` of them."""
 
     count: int | None = Field(None, ge=1, le=service.MAX_COUNT)
-
-    def options(self) -> service.InspectOptions:
-        return service.InspectOptions(**self.model_dump(exclude={"count"}))
 
 
 class JobAccepted(BaseModel):
@@ -77,10 +81,12 @@ class JobAccepted(BaseModel):
     "/inspections",
     response_model=JobAccepted,
     status_code=status.HTTP_202_ACCEPTED,
-    summary="Inspect the object at the station: a job whose result names the inspection (operator)",
+    summary="Inspect the object at the station: a job whose result names the inspection "
+    "(operator); the active recipe's options unless the request names others",
 )
 async def create_inspection(_: OperatorUser, rt: RuntimeDep, body: InspectIn) -> dict[str, Any]:
-    job = await service.start_inspection(rt, body.options())
+    opts = await resolve_options(rt, body.overrides(), recipe_id=body.recipe)
+    job = await service.start_inspection(rt, opts)
     return {"job": job.public()}
 
 
@@ -88,10 +94,14 @@ async def create_inspection(_: OperatorUser, rt: RuntimeDep, body: InspectIn) ->
     "/inspection/run",
     response_model=JobAccepted,
     status_code=status.HTTP_202_ACCEPTED,
-    summary="Start continuous inspection (operator)",
+    summary="Start continuous inspection (operator): it follows the active recipe (or "
+    "`recipe`), read again before each object, under the options given",
 )
 async def start_run(_: OperatorUser, rt: RuntimeDep, body: RunIn) -> dict[str, Any]:
-    run = service.start_run(rt, body.options(), body.count)
+    overrides = body.overrides()
+    opts = await resolve_options(rt, overrides, recipe_id=body.recipe)
+    resolve = follower(rt, overrides, recipe_id=body.recipe)
+    run = service.start_run(rt, opts, body.count, resolve=resolve)
     return {"job": run.job.public()}
 
 

@@ -4,7 +4,7 @@
 
 import { $, el, isoUtc, setText } from "../dom.js";
 
-const KINDS = ["threshold", "model", "view", "negative", "calibration", "user", "token", "estop"];
+const KINDS = ["threshold", "model", "view", "negative", "calibration", "user", "token", "estop", "recipe"];
 const PAGE_SIZE = 50;
 
 let root = null;

@@ -3,6 +3,10 @@
 // every model's score as bars, the viewpoints visited); a filmstrip of the last results
 // (images load lazily); counters per shift and the throughput over the last minute.
 //
+// The recipe line shows the cell's active recipe (GET /api/recipes): the controls start at
+// its options, and only those the operator changes are sent (they override the recipe's,
+// which the server applies, read again before each object of a run).
+//
 // The belt card shows the belt's state (GET /api/belt): a run waiting for a part says so in
 // its job line, and an operator starts or stops the belt here; an engineer on the simulator
 // can put a catalogue part at the station.
@@ -30,6 +34,8 @@ let shownId = null;
 let generation = 0;
 let runJob = null;
 let thresholdsRead = Promise.resolve();  // the models and thresholds, read at mount
+let recipe = null;         // the active recipe (API form), null: none
+let recipeSeen = "";       // id and update time of the recipe the controls were set from
 
 const q = (sel) => (root ? $(sel, root) : null);
 
@@ -48,9 +54,38 @@ export function shiftStart() {
   return v;
 }
 
+/**
+ * The options to send: every control without an active recipe; with one, only the
+ * controls set otherwise than the recipe (the server takes the recipe's for the rest).
+ */
 function options() {
   const body = { policy: q("#insp-policy").value, sort: q("#insp-sort").checked, max_views: Number(q("#insp-max-views").value) };
+  if (!recipe) return body;
+  for (const key of Object.keys(body)) if (body[key] === recipe[key]) delete body[key];
   return body;
+}
+
+async function loadRecipe() {
+  const gen = generation;
+  let page;
+  try { page = await api("GET", "/recipes?limit=1"); } catch (e) { return; }
+  if (gen !== generation || !root) return;
+  recipe = page.active;
+  const line = q("#insp-recipe");
+  if (!recipe) {
+    line.replaceChildren("Recipe: none active (", el("a", { href: "#recipes" }, "Recipes"), "): the options below apply.");
+    recipeSeen = "";
+    return;
+  }
+  line.replaceChildren("Recipe: ", el("strong", { id: "insp-recipe-name" }, `${recipe.name} (no. ${recipe.number})`),
+    ` · ${recipe.models.length ? recipe.models.join(", ") : "every model"} · threshold ${recipe.threshold === null ? "automatic" : recipe.threshold.toFixed(2)}`
+    + ` · belt ${recipe.belt_mode || "as it is"}; options changed below override it.`);
+  const seen = `${recipe.id}@${recipe.updated_at}`;
+  if (seen === recipeSeen) return;  // the operator's own changes stay until the recipe changes
+  recipeSeen = seen;
+  q("#insp-policy").value = recipe.policy;
+  q("#insp-max-views").value = String(recipe.max_views);
+  q("#insp-sort").checked = recipe.sort;
 }
 
 /**
@@ -184,7 +219,7 @@ async function showInspection(id) {
     el("figcaption", { className: "small" }, `viewpoint ${r.viewpoints_visited[k] ?? "?"}`))));
   if (!r.images.length) pics.append(el("p", { className: "small" }, "No image kept for this inspection."));
   setText(q("#live-viewpoints"), `Viewpoints visited: ${r.viewpoints_visited.join(" → ") || "none"} · policy ${r.policy}`
-    + ` · ${r.duration_s === null ? "" : `${r.duration_s.toFixed(2)} s`}`);
+    + `${r.recipe ? ` · recipe ${r.recipe}` : ""} · ${r.duration_s === null ? "" : `${r.duration_s.toFixed(2)} s`}`);
   const items = everyScore(r.scores, Object.keys(perModel))
     .map(([m, s]) => ({ label: m, value: s, color: m === r.model ? "#15803d" : "#9ca3af", mark: perModel[m] ?? threshold }));
   bars(q("#live-scores"), items, { max: 1 });
@@ -270,6 +305,7 @@ async function refresh() {
 function build() {
   const controls = el("div", { className: "card insp-controls" },
     el("h2", {}, "Operation"),
+    el("p", { id: "insp-recipe", className: "small", role: "status" }, "Recipe: -"),
     el("div", { className: "row" },
       el("label", { className: "inline" }, "Policy ", el("select", { id: "insp-policy" },
         ...["two-views", "best-next", "top-only", "naive"].map((p) => el("option", { value: p }, p)))),
@@ -335,8 +371,9 @@ export default {
     }).catch(() => {});
     refresh();
     loadBelt();
+    loadRecipe();
     loadCatalogue();
-    timer = setInterval(() => { if (document.visibilityState === "visible") { loadCounters(); loadBelt(); } }, REFRESH_MS);
+    timer = setInterval(() => { if (document.visibilityState === "visible") { loadCounters(); loadBelt(); loadRecipe(); } }, REFRESH_MS);
   },
 
   unmount() {
@@ -349,5 +386,7 @@ export default {
     root = null;
     ctx = null;
     runJob = null;
+    recipe = null;
+    recipeSeen = "";
   },
 };

@@ -153,7 +153,7 @@ async function openInspection(id) {
   box.hidden = false;
   for (const tr of root.querySelectorAll("#rep-table tbody tr")) tr.classList.toggle("selected", Number(tr.dataset.id) === r.id);
   setText(q("#rep-detail-title"), `Inspection #${r.id}: ${r.decision}${r.model ? ` ${r.model}` : ""}${r.score === null ? "" : ` (${r.score.toFixed(3)})`}`);
-  setText(q("#rep-detail-reason"), `${r.reason} · policy ${r.policy} · started ${when(r.started_at)} UTC · ${sec(r.duration_s)}`);
+  setText(q("#rep-detail-reason"), `${r.reason} · policy ${r.policy}${r.recipe ? ` · recipe ${r.recipe} (#${r.recipe_id})` : " · no recipe"} · started ${when(r.started_at)} UTC · ${sec(r.duration_s)}`);
   const pick = r.pick_outcome || { outcome: "not_sorted", bin: null, text: "not sorted" };
   const pickNode = q("#rep-detail-pick");
   pickNode.className = `small pick pick-${pick.outcome}${pick.outcome === "not_placed" ? " error" : ""}`;
