@@ -3,8 +3,8 @@
 Both are off by default; :func:`plc_links` is entered by the app's lifespan
 (:func:`backend.app.create_app`) after the cell runtime, and exited before it.  The Modbus
 server binds at once (a port taken stops the start-up with a :class:`StartupError`); the
-OPC UA server comes up on its own thread a few seconds later (the console and the E-STOP do
-not wait for it; a failure is logged as an error).
+OPC UA server comes up in a child process of its own a few seconds later (the console and
+the E-STOP do not wait for it; a failure is logged as an error).
 """
 
 from __future__ import annotations
@@ -45,7 +45,8 @@ async def plc_links(rt: Any) -> AsyncIterator[PlcLinks]:
 
     async with contextlib.AsyncExitStack() as stack:
         if s.opcua_endpoint is not None:
-            from backend.plc.opcua import OpcUaLink, nodeset_files
+            from backend.plc.opcua import nodeset_files
+            from backend.plc.opcua_link import OpcUaLink
             from backend.plc.signin import Credentials
 
             hs = Handshake(rt, name="opcua", max_queue=s.plc_result_queue)
@@ -55,13 +56,14 @@ async def plc_links(rt: Any) -> AsyncIterator[PlcLinks]:
             creds = Credentials(rt.database, s.secret_key.get_secret_value(),
                                 user_certificates=s.opcua_user_certificates)  # fmt: skip
             await creds.refresh(force=True)
+            throttle = {"max_failures": s.signin_max_failures, "window_s": s.signin_window_s,
+                        "block_s": s.signin_block_s, "max_clients": s.signin_max_clients}  # fmt: skip
             link = OpcUaLink(
                 hs, creds, endpoint=s.opcua_endpoint,
                 anonymous_read=s.opcua_anonymous == "read-only",
                 nodesets=nodeset_files(s.data_dir) if s.opcua_nodesets else [],
-                throttle=rt.signin_throttle,
-                security=s.opcua_security,
-                cert_dir=s.var_dir / "opcua",
+                throttle=throttle, security=s.opcua_security, cert_dir=s.var_dir / "opcua",
+                secret=s.secret_key.get_secret_value(),
             )  # fmt: skip
             await link.start()  # listening a few seconds later, off the cell's loop
             stack.push_async_callback(link.stop)

@@ -36,7 +36,6 @@ import contextlib
 import contextvars
 import logging
 import math
-import threading
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -45,10 +44,10 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from backend.db.models import Role
-from backend.plc.handshake import ErrorCode, Handshake, LinkUser, Snapshot
+from backend.plc.handshake import ErrorCode, LinkUser, Snapshot
 from backend.plc.signin import Credentials
 
-__all__ = ["NAMESPACE", "OpcUaLink", "nodeset_files"]
+__all__ = ["NAMESPACE", "OpcUaServer", "nodeset_files"]
 
 log = logging.getLogger(__name__)
 
@@ -86,15 +85,15 @@ class _Var:
     value: Any = None
 
 
-class OpcUaLink:
-    """The OPC UA server over one :class:`Handshake` (see the module docstring).
+class OpcUaServer:
+    """The OPC UA server (in the child process: see :mod:`backend.plc.opcua_link`).
 
     Parameters
     ----------
-    handshake : Handshake
-        The link's handshake (on the cell's event loop).
+    bridge : Bridge
+        The pipe to the cell's process: commands go there, snapshots come from there.
     credentials : Credentials
-        The live tokens for sign-in.
+        The sign-in tables (loaded from the cell's process at each new session).
     endpoint : str
         ``opc.tcp://HOST:PORT[/PATH]``.
     anonymous_read : bool
@@ -102,18 +101,18 @@ class OpcUaLink:
     nodesets : list of Path
         NodeSet2 files loaded at start, in order.
     throttle : SignInThrottle, optional
-        Failed sign-ins per client address (the cell's, shared with REST).
+        Failed sign-ins per client address.
     security : {"none", "encrypt", "both"}
         Security policies offered: None, Basic256Sha256 SignAndEncrypt, or both.
     cert_dir : Path, optional
         Where the server's certificate and key are kept (made at first start).
     """
 
-    def __init__(self, handshake: Handshake, credentials: Credentials, *, endpoint: str,
+    def __init__(self, bridge: Any, credentials: Credentials, *, endpoint: str,
                  anonymous_read: bool = False, nodesets: list[Path] | None = None,
                  throttle: Any = None, security: str = "none",
                  cert_dir: Path | None = None) -> None:  # fmt: skip
-        self.handshake = handshake
+        self.bridge = bridge
         self.credentials = credentials
         self.endpoint = endpoint
         self.anonymous_read = anonymous_read
@@ -122,99 +121,25 @@ class OpcUaLink:
         self.security = security
         self.cert_dir = cert_dir
         self.load_s: float | None = None
-        """Seconds the nodesets took to load (after start)."""
-        self._cell_loop: asyncio.AbstractEventLoop | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._thread: threading.Thread | None = None
-        self._stop: asyncio.Event | None = None
-        self._snapshots: asyncio.Queue[Snapshot] | None = None
+        """Seconds the nodesets took to load."""
+        self.stop_event = asyncio.Event()
+        self._snapshots: asyncio.Queue[Snapshot] = asyncio.Queue()
         self._vars: dict[str, _Var] = {}
         self._server: Any = None
         self._events: Any = None
         self._last_event_id = 0
-        self._ready: asyncio.Future[None] | None = None
-        self._stopping = False
-        self.error: str | None = None
-        """Why the server did not start (None: it did, or is starting)."""
 
-    # -- life cycle (cell loop) -------------------------------------------------------------
-    async def start(self) -> None:
-        """Start the server's thread and return at once: building the address space and
-        loading the nodesets take seconds, and the console, REST and the E-STOP must not wait
-        for them.  :meth:`wait_ready` waits (without holding the loop) until it listens; a
-        failure to start is logged as an error and kept in :attr:`error`."""
-        self._cell_loop = asyncio.get_running_loop()
-        self._ready = self._cell_loop.create_future()
-        self.handshake.add_listener(self._on_snapshot)
+    def on_snapshot(self, snap: Snapshot) -> None:
+        """A snapshot of the handshake arrived from the cell."""
+        self._snapshots.put_nowait(snap)
 
-        def settle(exc: BaseException | None) -> None:
-            if self._ready is not None and not self._ready.done():
-                if exc is None:
-                    self._ready.set_result(None)
-                else:
-                    self.error = f"{type(exc).__name__}: {exc}"
-                    log.error("OPC UA server at %s did not start: %s", self.endpoint, self.error)
-                    self._ready.set_exception(exc)
-                    self._ready.exception()  # retrieved: wait_ready re-raises it
-
-        def report(exc: BaseException | None) -> None:
-            assert self._cell_loop is not None
-            with contextlib.suppress(RuntimeError):  # the cell's loop closed
-                self._cell_loop.call_soon_threadsafe(settle, exc)
-
-        self._thread = threading.Thread(
-            target=self._main, args=(report,), name="opcua", daemon=True
-        )
-        self._thread.start()
-
-    async def wait_ready(self, timeout_s: float = START_BOUND_S) -> None:
-        """Wait until the server listens (its start-up error, or ``TimeoutError``)."""
-        assert self._ready is not None, "start() first"
-        await asyncio.wait_for(asyncio.shield(self._ready), timeout_s)
-
-    @property
-    def ready(self) -> bool:
-        """Whether the server listens now."""
-        return self._ready is not None and self._ready.done() and self._ready.exception() is None
-
-    async def stop(self) -> None:
-        """Stop the server and join its thread (off the loop)."""
-        self._stopping = True
-        loop, stop = self._loop, self._stop
-        if loop is not None and stop is not None:
-            with contextlib.suppress(RuntimeError):
-                loop.call_soon_threadsafe(stop.set)
-        if self._thread is not None:
-            await asyncio.to_thread(self._thread.join, START_BOUND_S)
-            self._thread = None
-
-    def _on_snapshot(self, snap: Snapshot) -> None:
-        loop, q = self._loop, self._snapshots
-        if loop is not None and q is not None:
-            with contextlib.suppress(RuntimeError):
-                loop.call_soon_threadsafe(q.put_nowait, snap)
-
-    # -- the server's thread ---------------------------------------------------------------
-    def _main(self, report: Callable[[BaseException | None], None]) -> None:
-        loop = asyncio.new_event_loop()
-        self._loop = loop
-        try:
-            loop.run_until_complete(self._serve(report))
-        except BaseException as exc:  # reported to start(); logged if it came later
-            log.exception("OPC UA server stopped on an error")
-            report(exc)
-        finally:
-            loop.close()
-
-    async def _serve(self, report: Callable[[BaseException | None], None]) -> None:
+    async def serve(self, ready: Callable[[float], None]) -> None:
+        """Build the address space, listen, call ``ready(load_s)``, serve until
+        :attr:`stop_event` is set."""
         from asyncua import Server, ua
 
         # asyncua logs every request at INFO: the cell's log keeps its warnings only
         logging.getLogger("asyncua").setLevel(max(logging.WARNING, log.getEffectiveLevel()))
-        self._stop = asyncio.Event()
-        self._snapshots = asyncio.Queue()
-        if self._stopping:
-            return
         manager: Any = _UserManager(self.credentials, self.anonymous_read)
         server = Server(user_manager=manager)
         await server.init()
@@ -246,14 +171,13 @@ class OpcUaLink:
             log.info("OPC UA: loaded %d nodesets in %.2f s", len(self.nodesets), self.load_s)
         await self._build(server)
         self._server = server
-        if self._stopping:  # stopped while starting
+        if self.stop_event.is_set():  # stopped while starting
             return
         async with server:
-            report(None)
+            ready(self.load_s or 0.0)
             log.info("OPC UA server listening on %s", self.endpoint)
-            self._snapshots.put_nowait(self.handshake.snapshot)  # the state before the start
             writer = asyncio.get_running_loop().create_task(self._writer())
-            await self._stop.wait()
+            await self.stop_event.wait()
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await writer
@@ -276,12 +200,11 @@ class OpcUaLink:
         await server.load_private_key(str(key))
 
     async def _refresh_credentials(self) -> None:
-        assert self._cell_loop is not None
-        fut = asyncio.run_coroutine_threadsafe(self.credentials.refresh(), self._cell_loop)
         try:
-            await asyncio.wrap_future(fut)
-        except Exception:  # the database is down: the table read last is used
-            log.warning("OPC UA: could not re-read the sign-in table", exc_info=True)
+            by_hash, by_cert = await self.bridge.request("refresh")
+            self.credentials.load(by_hash, by_cert)
+        except Exception:  # the database is down: the tables read last are used
+            log.warning("OPC UA: could not re-read the sign-in tables", exc_info=True)
 
     async def _build(self, server: Any) -> None:
         from asyncua import ua
@@ -394,93 +317,73 @@ class OpcUaLink:
                 await self._evgen.trigger(message=f"inspection {r.inspection_id}: {r.decision}")
 
     # -- methods (server loop) ------------------------------------------------------------
-    async def _on_cell(self, make: Callable[[], Awaitable[Any]]) -> Any:
-        assert self._cell_loop is not None
-        fut = asyncio.run_coroutine_threadsafe(_as_coro(make), self._cell_loop)
-        return await asyncio.wrap_future(fut)
-
     def _user(self) -> LinkUser | None:
         user = _session_user.get()
         role = getattr(user, "vc_role", None)
         return None if role is None else LinkUser(str(user.name), role)
 
-    async def _command(self, need: Role, make: Callable[[LinkUser], Awaitable[bool]]) -> Any:
+    async def _command(self, need: Role, name: str, *args: Any) -> Any:
+        """Run the handshake's command ``name`` in the cell's process as the session's user;
+        the OPC UA answer: a status code when refused, else ``(value, triggers)``."""
         from asyncua import ua
 
         user = self._user()
-        if user is None or int(user.role) < int(need):
+        refused = user is None or int(user.role) < int(need)
+        if refused:
             who = "anonymous" if user is None else f"{user.name} ({user.role.name})"
             log.info("OPC UA: %s refused: needs %s", who, need.name)
-            if user is not None:  # the error code tells the PLC why
-                await self._on_cell(lambda: make(user))
-            return _status(ua.StatusCodes.BadUserAccessDenied)
-        ok = await self._on_cell(lambda: make(user))
-        if ok is False:
-            snap = self.handshake.snapshot
+            if user is None:
+                return _status(ua.StatusCodes.BadUserAccessDenied)
+        assert user is not None
+        ok, error, triggers = await self.bridge.request(
+            "cmd", name, (user.name, int(user.role)), args
+        )
+        if refused or ok is False:
             code = (
                 ua.StatusCodes.BadUserAccessDenied
-                if snap.error is ErrorCode.ROLE_TOO_LOW
+                if refused or error == ErrorCode.ROLE_TOO_LOW
                 else ua.StatusCodes.BadInvalidState
             )
             return _status(code)
-        return ok
+        return ok, triggers
 
     async def _m_enable(self, parent: Any, enable: Any) -> Any:
-        async def run(user: LinkUser) -> bool:
-            if int(user.role) < int(Role.operator):
-                self.handshake._fail(ErrorCode.ROLE_TOO_LOW, f"{user.name} may not enable triggers")
-                return False
-            self.handshake.set_trigger_enable(bool(_value(enable)))
-            return True
-
-        out = await self._command(Role.operator, run)
-        return out if not isinstance(out, bool) else []
+        out = await self._command(Role.operator, "enable", bool(_value(enable)))
+        return out if not isinstance(out, tuple) else []
 
     async def _m_trigger(self, parent: Any) -> Any:
         from asyncua import ua
 
-        out = await self._command(Role.operator, self.handshake.trigger)
-        if isinstance(out, bool):
-            return [ua.Variant(self.handshake.snapshot.triggers % 2**32, ua.VariantType.UInt32)]
+        out = await self._command(Role.operator, "trigger")
+        if isinstance(out, tuple):
+            return [ua.Variant(out[1] % 2**32, ua.VariantType.UInt32)]
         return out
 
     async def _m_start_run(self, parent: Any, count: Any) -> Any:
-        n = int(_value(count))
-        out = await self._command(Role.operator, lambda u: self.handshake.start_run(u, n or None))
-        return out if not isinstance(out, bool) else []
+        out = await self._command(Role.operator, "start_run", int(_value(count)))
+        return out if not isinstance(out, tuple) else []
 
     async def _m_stop_run(self, parent: Any) -> Any:
-        async def run(user: LinkUser) -> bool:
-            return self.handshake.stop_run(user)
-
-        out = await self._command(Role.operator, run)
-        return out if not isinstance(out, bool) else []
+        out = await self._command(Role.operator, "stop_run")
+        return out if not isinstance(out, tuple) else []
 
     async def _m_reset(self, parent: Any) -> Any:
-        out = await self._command(Role.operator, self.handshake.reset)
-        return out if not isinstance(out, bool) else []
+        out = await self._command(Role.operator, "reset")
+        return out if not isinstance(out, tuple) else []
 
     async def _m_select(self, parent: Any, recipe: Any) -> Any:
-        n = int(_value(recipe))
-        out = await self._command(Role.operator, lambda u: self.handshake.select_recipe(u, n))
-        return out if not isinstance(out, bool) else []
+        out = await self._command(Role.operator, "select", int(_value(recipe)))
+        return out if not isinstance(out, tuple) else []
 
     async def _m_ack(self, parent: Any, inspection_id: Any) -> Any:
         from asyncua import ua
 
-        iid = int(_value(inspection_id))
-
-        async def run(user: LinkUser) -> bool:
-            took = self.handshake.acknowledge(iid)
-            self.handshake.present_next()
-            return took
-
         user = self._user()
-        if user is None:
+        if user is None or int(user.role) < int(Role.operator):
             return _status(ua.StatusCodes.BadUserAccessDenied)
-        if int(user.role) < int(Role.operator):
-            return _status(ua.StatusCodes.BadUserAccessDenied)
-        took = await self._on_cell(lambda: run(user))
+        took, _error, _n = await self.bridge.request(
+            "cmd", "ack", (user.name, int(user.role)), (int(_value(inspection_id)),)
+        )
         return [ua.Variant(bool(took), ua.VariantType.Boolean)]
 
 
@@ -495,10 +398,6 @@ def _status(code: int) -> Any:
     from asyncua import ua
 
     return ua.StatusCode(code)  # type: ignore[arg-type]
-
-
-async def _as_coro(make: Callable[[], Awaitable[Any]]) -> Any:
-    return await make()
 
 
 def _value(v: Any) -> Any:

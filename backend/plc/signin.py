@@ -143,6 +143,16 @@ class Credentials:
             self._last = now
         return len(table)
 
+    def tables(self) -> tuple[dict[str, Credential], dict[bytes, Credential]]:
+        """The tables read last (token HMAC -> user, certificate -> user)."""
+        with self._lock:
+            return dict(self._by_hash), dict(self._by_cert)
+
+    def load(self, by_hash: dict[str, Credential], by_cert: dict[bytes, Credential]) -> None:
+        """Take tables read by another process (:meth:`tables`)."""
+        with self._lock:
+            self._by_hash, self._by_cert = dict(by_hash), dict(by_cert)
+
     def check_certificate(self, der: object) -> Credential | None:
         """The user whose certificate (``user_certificates``/NAME.der or .pem) is ``der``."""
         if not isinstance(der, bytes | bytearray):

@@ -198,7 +198,7 @@ class OpcUaPlc:
             await self.client.set_security_string(f"Basic256Sha256,SignAndEncrypt,{cert},{key}")
             if self.sign_in_with_certificate:  # the certificate is the identity too
                 await self.client.load_client_certificate(str(cert))
-                await self.client.load_private_key(str(key))
+                await self.client.load_private_key(Path(key))
         await self.client.connect()
         idx = await self.client.get_namespace_index(NAMESPACE)
         cell = await self.client.nodes.objects.get_child([f"{idx}:VisionCell"])
