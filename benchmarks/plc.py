@@ -2,7 +2,7 @@
 Modbus TCP with the real clients (asyncua's and pymodbus's), REST is the baseline.
 
 One process serves the cell as ``visioncell serve`` does (uvicorn, the app, its runtime and
-the PLC links, in a thread; the OPC UA server on a thread of its own); the main thread runs
+the PLC links, in a thread; the OPC UA server in its child process); the main thread runs
 the clients:
 
 * **REST** (baseline): ``POST /api/inspections``, then ``GET /api/jobs/{id}`` every 2 ms
@@ -150,7 +150,7 @@ async def _rest_trigger(client: Any, headers: dict[str, str]) -> tuple[float, in
 
 async def _loop_gap_until(aw: Any, tick_s: float = 0.005) -> float:
     """Longest wait of a 5 ms tick on this (the cell's) loop while ``aw`` runs, ms: how long
-    the OPC UA server's start held the cell's loop (it builds on its own thread)."""
+    the OPC UA server's start held the cell's loop (it builds in its own process)."""
     gaps = [0.0]
     done = False
 
@@ -548,7 +548,7 @@ def _print_links(result: dict[str, Any]) -> None:
         out.print(f"recipe changeover: not measured ({ch['reason']})")
     out.print(f"cell serving REST and Modbus {result['startup_s']:.1f} s after start, OPC UA "
               f"{result['opcua_ready_s']:.1f} s (OPC 40100 + DI nodesets loaded in "
-              f"{result['nodesets_load_s'] or 0:.2f} s on the OPC UA thread; the cell's loop "
+              f"{result['nodesets_load_s'] or 0:.2f} s in the OPC UA process; the cell's loop "
               f"waited at most {result['loop_gap_during_opcua_start_ms']:.0f} ms meanwhile)")  # fmt: skip
 
 

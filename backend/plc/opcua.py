@@ -23,10 +23,10 @@ A refused command answers ``BadUserAccessDenied`` (role too low) or ``BadInvalid
 nodeset it builds on are loaded (when found in the data directory) so that clients can
 browse the companion specification's types.
 
-Threading: asyncua builds its address space and parses the nodesets in long synchronous
-stretches (seconds), so the server runs on its own thread and event loop; commands hop to
-the cell's loop (``run_coroutine_threadsafe``), the handshake's changes hop back
-(``call_soon_threadsafe``).  Nothing here ever holds the cell's loop.
+Process: asyncua builds its address space and parses the nodesets in long synchronous
+stretches (seconds), so this server runs in a child process of its own
+(:mod:`backend.plc.opcua_link`); its method calls go to the cell's handshake over a pipe, the
+handshake's changes come back the same way.  Nothing here ever holds the cell's loop.
 """
 
 from __future__ import annotations
@@ -407,9 +407,8 @@ def _value(v: Any) -> Any:
 def _hook_sessions(server: Any, refresh: Callable[[], Awaitable[None]], throttle: Any,
                    manager: Any) -> None:  # fmt: skip
     """Re-read the sign-in table when a session is created (before it signs in), count
-    failed sign-ins per client address in the cell's sign-in ``throttle`` (shared with REST,
-    the console and the 3D view: a blocked address is refused before its credentials are
-    looked at), and make the session's user known to the method callbacks of its calls."""
+    failed sign-ins per client address in ``throttle`` (REST's rule, the server's own count:
+    a blocked address is refused before its credentials are looked at), and make the session's user known to the method callbacks of its calls."""
     from asyncua import ua
     from asyncua.common.utils import ServiceError
 
