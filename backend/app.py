@@ -36,20 +36,26 @@ def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None 
 
     Without ``runtime`` the lifespan enters a :class:`CellRuntime` of ``settings`` (database,
     hardware, cell, 3D view) and exits it at shutdown; with one (already entered, e.g. by
-    ``visioncell serve``) the app serves it and leaves its life cycle to the caller.
+    ``visioncell serve``) the app serves it and leaves its life cycle to the caller.  Either
+    way the lifespan runs the PLC links the settings enable (``backend.plc``: OPC UA,
+    Modbus TCP) over the runtime, and stops them before the runtime.
     """
     settings = settings or (runtime.settings if runtime is not None else Settings())
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        from backend.plc import plc_links
+
         if runtime is not None:
             install_runtime(app, runtime)
-            yield
+            async with plc_links(runtime):
+                yield
             return
         async with CellRuntime(settings) as rt:
             install_runtime(app, rt)
             try:
-                yield
+                async with plc_links(rt):  # the PLC links go before the cell they drive
+                    yield
             finally:
                 install_runtime(app, None)
 

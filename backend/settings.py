@@ -31,6 +31,12 @@ _ORIGIN = re.compile(
 )
 
 
+#: An OPC UA endpoint: opc.tcp://HOST:PORT with an optional path.
+_OPCUA_ENDPOINT = re.compile(
+    r"^opc\.tcp://(?P<host>[A-Za-z0-9.-]{1,253}|\[[0-9A-Fa-f:.]{2,45}\]):(?P<port>[0-9]{1,5})"
+    r"(?P<path>/[A-Za-z0-9._~/-]{0,128})?$"
+)
+
 #: Most entries of ``VISIONCELL_TRUSTED_PROXIES``.
 MAX_TRUSTED_PROXIES = 32
 
@@ -308,6 +314,63 @@ class Settings(BaseSettings):
         "disabled user) at once through LISTEN/NOTIFY (after the 2 s sign-in cache otherwise).",
     )
 
+    opcua_endpoint: str | None = Field(
+        None,
+        description="Serve OPC UA for a line's PLC or the MES at this endpoint, "
+        "'opc.tcp://HOST:PORT[/PATH]' (HOST an IP address or 'localhost'; e.g. "
+        "'opc.tcp://127.0.0.1:4840/visioncell'); None (the default): no OPC UA server. "
+        "Clients sign in with a VisionCell user's name and one of its API tokens as the "
+        "password (docs/plc.md).",
+    )
+    opcua_anonymous: Literal["off", "read-only"] = Field(
+        "off",
+        description="OPC UA clients without a user: refused ('off'), or allowed to read and "
+        "subscribe, never to call a method ('read-only').",
+    )
+    opcua_security: Literal["none", "encrypt", "both"] = Field(
+        "both",
+        description="OPC UA security policies offered: 'none' (None: user names and tokens "
+        "cross the network in clear), 'encrypt' (Basic256Sha256, SignAndEncrypt only), or "
+        "'both'.  The server's certificate and key are made at first start under "
+        "var_dir/opcua (self-signed; replace them with the plant's).",
+    )
+    opcua_user_certificates: Path | None = Field(
+        None,
+        description="Folder of user certificates, NAME.der or NAME.pem: an OPC UA client "
+        "signing in with one of them (an X509 identity token, over the encrypting policy) "
+        "acts as the enabled VisionCell user NAME; None: certificates sign nobody in.",
+    )
+    opcua_nodesets: bool = Field(
+        True,
+        description="Load OPC 40100's MachineVision and the DI NodeSet2 files from "
+        "data_dir/opcua into the OPC UA server when they are there (a few seconds at start, "
+        "on the server's own thread).",
+    )
+    modbus_port: int | None = Field(
+        None,
+        ge=1,
+        le=65535,
+        description="Serve the Modbus TCP handshake (docs/plc.md's register map) on this "
+        "port; None (the default): no Modbus server.",
+    )
+    modbus_host: str = Field(
+        "127.0.0.1",
+        description="Address of the Modbus TCP server (Modbus has no sign-in: keep it on the "
+        "loopback interface or the cell's own network segment).",
+    )
+    modbus_role: Literal["viewer", "operator", "engineer"] = Field(
+        "operator",
+        description="The role every Modbus client acts with: 'viewer' reads, 'operator' "
+        "also triggers, runs and resets, 'engineer' also selects recipes.",
+    )
+    plc_result_queue: int = Field(
+        32,
+        ge=1,
+        le=1000,
+        description="Results each PLC link holds until its PLC acknowledges them (a "
+        "continuous run stores objects faster than a slow PLC reads them).",
+    )
+
     max_json_body_bytes: int = Field(
         1 << 20,
         ge=4096,
@@ -358,7 +421,7 @@ class Settings(BaseSettings):
         description="Longest wait of such a request for its turn before a 503 busy, s.",
     )
 
-    @field_validator("http_host", "viser_host")
+    @field_validator("http_host", "viser_host", "modbus_host")
     @classmethod
     def _valid_host(cls, v: str) -> str:
         if v != "localhost":
@@ -366,6 +429,27 @@ class Settings(BaseSettings):
                 ipaddress.ip_address(v)
             except ValueError as exc:
                 raise ValueError(f"host must be an IP address or 'localhost', got {v!r}") from exc
+        return v
+
+    @field_validator("opcua_endpoint")
+    @classmethod
+    def _valid_opcua_endpoint(cls, v: str | None) -> str | None:
+        if v is None:
+            return None
+        m = _OPCUA_ENDPOINT.match(v) if isinstance(v, str) and len(v) <= 256 else None
+        if m is None or not 1 <= int(m.group("port")) <= 65535:
+            raise ValueError(
+                "opcua_endpoint must be 'opc.tcp://HOST:PORT[/PATH]' with HOST an IP address "
+                f"or 'localhost' and PORT in 1..65535 (at most 256 characters), got {str(v)[:80]!r}"
+            )
+        host = m.group("host").strip("[]")
+        if host != "localhost":
+            try:
+                ipaddress.ip_address(host)
+            except ValueError:
+                raise ValueError(
+                    f"opcua_endpoint's host must be an IP address or 'localhost', got {host!r}"
+                ) from None
         return v
 
     @field_validator("trusted_proxies")
@@ -421,7 +505,12 @@ class Settings(BaseSettings):
     def _safe(self) -> Settings:
         public = [
             f"{name}={host!r}"
-            for name, host in (("http_host", self.http_host), ("viser_host", self.viser_host))
+            for name, host in (
+                ("http_host", self.http_host),
+                ("viser_host", self.viser_host),
+                *((("opcua_endpoint", self.opcua_host()),) if self.opcua_endpoint else ()),
+                *((("modbus_host", self.modbus_host),) if self.modbus_port else ()),
+            )
             if not _is_loopback(host)
         ]
         if public and not self.auth_enabled:
@@ -462,9 +551,19 @@ class Settings(BaseSettings):
                 load_layout(self.cell_layout)
             except LayoutError as exc:
                 raise ValueError(f"VISIONCELL_CELL_LAYOUT: {exc}") from None
+        if self.opcua_user_certificates is not None and self.opcua_security == "none":
+            raise ValueError(
+                "opcua_user_certificates needs an encrypting policy: set opcua_security to "
+                "'encrypt' or 'both'"
+            )
         if self.http_port == self.viser_port and self.http_host == self.viser_host:
             raise ValueError(f"http_port and viser_port must differ, both are {self.http_port}")
         return self
+
+    def opcua_host(self) -> str:
+        """The host of ``opcua_endpoint`` (empty when there is none)."""
+        m = _OPCUA_ENDPOINT.match(self.opcua_endpoint or "")
+        return "" if m is None else m.group("host").strip("[]")
 
     def trusted_proxy_networks(self) -> tuple[Network, ...]:
         """``trusted_proxies`` as networks (an address is a network of one)."""

@@ -1,0 +1,525 @@
+"""The trigger and result handshake a line's PLC drives, independent of the protocol.
+
+One :class:`Handshake` per link (the OPC UA server has one, the Modbus TCP server another),
+in the style of the vision sensors' PLC handshakes (Cognex In-Sight, Keyence, Matrox):
+
+- **Trigger Enable** (set by the PLC) arms the link; **Trigger Ready** says a trigger would
+  be taken now: enabled, not busy, no continuous run, no E-STOP, no result waiting for
+  its acknowledgement.
+- A **Trigger** starts one inspection of the object at the station with the active
+  recipe's options; the link answers with **Trigger Ack** and **Busy**.  A trigger that
+  cannot be taken is refused with an **error code** (:class:`ErrorCode`): not enabled,
+  while busy, a result not acknowledged, E-STOP, the cell not ready, a role too low.
+- When the inspection is stored, its result words are presented and **Results Valid**
+  goes high.  The PLC reads them and **acknowledges** (``ack``); the next queued result
+  (a continuous run can store several before the PLC reads one) is presented by
+  :meth:`Handshake.present_next`.  Results are queued up to ``max_queue``; beyond, the
+  oldest is kept and the new one counted as overflow (error code ``RESULTS_OVERFLOW``):
+  the PLC has lost nothing it was shown, and it is told that it fell behind.
+- The cell's E-STOP reaches the link through the event bus (:class:`CellStopped`) the
+  moment it is latched: no polling, no database.
+
+Every change calls the listeners (:meth:`Handshake.add_listener`) with a
+:class:`Snapshot`, on the event loop, synchronously: a protocol server copies it into its
+registers or variables there and then.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import enum
+import logging
+import math
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from backend.cell.events import CellStopped, JobState
+from backend.db.models import Role
+from backend.inspection import service
+from backend.plc import recipes
+from vision.errors import VisionCellError
+
+__all__ = [
+    "DECISION_CODES",
+    "ErrorCode",
+    "Handshake",
+    "LinkUser",
+    "PlcResult",
+    "Snapshot",
+    "SystemState",
+]
+
+log = logging.getLogger(__name__)
+
+#: Most results a link holds for its PLC by default.
+DEFAULT_QUEUE = 32
+
+
+class SystemState(enum.IntEnum):
+    """The cell's state as a PLC sees it (OPC 40100's system states where they fit)."""
+
+    IDLE = 0
+    """Trigger not enabled, nothing running."""
+    READY = 1
+    """A trigger would be taken now."""
+    EXECUTING = 2
+    """An inspection or a continuous run is going."""
+    ERROR = 3
+    """The last command was refused or failed (see the error code); reset clears it."""
+    ESTOP = 4
+    """Stopped by E-STOP (latched until reset)."""
+
+    @property
+    def label(self) -> str:
+        """The name shown to the PLC and the MES."""
+        return {4: "Stopped by E-STOP"}.get(int(self), self.name.capitalize())
+
+
+class ErrorCode(enum.IntEnum):
+    """Why the last command was refused or failed (0: none)."""
+
+    NONE = 0
+    TRIGGER_NOT_ENABLED = 1
+    TRIGGER_WHILE_BUSY = 2
+    RESULT_NOT_ACKNOWLEDGED = 3
+    ESTOP = 4
+    NOT_READY = 5
+    """The cell refused: arm busy, nothing trained, camera or link down."""
+    INSPECTION_FAILED = 6
+    """The inspection's job failed or was cancelled before storing a result."""
+    RESULTS_OVERFLOW = 7
+    RECIPE_UNKNOWN = 8
+    RECIPES_UNAVAILABLE = 9
+    ROLE_TOO_LOW = 10
+    NO_RUN = 11
+    """Stop was asked with no run going."""
+    BAD_REQUEST = 12
+    INTERNAL = 99
+
+
+#: Decision words of the result (0: no result).
+DECISION_CODES = {"recognized": 1, "unknown": 2, "failed": 3}
+
+
+@dataclass(frozen=True)
+class LinkUser:
+    """Who drives a link: a VisionCell user's name and role."""
+
+    name: str
+    role: Role
+
+
+@dataclass(frozen=True)
+class PlcResult:
+    """One stored inspection, in the units a PLC reads."""
+
+    inspection_id: int
+    decision: str
+    """``recognized``, ``unknown`` or ``failed``."""
+    model: str | None
+    model_id: int
+    """The model's database id (0: none)."""
+    score: float | None
+    x_m: float | None
+    """Object position in the robot base frame, metres (None: no pose)."""
+    y_m: float | None
+    yaw_rad: float | None
+    """Rotation about the base z axis, radians in [-pi, pi)."""
+    bin: int
+    """1-based index of the bin in the cell's layout (0: not sorted)."""
+    bin_name: str | None
+    duration_s: float
+    trigger: int
+    """The trigger number that asked for it (0: from a continuous run)."""
+
+    @property
+    def decision_code(self) -> int:
+        """:data:`DECISION_CODES` of the decision."""
+        return DECISION_CODES.get(self.decision, 3)
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The link's whole state at one moment."""
+
+    state: SystemState
+    trigger_enabled: bool
+    trigger_ready: bool
+    trigger_ack: bool
+    busy: bool
+    results_valid: bool
+    running: bool
+    estop: bool
+    error: ErrorCode
+    error_text: str
+    recipe: int
+    triggers: int
+    """Triggers taken so far (the last one's number)."""
+    result: PlcResult | None
+    """The result presented now (None before the first)."""
+    queued: int
+    """Results waiting behind the presented one."""
+    overflows: int
+
+
+def result_of(public: dict[str, Any], *, bins: list[str], trigger: int) -> PlcResult:
+    """A :class:`PlcResult` from an inspection's API form (``inspection_public``)."""
+    pose = public.get("pose") if isinstance(public.get("pose"), dict) else None
+    x = y = yaw = None
+    if pose is not None:
+        pos = pose.get("position_m") or [row[3] for row in pose.get("T_base_obj", [])[:3]]
+        if len(pos) >= 2 and all(math.isfinite(float(v)) for v in pos[:2]):
+            x, y = float(pos[0]), float(pos[1])
+        if pose.get("yaw_rad") is not None and math.isfinite(float(pose["yaw_rad"])):
+            yaw = math.remainder(float(pose["yaw_rad"]), 2 * math.pi)
+    outcome = public.get("pick_outcome") or {}
+    bin_name = outcome.get("bin") if isinstance(outcome.get("bin"), str) else None
+    return PlcResult(
+        inspection_id=int(public["id"]),
+        decision=str(public["decision"]),
+        model=public.get("model"),
+        model_id=int(public.get("model_id") or 0),
+        score=None if public.get("score") is None else float(public["score"]),
+        x_m=x,
+        y_m=y,
+        yaw_rad=yaw,
+        bin=bins.index(bin_name) + 1 if bin_name in bins else 0,
+        bin_name=bin_name,
+        duration_s=float(public.get("duration_s") or 0.0),
+        trigger=trigger,
+    )
+
+
+class Handshake:
+    """The handshake of one link over one cell runtime (see the module docstring).
+
+    Parameters
+    ----------
+    rt : CellRuntime
+        The running cell.
+    name : str
+        The link's name for logs (``opcua``, ``modbus``).
+    max_queue : int
+        Most results held for the PLC (1..1000).
+    """
+
+    def __init__(self, rt: Any, *, name: str, max_queue: int = DEFAULT_QUEUE) -> None:
+        if (
+            isinstance(max_queue, bool)
+            or not isinstance(max_queue, int)
+            or not 1 <= max_queue <= 1000
+        ):
+            raise ValueError(f"max_queue must be an integer in 1..1000, got {max_queue!r}")
+        self.rt = rt
+        self.name = name
+        self.max_queue = max_queue
+        self._listeners: list[Callable[[Snapshot], None]] = []
+        self._removers: list[Callable[[], None]] = []
+        self._tasks: set[asyncio.Task[Any]] = set()
+        self._queue: deque[PlcResult] = deque()
+        self._presented: PlcResult | None = None
+        self._valid = False
+        self._enabled = False
+        self._ack = False
+        self._busy = False
+        self._estop = False
+        self._error = ErrorCode.NONE
+        self._error_text = ""
+        self._recipe = 0
+        self._triggers = 0
+        self._overflows = 0
+        self._run: Any = None
+        self._seen: set[int] = set()
+        self._ack_held = False
+        self.snapshot = self._make()
+
+    # -- life cycle --------------------------------------------------------------------------
+    async def start(self) -> None:
+        """Follow the cell's E-STOP, runs and active recipe."""
+        bus = self.rt.bus
+        self._removers.append(bus.add_listener(self._on_stop, CellStopped))
+        self._removers.append(bus.add_listener(self._on_done, service.InspectionDone))
+        self._removers.append(bus.add_listener(self._on_job, JobState))
+        self._estop = bool(self.rt.cell.estopped)
+        with contextlib.suppress(Exception):
+            self._recipe = await recipes.active_number(self.rt)
+        self._changed()
+
+    async def stop(self) -> None:
+        """Stop following the cell; cancel this link's pending work."""
+        for remove in self._removers:
+            remove()
+        self._removers.clear()
+        for task in list(self._tasks):
+            task.cancel()
+        for task in list(self._tasks):
+            with contextlib.suppress(BaseException):
+                await task
+
+    def add_listener(self, fn: Callable[[Snapshot], None]) -> None:
+        """Call ``fn(snapshot)`` after every change (on the event loop; must not block)."""
+        self._listeners.append(fn)
+        fn(self.snapshot)
+
+    # -- state -------------------------------------------------------------------------------
+    def _running(self) -> bool:
+        run = self._run
+        return (
+            run is not None
+            and run.job is not None
+            and run.job.task is not None
+            and not run.job.task.done()
+            and run.job.state.value == "running"
+        )
+
+    def _make(self) -> Snapshot:
+        running = self._running()
+        pending = self._valid or bool(self._queue)
+        ready = self._enabled and not (self._busy or running or self._estop or pending)
+        if self._estop:
+            state = SystemState.ESTOP
+        elif self._busy or running:
+            state = SystemState.EXECUTING
+        elif self._error is not ErrorCode.NONE:
+            state = SystemState.ERROR
+        elif ready:
+            state = SystemState.READY
+        else:
+            state = SystemState.IDLE
+        return Snapshot(
+            state=state, trigger_enabled=self._enabled, trigger_ready=ready,
+            trigger_ack=self._ack, busy=self._busy or running, results_valid=self._valid,
+            running=running, estop=self._estop, error=self._error, error_text=self._error_text,
+            recipe=self._recipe, triggers=self._triggers,
+            result=self._presented if self._valid or self._presented else None,
+            queued=len(self._queue), overflows=self._overflows,
+        )  # fmt: skip
+
+    def _changed(self) -> None:
+        self.snapshot = self._make()
+        for fn in list(self._listeners):
+            try:
+                fn(self.snapshot)
+            except Exception:
+                log.exception("PLC link %s: a listener failed", self.name)
+
+    def _fail(self, code: ErrorCode, text: str) -> bool:
+        """Set the error code and text (a refusal); returns False."""
+        self._error, self._error_text = code, text[:200]
+        log.info("PLC link %s: %s (%s)", self.name, code.name, text)
+        self._changed()
+        return False
+
+    def _spawn(self, coro: Any) -> None:
+        task = asyncio.get_running_loop().create_task(coro, name=f"plc-{self.name}")
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    @staticmethod
+    def _allowed(user: LinkUser, role: Role) -> bool:
+        return int(user.role) >= int(role)
+
+    # -- commands ----------------------------------------------------------------------------
+    def set_trigger_enable(self, enabled: bool) -> None:
+        """The PLC's Trigger Enable."""
+        self._enabled = bool(enabled)
+        self._changed()
+
+    async def trigger(self, user: LinkUser) -> bool:
+        """Start one inspection; False (and the error code set) when refused."""
+        if not self._allowed(user, Role.operator):
+            return self._fail(
+                ErrorCode.ROLE_TOO_LOW, f"{user.name} ({user.role.name}) may not trigger"
+            )
+        if self._estop:
+            return self._fail(ErrorCode.ESTOP, "stopped by E-STOP")
+        if not self._enabled:
+            return self._fail(ErrorCode.TRIGGER_NOT_ENABLED, "trigger enable is off")
+        if self._busy or self._running():
+            return self._fail(ErrorCode.TRIGGER_WHILE_BUSY, "an inspection is going")
+        if self._valid or self._queue:
+            return self._fail(
+                ErrorCode.RESULT_NOT_ACKNOWLEDGED, "the last result is not acknowledged"
+            )
+        self._busy = True
+        self._triggers += 1
+        number = self._triggers
+        try:
+            opts = await recipes.options(self.rt)
+            job = await service.start_inspection(self.rt, opts)
+        except VisionCellError as exc:
+            self._busy = False
+            return self._fail(ErrorCode.NOT_READY, f"{exc.code}: {exc}")
+        except Exception as exc:  # never take the link down with the cell's error
+            log.exception("PLC link %s: trigger failed", self.name)
+            self._busy = False
+            return self._fail(ErrorCode.INTERNAL, repr(exc))
+        self._ack = True
+        self._error, self._error_text = ErrorCode.NONE, ""
+        self._changed()
+        self._spawn(self._finish(job, number))
+        return True
+
+    def clear_trigger(self) -> None:
+        """The PLC dropped its Trigger: Trigger Ack follows it down."""
+        if self._ack:
+            self._ack = False
+            self._changed()
+
+    async def _finish(self, job: Any, number: int) -> None:
+        await self.rt.jobs.wait(job)
+        self._busy = False
+        result = job.result if isinstance(job.result, dict) else None
+        if job.state.value == "done" and result is not None and "inspection" in result:
+            self._offer(result_of(result["inspection"], bins=self._bins(), trigger=number))
+            return
+        err = (job.error or {}).get("detail") or job.state.value
+        code = ErrorCode.ESTOP if self._estop else ErrorCode.INSPECTION_FAILED
+        self._fail(code, f"inspection {job.state.value}: {err}")
+
+    def _bins(self) -> list[str]:
+        sim = getattr(self.rt, "sim", None)
+        return [] if sim is None else [b.name for b in sim.config.layout.bins]
+
+    async def _follow_recipe(self) -> None:
+        """Read the active recipe's number again (the console or another link may have
+        selected one): after each result, off the result's path."""
+        with contextlib.suppress(Exception):
+            number = await recipes.active_number(self.rt)
+            if number != self._recipe:
+                self._recipe = number
+                self._changed()
+
+    def _offer(self, res: PlcResult) -> None:
+        if res.inspection_id in self._seen:  # one inspection is offered once
+            return
+        self._seen.add(res.inspection_id)
+        if len(self._seen) > 100_000:
+            self._seen = {res.inspection_id}
+        if not self._valid and not self._queue and not self._ack_held:
+            self._presented, self._valid = res, True
+        elif len(self._queue) >= self.max_queue:
+            self._overflows += 1
+            self._error = ErrorCode.RESULTS_OVERFLOW
+            self._error_text = f"{self._overflows} results dropped: acknowledge faster"
+        else:
+            self._queue.append(res)
+        self._changed()
+        self._spawn(self._follow_recipe())
+
+    def acknowledge(self, inspection_id: int | None = None) -> bool:
+        """The PLC took the presented result (``inspection_id``: only if it is that one).
+
+        Results Valid drops; :meth:`present_next` shows the next queued result.
+        """
+        if not self._valid or self._presented is None:
+            return False
+        if inspection_id is not None and inspection_id != self._presented.inspection_id:
+            return False
+        self._valid = False
+        self._ack_held = True
+        self._changed()
+        return True
+
+    def present_next(self) -> None:
+        """The PLC dropped its Results Ack: present the next queued result, if any."""
+        self._ack_held = False
+        if not self._valid and self._queue:
+            self._presented, self._valid = self._queue.popleft(), True
+        self._changed()
+
+    async def start_run(self, user: LinkUser, count: int | None) -> bool:
+        """Start continuous operation with the active recipe (``count`` objects, None: until
+        stopped); its results are queued for the PLC."""
+        if not self._allowed(user, Role.operator):
+            return self._fail(
+                ErrorCode.ROLE_TOO_LOW, f"{user.name} ({user.role.name}) may not start a run"
+            )
+        if self._estop:
+            return self._fail(ErrorCode.ESTOP, "stopped by E-STOP")
+        if self._busy or self._running():
+            return self._fail(ErrorCode.TRIGGER_WHILE_BUSY, "an inspection is going")
+        try:
+            opts = await recipes.options(self.rt)
+            resolve = recipes.resolver(self.rt)  # a recipe selected mid-run: the next object
+            kw = {} if resolve is None else {"resolve": resolve}
+            self._run = service.start_run(self.rt, opts, count, **kw)
+        except VisionCellError as exc:
+            return self._fail(ErrorCode.NOT_READY, f"{exc.code}: {exc}")
+        # the job's end event goes out before its task is done: the state follows the task
+        self._run.job.task.add_done_callback(lambda _t: self._changed())
+        self._error, self._error_text = ErrorCode.NONE, ""
+        self._changed()
+        return True
+
+    def stop_run(self, user: LinkUser) -> bool:
+        """End the run after the current object."""
+        if not self._allowed(user, Role.operator):
+            return self._fail(
+                ErrorCode.ROLE_TOO_LOW, f"{user.name} ({user.role.name}) may not stop a run"
+            )
+        if not self._running():
+            return self._fail(ErrorCode.NO_RUN, "no run started by this link is going")
+        with contextlib.suppress(VisionCellError):
+            service.stop_run(self.rt)
+        self._changed()
+        return True
+
+    async def select_recipe(self, user: LinkUser, number: int) -> bool:
+        """Make recipe ``number`` the active one (a line changeover: operators, as over REST;
+        only engineers create or change recipes, and not over the PLC links)."""
+        if not self._allowed(user, Role.operator):
+            return self._fail(
+                ErrorCode.ROLE_TOO_LOW, f"{user.name} ({user.role.name}) may not select recipes"
+            )
+        try:
+            self._recipe = await recipes.select(self.rt, number, user=user, link=self.name)
+        except recipes.RecipesUnavailable as exc:
+            return self._fail(ErrorCode.RECIPES_UNAVAILABLE, str(exc))
+        except VisionCellError as exc:
+            code = ErrorCode.RECIPE_UNKNOWN if exc.http_status == 404 else ErrorCode.BAD_REQUEST
+            return self._fail(code, f"{exc.code}: {exc}")
+        self._error, self._error_text = ErrorCode.NONE, ""
+        self._changed()
+        return True
+
+    async def reset(self, user: LinkUser) -> bool:
+        """Clear the error code and, when latched, the cell's E-STOP (operators)."""
+        if not self._allowed(user, Role.operator):
+            return self._fail(
+                ErrorCode.ROLE_TOO_LOW, f"{user.name} ({user.role.name}) may not reset"
+            )
+        if self._estop or self.rt.cell.estopped:
+            try:
+                await self.rt.cell.reset(by=user.name, role=user.role.name, source=self.name)
+            except Exception as exc:
+                return self._fail(ErrorCode.ESTOP, f"the E-STOP could not be reset: {exc}")
+        self._error, self._error_text = ErrorCode.NONE, ""
+        self._changed()
+        return True
+
+    # -- the cell's events -------------------------------------------------------------------
+    def _on_stop(self, ev: CellStopped) -> None:
+        self._estop = bool(ev.active)
+        self._changed()
+
+    def _on_done(self, ev: Any) -> None:
+        if not self._running():
+            return  # a trigger's result comes from its job, with the trigger's number
+        iid = int(ev.inspection_id)
+        self._spawn(self._read_and_offer(iid))
+
+    async def _read_and_offer(self, iid: int) -> None:
+        from backend.inspection import results
+
+        async with self.rt.database.session() as session:
+            public = results.inspection_public(await results.get_inspection(session, iid))
+        self._offer(result_of(public, bins=self._bins(), trigger=0))
+
+    def _on_job(self, ev: JobState) -> None:
+        run = self._run
+        if run is not None and run.job is not None and ev.job_id == run.job.id:
+            self._changed()  # a run ended (or began): busy and state follow

@@ -1,0 +1,526 @@
+"""The OPC UA server of the cell (asyncua), for a line's PLC and the plant's MES.
+
+Address space (namespace ``urn:visioncell:plc``), under ``Objects/VisionCell``, laid out as
+OPC 40100-1 (Machine Vision) lays out a vision system where it fits the cell:
+
+- ``StateMachine``: ``CurrentState`` (``Idle``, ``Ready``, ``Executing``, ``Error``,
+  ``Stopped by E-STOP``) and ``CurrentStateCode`` (:class:`SystemState`);
+- ``Status``: the handshake's flags (``TriggerEnabled``, ``TriggerReady``, ``Busy``,
+  ``ResultsValid``, ``Running``, ``EStop``), ``ErrorCode`` / ``ErrorText``, ``Triggers``,
+  ``QueuedResults``;
+- ``RecipeManagement``: ``ActiveRecipeId`` and the method ``SelectRecipe(UInt16)`` (a line
+  changeover: operators, as over REST);
+- ``ResultManagement/Result``: the presented result (``InspectionId``, ``TriggerNumber``,
+  ``Decision``, ``DecisionCode``, ``Model``, ``ModelId``, ``Score``, ``X_mm``, ``Y_mm``,
+  ``Yaw_deg``, ``Bin``, ``BinName``, ``Duration_s``) and the method
+  ``AcknowledgeResult(UInt32 inspection id)``; every presented result is also sent as an
+  ``InspectionResultEventType`` event from the ``VisionCell`` object;
+- methods ``EnableTrigger(Boolean)``, ``Trigger() -> UInt32``, ``StartRun(UInt32 count, 0:
+  until stopped)``, ``StopRun()``, ``Reset()``.
+
+A refused command answers ``BadUserAccessDenied`` (role too low) or ``BadInvalidState``
+(the handshake's error code and text say why).  OPC 40100's MachineVision nodeset and the DI
+nodeset it builds on are loaded (when found in the data directory) so that clients can
+browse the companion specification's types.
+
+Process: asyncua builds its address space and parses the nodesets in long synchronous
+stretches (seconds), so this server runs in a child process of its own
+(:mod:`backend.plc.opcua_link`); its method calls go to the cell's handshake over a pipe, the
+handshake's changes come back the same way.  Nothing here ever holds the cell's loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import contextvars
+import logging
+import math
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlsplit
+
+from backend.db.models import Role
+from backend.plc.handshake import ErrorCode, LinkUser, Snapshot
+from backend.plc.signin import Credentials
+
+__all__ = ["NAMESPACE", "OpcUaServer", "nodeset_files"]
+
+log = logging.getLogger(__name__)
+
+NAMESPACE = "urn:visioncell:plc"
+#: The server's application URI (in its certificate).
+APP_URI = "urn:visioncell:server"
+#: Most OPC UA sessions at once.
+MAX_SESSIONS = 64
+#: The nodesets loaded, in order (DI first: MachineVision builds on it).
+NODESETS = ("Opc.Ua.Di.NodeSet2.xml", "Opc.Ua.MachineVision.NodeSet2.xml")
+#: Longest wait for the server's thread to come up or go down, seconds (a hang's bound).
+START_BOUND_S = 300.0
+
+_session_user: contextvars.ContextVar[Any] = contextvars.ContextVar("opcua_user", default=None)
+
+
+def nodeset_files(data_dir: Path) -> list[Path]:
+    """The OPC 40100 nodesets under ``data_dir/opcua`` (empty when any is missing)."""
+    files = [data_dir / "opcua" / n for n in NODESETS]
+    return files if all(f.is_file() for f in files) else []
+
+
+def _mm(v: float | None) -> float:
+    return float("nan") if v is None else round(v * 1000.0, 2)
+
+
+def _deg(v: float | None) -> float:
+    return float("nan") if v is None else round(math.degrees(v), 2)
+
+
+@dataclass
+class _Var:
+    node: Any
+    vtype: Any
+    value: Any = None
+
+
+class OpcUaServer:
+    """The OPC UA server (in the child process: see :mod:`backend.plc.opcua_link`).
+
+    Parameters
+    ----------
+    bridge : Bridge
+        The pipe to the cell's process: commands go there, snapshots come from there.
+    credentials : Credentials
+        The sign-in tables (loaded from the cell's process at each new session).
+    endpoint : str
+        ``opc.tcp://HOST:PORT[/PATH]``.
+    anonymous_read : bool
+        Let clients without a user read and subscribe (never call a method).
+    nodesets : list of Path
+        NodeSet2 files loaded at start, in order.
+    throttle : SignInThrottle, optional
+        Failed sign-ins per client address.
+    security : {"none", "encrypt", "both"}
+        Security policies offered: None, Basic256Sha256 SignAndEncrypt, or both.
+    cert_dir : Path, optional
+        Where the server's certificate and key are kept (made at first start).
+    """
+
+    def __init__(self, bridge: Any, credentials: Credentials, *, endpoint: str,
+                 anonymous_read: bool = False, nodesets: list[Path] | None = None,
+                 throttle: Any = None, security: str = "none",
+                 cert_dir: Path | None = None) -> None:  # fmt: skip
+        self.bridge = bridge
+        self.credentials = credentials
+        self.endpoint = endpoint
+        self.anonymous_read = anonymous_read
+        self.nodesets = list(nodesets or [])
+        self.throttle = throttle
+        self.security = security
+        self.cert_dir = cert_dir
+        self.load_s: float | None = None
+        """Seconds the nodesets took to load."""
+        self.stop_event = asyncio.Event()
+        self._snapshots: asyncio.Queue[Snapshot] = asyncio.Queue()
+        self._vars: dict[str, _Var] = {}
+        self._server: Any = None
+        self._events: Any = None
+        self._last_event_id = 0
+
+    def on_snapshot(self, snap: Snapshot) -> None:
+        """A snapshot of the handshake arrived from the cell."""
+        self._snapshots.put_nowait(snap)
+
+    async def serve(self, ready: Callable[[float], None]) -> None:
+        """Build the address space, listen, call ``ready(load_s)``, serve until
+        :attr:`stop_event` is set."""
+        from asyncua import Server, ua
+
+        # asyncua logs every request at INFO: the cell's log keeps its warnings only
+        logging.getLogger("asyncua").setLevel(max(logging.WARNING, log.getEffectiveLevel()))
+        manager: Any = _UserManager(self.credentials, self.anonymous_read)
+        server = Server(user_manager=manager)
+        await server.init()
+        server.set_endpoint(self.endpoint)
+        await server.set_application_uri(APP_URI)
+        server.set_server_name("VisionCell")
+        policies = []
+        if self.security in ("none", "both"):
+            policies.append(ua.SecurityPolicyType.NoSecurity)
+        if self.security in ("encrypt", "both"):
+            await self._load_certificate(server)
+            policies.append(ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt)
+        server.set_security_policy(policies, permission_ruleset=_ruleset(self.anonymous_read))
+        from asyncua.server.internal_session import InternalSession
+
+        InternalSession.max_connections = MAX_SESSIONS
+        tokens: list[type] = [ua.UserNameIdentityToken]
+        if self.credentials.user_certificates is not None:
+            tokens.append(ua.X509IdentityToken)
+        if self.anonymous_read:
+            tokens.append(ua.AnonymousIdentityToken)
+        server.set_identity_tokens(tokens)
+        _hook_sessions(server, self._refresh_credentials, self.throttle, manager)
+        t0 = time.perf_counter()
+        for path in self.nodesets:
+            await server.import_xml(str(path))
+        self.load_s = time.perf_counter() - t0
+        if self.nodesets:
+            log.info("OPC UA: loaded %d nodesets in %.2f s", len(self.nodesets), self.load_s)
+        await self._build(server)
+        self._server = server
+        if self.stop_event.is_set():  # stopped while starting
+            return
+        async with server:
+            ready(self.load_s or 0.0)
+            log.info("OPC UA server listening on %s", self.endpoint)
+            writer = asyncio.get_running_loop().create_task(self._writer())
+            await self.stop_event.wait()
+            writer.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await writer
+
+    async def _load_certificate(self, server: Any) -> None:
+        """The server's certificate and key under ``cert_dir`` (self-signed, made once)."""
+        from asyncua.crypto.cert_gen import setup_self_signed_certificate
+        from cryptography.x509.oid import ExtendedKeyUsageOID
+
+        if self.cert_dir is None:
+            raise ValueError("an encrypting security policy needs a folder for the certificate")
+        self.cert_dir.mkdir(parents=True, exist_ok=True)
+        key, cert = self.cert_dir / "server-key.pem", self.cert_dir / "server-cert.der"
+        host = endpoint_host(self.endpoint) or "localhost"
+        await setup_self_signed_certificate(
+            key, cert, APP_URI, host, [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
+            {"commonName": "VisionCell OPC UA server", "organizationName": "VisionCell"},
+        )  # fmt: skip
+        await server.load_certificate(str(cert))
+        await server.load_private_key(str(key))
+
+    async def _refresh_credentials(self) -> None:
+        try:
+            by_hash, by_cert = await self.bridge.request("refresh")
+            self.credentials.load(by_hash, by_cert)
+        except Exception:  # the database is down: the tables read last are used
+            log.warning("OPC UA: could not re-read the sign-in tables", exc_info=True)
+
+    async def _build(self, server: Any) -> None:
+        from asyncua import ua
+
+        idx = await server.register_namespace(NAMESPACE)
+        V = ua.VariantType
+        cell = await server.nodes.objects.add_object(idx, "VisionCell")
+        groups: dict[str, Any] = {}
+        for g in ("StateMachine", "Status", "RecipeManagement", "ResultManagement"):
+            groups[g] = await cell.add_object(idx, g)
+        groups["Result"] = await groups["ResultManagement"].add_object(idx, "Result")
+        spec: dict[str, list[tuple[str, Any, Any]]] = {
+            "StateMachine": [("CurrentState", "Idle", V.String), ("CurrentStateCode", 0, V.Int32)],
+            "Status": [("TriggerEnabled", False, V.Boolean), ("TriggerReady", False, V.Boolean),
+                       ("Busy", False, V.Boolean), ("ResultsValid", False, V.Boolean),
+                       ("Running", False, V.Boolean), ("EStop", False, V.Boolean),
+                       ("ErrorCode", 0, V.UInt16), ("ErrorText", "", V.String),
+                       ("Triggers", 0, V.UInt32), ("QueuedResults", 0, V.UInt32)],
+            "RecipeManagement": [("ActiveRecipeId", 0, V.UInt16)],
+            "Result": [("InspectionId", 0, V.UInt32), ("TriggerNumber", 0, V.UInt32),
+                       ("Decision", "", V.String), ("DecisionCode", 0, V.UInt16),
+                       ("Model", "", V.String), ("ModelId", 0, V.UInt32),
+                       ("Score", float("nan"), V.Double), ("X_mm", float("nan"), V.Double),
+                       ("Y_mm", float("nan"), V.Double), ("Yaw_deg", float("nan"), V.Double),
+                       ("Bin", 0, V.UInt16), ("BinName", "", V.String),
+                       ("Duration_s", 0.0, V.Double)],
+        }  # fmt: skip
+        for group, items in spec.items():
+            for name, value, vtype in items:
+                node = await groups[group].add_variable(idx, name, ua.Variant(value, vtype))
+                self._vars[name] = _Var(node, vtype, value)
+        self._events = await server.create_custom_event_type(
+            idx, "InspectionResultEventType", ua.ObjectIds.BaseEventType,
+            [("InspectionId", V.UInt32), ("TriggerNumber", V.UInt32), ("Decision", V.String),
+             ("Model", V.String), ("ModelId", V.UInt32), ("Score", V.Double), ("X_mm", V.Double),
+             ("Y_mm", V.Double), ("Yaw_deg", V.Double), ("Bin", V.UInt16),
+             ("Duration_s", V.Double)],
+        )  # fmt: skip
+        self._evgen = await server.get_event_generator(self._events, cell)
+        A = ua.Argument
+
+        def arg(name: str, vtype: Any) -> Any:
+            a = A()
+            a.Name, a.DataType, a.ValueRank = name, ua.NodeId(vtype.value), -1
+            return a
+
+        await cell.add_method(idx, "EnableTrigger", self._m_enable, [arg("Enable", V.Boolean)], [])
+        await cell.add_method(idx, "Trigger", self._m_trigger, [], [arg("TriggerNumber", V.UInt32)])
+        await cell.add_method(idx, "StartRun", self._m_start_run, [arg("Count", V.UInt32)], [])
+        await cell.add_method(idx, "StopRun", self._m_stop_run, [], [])
+        await cell.add_method(idx, "Reset", self._m_reset, [], [])
+        await groups["RecipeManagement"].add_method(
+            idx, "SelectRecipe", self._m_select, [arg("RecipeId", V.UInt16)], []
+        )
+        await groups["ResultManagement"].add_method(
+            idx, "AcknowledgeResult", self._m_ack, [arg("InspectionId", V.UInt32)],
+            [arg("Acknowledged", V.Boolean)],
+        )  # fmt: skip
+
+    async def _writer(self) -> None:
+        """Copy each handshake snapshot into the variables (only what changed) and send an
+        event for each newly presented result."""
+        from asyncua import ua
+
+        assert self._snapshots is not None
+        while True:
+            snap = await self._snapshots.get()
+            r = snap.result
+            values: dict[str, Any] = {
+                "CurrentState": snap.state.label, "CurrentStateCode": int(snap.state),
+                "TriggerEnabled": snap.trigger_enabled, "TriggerReady": snap.trigger_ready,
+                "Busy": snap.busy, "ResultsValid": snap.results_valid, "Running": snap.running,
+                "EStop": snap.estop, "ErrorCode": int(snap.error), "ErrorText": snap.error_text,
+                "Triggers": snap.triggers % 2**32, "QueuedResults": snap.queued,
+                "ActiveRecipeId": snap.recipe,
+            }  # fmt: skip
+            if r is not None:
+                values.update({
+                    "InspectionId": r.inspection_id % 2**32, "TriggerNumber": r.trigger % 2**32,
+                    "Decision": r.decision, "DecisionCode": r.decision_code,
+                    "Model": r.model or "", "ModelId": r.model_id,
+                    "Score": float("nan") if r.score is None else float(r.score),
+                    "X_mm": _mm(r.x_m), "Y_mm": _mm(r.y_m), "Yaw_deg": _deg(r.yaw_rad),
+                    "Bin": r.bin, "BinName": r.bin_name or "", "Duration_s": r.duration_s,
+                })  # fmt: skip
+            # the result's words first, its valid flag and the state after them
+            order = sorted(values, key=lambda k: k not in _RESULT_WORDS)
+            for name in order:
+                var = self._vars[name]
+                value = values[name]
+                same = var.value == value or (
+                    isinstance(value, float) and isinstance(var.value, float)
+                    and math.isnan(value) and math.isnan(var.value)
+                )  # fmt: skip
+                if same:
+                    continue
+                var.value = value
+                await self._server.write_attribute_value(
+                    var.node.nodeid, ua.DataValue(ua.Variant(value, var.vtype))
+                )
+            if r is not None and snap.results_valid and r.inspection_id != self._last_event_id:
+                self._last_event_id = r.inspection_id
+                ev = self._evgen.event
+                ev.InspectionId, ev.TriggerNumber = r.inspection_id % 2**32, r.trigger % 2**32
+                ev.Decision, ev.Model, ev.ModelId = r.decision, r.model or "", r.model_id
+                ev.Score = float("nan") if r.score is None else float(r.score)
+                ev.X_mm, ev.Y_mm, ev.Yaw_deg = _mm(r.x_m), _mm(r.y_m), _deg(r.yaw_rad)
+                ev.Bin, ev.Duration_s = r.bin, r.duration_s
+                ev.Severity = 100
+                await self._evgen.trigger(message=f"inspection {r.inspection_id}: {r.decision}")
+
+    # -- methods (server loop) ------------------------------------------------------------
+    def _user(self) -> LinkUser | None:
+        user = _session_user.get()
+        role = getattr(user, "vc_role", None)
+        return None if role is None else LinkUser(str(user.name), role)
+
+    async def _command(self, need: Role, name: str, *args: Any) -> Any:
+        """Run the handshake's command ``name`` in the cell's process as the session's user;
+        the OPC UA answer: a status code when refused, else ``(value, triggers)``."""
+        from asyncua import ua
+
+        user = self._user()
+        refused = user is None or int(user.role) < int(need)
+        if refused:
+            who = "anonymous" if user is None else f"{user.name} ({user.role.name})"
+            log.info("OPC UA: %s refused: needs %s", who, need.name)
+            if user is None:
+                return _status(ua.StatusCodes.BadUserAccessDenied)
+        assert user is not None
+        ok, error, triggers = await self.bridge.request(
+            "cmd", name, (user.name, int(user.role)), args
+        )
+        if refused or ok is False:
+            code = (
+                ua.StatusCodes.BadUserAccessDenied
+                if refused or error == ErrorCode.ROLE_TOO_LOW
+                else ua.StatusCodes.BadInvalidState
+            )
+            return _status(code)
+        return ok, triggers
+
+    async def _m_enable(self, parent: Any, enable: Any) -> Any:
+        out = await self._command(Role.operator, "enable", bool(_value(enable)))
+        return out if not isinstance(out, tuple) else []
+
+    async def _m_trigger(self, parent: Any) -> Any:
+        from asyncua import ua
+
+        out = await self._command(Role.operator, "trigger")
+        if isinstance(out, tuple):
+            return [ua.Variant(out[1] % 2**32, ua.VariantType.UInt32)]
+        return out
+
+    async def _m_start_run(self, parent: Any, count: Any) -> Any:
+        out = await self._command(Role.operator, "start_run", int(_value(count)))
+        return out if not isinstance(out, tuple) else []
+
+    async def _m_stop_run(self, parent: Any) -> Any:
+        out = await self._command(Role.operator, "stop_run")
+        return out if not isinstance(out, tuple) else []
+
+    async def _m_reset(self, parent: Any) -> Any:
+        out = await self._command(Role.operator, "reset")
+        return out if not isinstance(out, tuple) else []
+
+    async def _m_select(self, parent: Any, recipe: Any) -> Any:
+        out = await self._command(Role.operator, "select", int(_value(recipe)))
+        return out if not isinstance(out, tuple) else []
+
+    async def _m_ack(self, parent: Any, inspection_id: Any) -> Any:
+        from asyncua import ua
+
+        user = self._user()
+        if user is None or int(user.role) < int(Role.operator):
+            return _status(ua.StatusCodes.BadUserAccessDenied)
+        took, _error, _n = await self.bridge.request(
+            "cmd", "ack", (user.name, int(user.role)), (int(_value(inspection_id)),)
+        )
+        return [ua.Variant(bool(took), ua.VariantType.Boolean)]
+
+
+_RESULT_WORDS = frozenset(
+    ("InspectionId", "TriggerNumber", "Decision", "DecisionCode", "Model", "ModelId", "Score",
+     "X_mm", "Y_mm", "Yaw_deg", "Bin", "BinName", "Duration_s")
+)  # fmt: skip
+
+
+def _status(code: int) -> Any:
+    """An OPC UA status code answer (asyncua types the code as its UInt32 alias)."""
+    from asyncua import ua
+
+    return ua.StatusCode(code)  # type: ignore[arg-type]
+
+
+def _value(v: Any) -> Any:
+    return getattr(v, "Value", v)
+
+
+def _hook_sessions(server: Any, refresh: Callable[[], Awaitable[None]], throttle: Any,
+                   manager: Any) -> None:  # fmt: skip
+    """Re-read the sign-in table when a session is created (before it signs in), count
+    failed sign-ins per client address in ``throttle`` (REST's rule, the server's own count:
+    a blocked address is refused before its credentials are looked at), and make the session's user known to the method callbacks of its calls."""
+    from asyncua import ua
+    from asyncua.common.utils import ServiceError
+
+    refused = {ua.StatusCodes.BadUserAccessDenied, ua.StatusCodes.BadIdentityTokenInvalid,
+               ua.StatusCodes.BadIdentityTokenRejected}  # fmt: skip
+    iserver = server.iserver
+    make = iserver.create_session
+
+    def create_session(*args: Any, **kwargs: Any) -> Any:
+        session = make(*args, **kwargs)
+        create, call, activate = session.create_session, session.call, session.activate_session
+        peer = session.name[0] if isinstance(session.name, tuple) else str(session.name)
+        client = f"opcua:{peer}"
+
+        def activate_hooked(*a: Any, **kw: Any) -> Any:
+            params = a[0] if a else kw.get("params")
+            token = getattr(params, "UserIdentityToken", None)
+            # the user manager is told which kind of identity it checks (asyncua hands it
+            # the channel's certificate with every kind); no await between here and there
+            manager.token_kind = "x509" if isinstance(token, ua.X509IdentityToken) else "other"
+            if throttle is not None:
+                try:
+                    throttle.check(client)
+                except Exception:
+                    log.warning("OPC UA: sign-in from %s refused: too many failures", peer)
+                    raise ServiceError(ua.StatusCodes.BadUserAccessDenied) from None
+            try:
+                return activate(*a, **kw)
+            except ServiceError as exc:
+                if throttle is not None and exc.code in refused:
+                    throttle.failure(client)
+                raise
+
+        async def create_hooked(*a: Any, **kw: Any) -> Any:
+            await refresh()
+            return await create(*a, **kw)
+
+        async def call_hooked(params: Any) -> Any:
+            token = _session_user.set(session.user)
+            try:
+                return await call(params)
+            finally:
+                _session_user.reset(token)
+
+        session.create_session, session.call = create_hooked, call_hooked
+        session.activate_session = activate_hooked
+        return session
+
+    iserver.create_session = create_session
+
+
+def _ruleset(anonymous_read: bool) -> Any:
+    """Signed-in users read, subscribe and call (each method checks the role); anonymous
+    clients read and subscribe when allowed, nothing else; nobody changes the address space."""
+    from asyncua import ua
+    from asyncua.crypto.permission_rules import USER_TYPES, SimpleRoleRuleset, UserRole
+
+    def ids(types: Any) -> set[Any]:
+        return {ua.NodeId(t) for t in types}
+
+    oid = ua.ObjectIds
+    rules = SimpleRoleRuleset()
+    users = ids(USER_TYPES)
+    rules._permission_dict[UserRole.Admin] = set(users)
+    rules._permission_dict[UserRole.User] = set(users)
+    calls = ids((oid.CallRequest_Encoding_DefaultBinary, oid.WriteRequest_Encoding_DefaultBinary))
+    session_only = ids((oid.CreateSessionRequest_Encoding_DefaultBinary,
+                        oid.ActivateSessionRequest_Encoding_DefaultBinary,
+                        oid.CloseSessionRequest_Encoding_DefaultBinary,
+                        oid.GetEndpointsRequest_Encoding_DefaultBinary,
+                        oid.FindServersRequest_Encoding_DefaultBinary,
+                        oid.CloseSecureChannelRequest_Encoding_DefaultBinary))  # fmt: skip
+    rules._permission_dict[UserRole.Anonymous] = (users - calls) if anonymous_read else session_only
+    return rules
+
+
+class _UserManager:
+    """asyncua's user manager over :class:`Credentials`."""
+
+    def __init__(self, credentials: Credentials, anonymous_read: bool) -> None:
+        self.credentials = credentials
+        self.anonymous_read = anonymous_read
+        self.token_kind = "other"
+        """The identity token being checked: ``x509`` or another kind (set just before)."""
+
+    def get_user(self, iserver: Any, username: Any = None, password: Any = None,
+                 certificate: Any = None) -> Any:  # fmt: skip
+        from asyncua.crypto.permission_rules import User, UserRole
+
+        if self.token_kind == "x509":
+            cred = None if certificate is None else self.credentials.check_certificate(certificate)
+            if cred is None:
+                log.warning("OPC UA: sign-in refused for a certificate of no user")
+                return None
+            user = User(role=UserRole.User, name=cred.name)
+            user.vc_role = cred.role  # type: ignore[attr-defined]
+            return user
+        if username is None and password is None:
+            if not self.anonymous_read:
+                return None
+            user = User(role=UserRole.Anonymous, name="anonymous")
+            user.vc_role = None  # type: ignore[attr-defined]
+            return user
+        cred = self.credentials.check(username, password)
+        if cred is None:
+            log.warning("OPC UA: sign-in refused for user name %r", str(username)[:64])
+            return None
+        user = User(role=UserRole.User, name=cred.name)
+        user.vc_role = cred.role  # type: ignore[attr-defined]
+        return user
+
+
+def endpoint_host(endpoint: str) -> str:
+    """The host of an ``opc.tcp://`` endpoint."""
+    return urlsplit(endpoint).hostname or ""
