@@ -361,7 +361,7 @@ class Settings(BaseSettings):
     modbus_role: Literal["viewer", "operator", "engineer"] = Field(
         "operator",
         description="The role every Modbus client acts with: 'viewer' reads, 'operator' "
-        "also triggers, runs and resets, 'engineer' also selects recipes.",
+        "also triggers, runs, resets and selects recipes; 'engineer' the same (recipes are created and changed in the console, REST or the CLI only).",
     )
     plc_result_queue: int = Field(
         32,

@@ -8,8 +8,8 @@ VisionCell users have no passwords: a program signs in with a token issued to it
 (``visioncell user add plc --role operator`` prints one).  OPC UA's user-name identity
 token carries the user's name and, as the password, that token; the pair is accepted when
 the token is live (neither revoked nor expired), its user is enabled and has that name.
-The session then acts with the user's role (viewer reads; operator triggers, runs and
-resets; engineer also selects recipes).
+The session then acts with the user's role (viewer reads; operator also triggers, runs,
+resets and selects recipes; engineer the same, since recipes are edited elsewhere).
 
 OPC UA servers check a sign-in synchronously (asyncua's ``UserManager.get_user``), so the
 check reads a table of the live tokens' HMACs held in memory; :meth:`Credentials.refresh`
