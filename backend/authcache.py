@@ -126,6 +126,11 @@ class _Flight:
     future: asyncio.Future[tuple[_UserRow, datetime | None] | None]
 
 
+def _monotonic() -> float:
+    # looked up at each call, so a test may also replace the module's ``time``
+    return time.monotonic()
+
+
 def _row(user: User) -> _UserRow:
     return (int(user.id), str(user.name), str(user.role), bool(user.disabled), user.created_at)
 
@@ -154,10 +159,18 @@ class AuthCache:
         Share a token's lookup in flight and refresh an entry hit in the last
         :data:`REFRESH_AHEAD_FRACTION` of its TTL in the background (see the module doc);
         False: every request that misses looks its token up itself.
+    clock : callable, optional
+        Monotonic seconds the TTL is counted in (default: ``time.monotonic``); a test
+        gives its own, so an entry's age does not depend on how busy the machine is.
     """
 
     def __init__(
-        self, *, ttl_s: float = TTL_S, max_entries: int = MAX_ENTRIES, refresh_ahead: bool = True
+        self,
+        *,
+        ttl_s: float = TTL_S,
+        max_entries: int = MAX_ENTRIES,
+        refresh_ahead: bool = True,
+        clock: Callable[[], float] | None = None,
     ) -> None:
         if not 0.0 <= float(ttl_s) <= 60.0:
             raise ValueError(f"ttl_s must be within 0..60 s, got {ttl_s!r}")
@@ -168,6 +181,7 @@ class AuthCache:
         self.ttl_s = float(ttl_s)
         self.max_entries = int(max_entries)
         self.refresh_ahead = refresh_ahead
+        self._clock = clock if clock is not None else _monotonic
         self._entries: dict[str, _Entry] = {}
         self._lock = threading.Lock()
         #: Grows with every :meth:`clear`; :meth:`put` drops a sign-in read before it.
@@ -192,7 +206,7 @@ class AuthCache:
         """The entry of ``token_hash`` if still valid: within the TTL and before the
         token's expiry, checked on every hit (an entry past either is dropped).  A hit in
         the last part of the TTL starts the background lookup ``refresh``, if given."""
-        now = time.monotonic()
+        now = self._clock()
         with self._lock:
             e = self._entries.get(token_hash)
             if e is None:
@@ -229,7 +243,7 @@ class AuthCache:
         if user is not None:
             return user
         if not self.refresh_ahead or self.ttl_s <= 0:
-            generation, started = self.generation, time.monotonic()
+            generation, started = self.generation, self._clock()
             self.lookups += 1
             found = await lookup()
             if found is None:
@@ -254,7 +268,7 @@ class AuthCache:
                 return None
             return _user(row)
         mine = self._start(token_hash, loop)
-        started = time.monotonic()
+        started = self._clock()
         try:
             found = await work_for_waiters(mine.future, lookup())
         finally:
@@ -298,7 +312,7 @@ class AuthCache:
         cancellation."""
         with self._lock:
             old = self._entries.get(token_hash)
-        started = time.monotonic()
+        started = self._clock()
         try:
             found = await lookup()
         except asyncio.CancelledError:
@@ -360,7 +374,7 @@ class AuthCache:
     ) -> None:  # fmt: skip
         """Remember a successful sign-in read from the database when :attr:`generation`
         was ``generation`` (a user or token change committed since: not remembered), its
-        lookup started at ``started`` (``time.monotonic()``; default now): the entry
+        lookup started at ``started`` (the cache's clock; default now): the entry
         lasts :attr:`ttl_s` from then."""
         if user.disabled:
             return
@@ -368,7 +382,7 @@ class AuthCache:
             self.known.note(token_hash, user_id=int(user.id), user=user.name, role=user.role)
         if self.ttl_s <= 0:
             return
-        at = time.monotonic() if started is None else started
+        at = self._clock() if started is None else started
         entry = _Entry(at + self.ttl_s, _aware(expires_at), _row(user))
         with self._lock:
             if generation != self.generation:

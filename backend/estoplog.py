@@ -13,6 +13,7 @@ overflows, or the process stops first) is logged at error level with its whole c
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 from collections import deque
 from dataclasses import dataclass
@@ -144,7 +145,7 @@ class EStopLog:
                 record = self._pending[0]
                 try:
                     await retry_database(
-                        "recording an emergency stop", lambda r=record: self._write(r),
+                        "recording an emergency stop", functools.partial(self._write, record),
                         max_wait_s=self.max_wait_s,
                     )  # fmt: skip
                 except asyncio.CancelledError:

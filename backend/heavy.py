@@ -158,8 +158,9 @@ class HeavyJob:
                 cf.cancel()
                 raise
         gone = asyncio.ensure_future(self._cancel.wait())
+        either: set[asyncio.Future[Any]] = {fut, gone}
         try:
-            await asyncio.wait({fut, gone}, return_when=asyncio.FIRST_COMPLETED)
+            await asyncio.wait(either, return_when=asyncio.FIRST_COMPLETED)
         except asyncio.CancelledError:
             cf.cancel()
             fut.add_done_callback(_mark_retrieved)

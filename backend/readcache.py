@@ -116,7 +116,7 @@ class Entry:
     """One cached answer.  Equal only to itself: a new read makes a new entry, so an
     entry's identity stands for its answer (what the fast path keys its JSON on)."""
 
-    #: ``time.monotonic()`` after which it is not served.
+    #: The cache's clock (``time.monotonic`` by default) after which it is not served.
     until: float
     #: The role it was read for (served to that role and stronger ones only).
     role: Role
@@ -126,6 +126,11 @@ class Entry:
     value: Any
     #: The read that made it (its refresh ahead reads with it; None: never refreshed).
     read: Callable[[], Awaitable[Any]] | None = field(default=None, repr=False)
+
+
+def _monotonic() -> float:
+    # looked up at each call, so a test may also replace the module's ``time``
+    return time.monotonic()
 
 
 class ReadCache:
@@ -142,10 +147,18 @@ class ReadCache:
         Re-read an entry in the background when it is hit in the last
         :data:`REFRESH_AHEAD_FRACTION` of its TTL (see the module doc); False: entries
         expire and the next request reads.
+    clock : callable, optional
+        Monotonic seconds the TTL is counted in (default: ``time.monotonic``); a test
+        gives its own, so an entry's age does not depend on how busy the machine is.
     """
 
     def __init__(
-        self, *, ttl_s: float = TTL_S, max_entries: int = MAX_ENTRIES, refresh_ahead: bool = True
+        self,
+        *,
+        ttl_s: float = TTL_S,
+        max_entries: int = MAX_ENTRIES,
+        refresh_ahead: bool = True,
+        clock: Callable[[], float] | None = None,
     ) -> None:
         if isinstance(ttl_s, bool) or not isinstance(ttl_s, int | float):
             raise TypeError(f"ttl_s must be a number, got {ttl_s!r}")
@@ -158,6 +171,7 @@ class ReadCache:
         if not isinstance(refresh_ahead, bool):
             raise TypeError(f"refresh_ahead must be a bool, got {refresh_ahead!r}")
         self.refresh_ahead = refresh_ahead
+        self._clock = clock if clock is not None else _monotonic
         self.ttl_s = float(ttl_s)
         self.max_entries = max_entries
         self._entries: dict[Hashable, Entry] = {}
@@ -197,7 +211,7 @@ class ReadCache:
         if not deps or not all(isinstance(t, str) and t for t in deps):
             raise ValueError(f"tables must name at least one table, got {tables!r}")
         hash(key)  # a TypeError now, not inside the lock
-        now = time.monotonic()
+        now = self._clock()
         with self._lock:
             e = self._fresh(key, role, deps, now)
             gen = self._gen(deps)
@@ -279,7 +293,7 @@ class ReadCache:
         """The background re-read of ``key`` (``old.read``, for ``old.role``), shared with
         the requests that miss meanwhile; never raises but its cancellation."""
         assert old.read is not None
-        start = time.monotonic()
+        start = self._clock()
         try:
             value = await old.read()
         except asyncio.CancelledError:
@@ -342,7 +356,7 @@ class ReadCache:
         if not isinstance(role, Role):
             raise TypeError(f"role must be a Role, got {role!r}")
         deps = tables if isinstance(tables, frozenset) else frozenset(tables)
-        now = time.monotonic()
+        now = self._clock()
         with self._lock:
             e = self._fresh(key, role, deps, now)
         if e is not None:

@@ -26,3 +26,27 @@ def data_dir() -> Path:
     if not path.is_dir():
         pytest.skip(f"public data directory {path} is absent (set VISIONCELL_DATA_DIR)")
     return path
+
+
+def _rank(item: pytest.Item) -> int:
+    """0: the module is marked slow; 1: it drives a server or a browser (e2e); 2: the rest."""
+    if item.get_closest_marker("slow") is not None:
+        return 0
+    if item.get_closest_marker("e2e") is not None or "e2e" in item.path.parts:
+        return 1
+    return 2
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Run the long modules first.
+
+    ``make test`` hands whole files to two xdist workers in the order they were collected
+    (``--dist loadfile --no-loadscope-reorder``).  A long file handed out last keeps one
+    worker busy alone at the end, so modules with a slow or e2e test go first (the longest
+    first is the classic greedy schedule); each module's tests keep their order and stay
+    together, so module-scoped fixtures are still built once.
+    """
+    rank: dict[Path, int] = {}
+    for item in items:
+        rank[item.path] = min(rank.get(item.path, 2), _rank(item))
+    items.sort(key=lambda item: rank[item.path])  # stable: collection order within a rank

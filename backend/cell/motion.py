@@ -32,7 +32,7 @@ import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -301,7 +301,7 @@ class CellMotion:
         (a camera replaying in step mode) the recording's image due now, recognised by its
         ``meta["replay_step"]``, after which the camera moves on to the next image (the live
         view shows the image the next look will take)."""
-        cam = self.feed.camera
+        cam: Any = self.feed.camera  # a replaying camera has step, replay_step, advance
         if getattr(cam, "step", False) is not True or not callable(getattr(cam, "advance", None)):
             return await self.next_frame(after=after, timeout_s=timeout_s)
         want = int(cam.replay_step)

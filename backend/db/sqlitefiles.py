@@ -139,8 +139,9 @@ class GuardedPool(AsyncAdaptedQueuePool):
         super().__init__(*args, **kw)
         self._vc_state = _State(self.sqlite_path)
 
-    def connect(self) -> Any:  # type: ignore[override]
+    def connect(self) -> Any:  # type: ignore[override, unused-ignore]
         state = self._vc_state
+        dialect: Any = self._dialect  # an async adapter dialect: its DB-API is loaded_dbapi
         with state.lock:
             try:
                 check_side_files(state)
@@ -148,7 +149,7 @@ class GuardedPool(AsyncAdaptedQueuePool):
                 if not state.refusing:
                     log.error("database unavailable: %s; answering 503 until it is fixed", exc)
                     state.refusing = True
-                raise self._dialect.loaded_dbapi.OperationalError(
+                raise dialect.loaded_dbapi.OperationalError(
                     f"the database's side file cannot be used: {exc}"
                 ) from None
             if state.refusing:

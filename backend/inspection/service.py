@@ -989,7 +989,7 @@ async def _inspect_body(ctx: _Ctx, opts: InspectOptions, plan: _TopPlan, part: F
     T_cam_top = _T_cam(frame.robot_state.q, ctx.T_ee_cam)
     z_mid = ctx.surface_z + AIM_HEIGHT_M / 2
     state["stage"] = "segmenting"
-    if whole:
+    if bg is None:  # whole
         region: Any = _WholeImage(np.ones(frame.rgb.shape[:2], dtype=bool))
     else:
         assert bg is not None  # not whole: there is a background

@@ -213,7 +213,7 @@ class LiveIndex:
         max_features: int = 1000,
         transfer: tuple[str, str] = ("linear", "srgb"),
     ) -> None:
-        options = dict(FEATURE_OPTIONS.get(method, {}))
+        options: dict[str, Any] = dict(FEATURE_OPTIONS.get(method, {}))
         descriptor, tiebreak = transfer
         if descriptor not in ("linear", "srgb"):
             raise ValueError(f"transfer must be 'linear' or 'srgb', got {descriptor!r}")

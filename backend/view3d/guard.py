@@ -46,7 +46,7 @@ class MessageGuard:
 
     def install(self, server: Any) -> None:
         """Wrap the server-wide dispatch of the viser ``server``."""
-        ws = getattr(server, "_websock_server", None)
+        ws: Any = getattr(server, "_websock_server", None)
         handle = getattr(ws, "_handle_incoming_message", None)
         if handle is None:
             log.warning("3D view: viser's message dispatch was not found; client messages "
@@ -60,7 +60,7 @@ class MessageGuard:
 
     def attach(self, client: Any) -> None:
         """Wrap the dispatch of one client's own GUI elements (its panel)."""
-        conn = getattr(client, "_websock_connection", None)
+        conn: Any = getattr(client, "_websock_connection", None)
         handle = getattr(conn, "_handle_incoming_message", None)
         if self.installed and handle is not None:
             conn._handle_incoming_message = self._wrap(handle)

@@ -15,6 +15,7 @@ from datetime import timedelta
 from backend.authcache import REFRESH_AHEAD_FRACTION, TTL_S, AuthCache, SignIn
 from backend.db.models import User
 from backend.db.types import utcnow
+from tests.utils.clock import SteppedClock
 
 
 def _db_file(settings) -> str:
@@ -30,16 +31,21 @@ def test_revocation_here_applies_at_once(client, headers):
     assert client.get("/api/robot/state", headers=hdr).status_code == 401
 
 
-def test_revocation_elsewhere_applies_within_the_ttl(client, headers, settings):
+def test_revocation_elsewhere_applies_within_the_ttl(client, headers, settings, monkeypatch):
+    # The cache's clock moves only when the test moves it (a stalled test process cannot
+    # age an entry), and this cache does not refresh ahead.
+    import backend.authcache
+
+    clock = SteppedClock()
+    monkeypatch.setattr(backend.authcache, "time", clock)
+    client.app.state.runtime.auth_cache.refresh_ahead = False
     hdr = headers["operator"]
     assert client.get("/api/robot/state", headers=hdr).status_code == 200
     # Another process (plain sqlite3, not this process's sessions) revokes every token.
     with sqlite3.connect(_db_file(settings)) as conn:
         conn.execute("UPDATE api_tokens SET revoked = 1")
-    t0 = time.monotonic()
-    while client.get("/api/robot/state", headers=hdr).status_code == 200:
-        assert time.monotonic() - t0 < TTL_S + 5.0, "still signed in long after the TTL"
-        time.sleep(0.1)
+    clock.advance(TTL_S)
+    assert client.get("/api/robot/state", headers=hdr).status_code == 401
 
 
 def test_expired_and_stale_entries_are_not_served():
@@ -130,12 +136,13 @@ def test_the_setting_off_looks_each_request_up_itself():
 
 
 def test_an_entry_used_late_in_its_ttl_is_refreshed_in_the_background():
-    cache, lookup = AuthCache(ttl_s=0.5), _Lookups((_user(), None), delay_s=0.1)
+    clock = SteppedClock()
+    cache, lookup = AuthCache(ttl_s=0.5, clock=clock), _Lookups((_user(), None), delay_s=0.1)
 
     async def run() -> None:
         await cache.sign_in("h", lookup)
         first = cache._entries["h"]
-        await asyncio.sleep(0.5 * (1 - REFRESH_AHEAD_FRACTION) + 0.02)
+        clock.advance(0.5 * (1 - REFRESH_AHEAD_FRACTION) + 0.02)
         for _ in range(5):  # answered from the entry at once, one lookup started
             user = await asyncio.wait_for(cache.sign_in("h", lookup), 0.05)
             assert user is not None
@@ -150,11 +157,12 @@ def test_an_entry_used_late_in_its_ttl_is_refreshed_in_the_background():
 
 
 def test_a_refresh_that_finds_the_token_refused_drops_the_entry():
-    cache, lookup = AuthCache(ttl_s=0.5), _Lookups((_user(), None))
+    clock = SteppedClock()
+    cache, lookup = AuthCache(ttl_s=0.5, clock=clock), _Lookups((_user(), None))
 
     async def run() -> None:
         await cache.sign_in("h", lookup)
-        await asyncio.sleep(0.5 * (1 - REFRESH_AHEAD_FRACTION) + 0.02)
+        clock.advance(0.5 * (1 - REFRESH_AHEAD_FRACTION) + 0.02)
         lookup.found = None  # revoked in the database
         assert await cache.sign_in("h", lookup) is not None  # the entry, still valid
         while cache.refreshing:
@@ -165,17 +173,21 @@ def test_a_refresh_that_finds_the_token_refused_drops_the_entry():
 
 
 def test_a_failed_background_lookup_is_logged_once_and_the_entry_expires(caplog):
-    cache, lookup = AuthCache(ttl_s=0.4), _Lookups((_user(), None), delay_s=0.0)
+    clock = SteppedClock()
+    cache, lookup = AuthCache(ttl_s=0.4, clock=clock), _Lookups((_user(), None), delay_s=0.0)
 
     async def run() -> None:
         await cache.sign_in("h", lookup)
-        await asyncio.sleep(0.4 * (1 - REFRESH_AHEAD_FRACTION) + 0.02)
+        started = clock()
+        clock.advance(0.4 * (1 - REFRESH_AHEAD_FRACTION) + 0.02)
         lookup.error = RuntimeError("database down")
         for _ in range(5):
             assert cache.get("h", refresh=lookup) is not None
             await asyncio.sleep(0.01)
         assert lookup.calls == 2  # not tried again for the same entry
-        await asyncio.sleep(0.2)
+        while cache.refreshing:
+            await asyncio.sleep(0.01)
+        clock.now = started + 0.4
         assert cache.get("h") is None  # expired at its until, not extended
 
     with caplog.at_level(logging.WARNING, logger="backend.authcache"):
@@ -185,11 +197,12 @@ def test_a_failed_background_lookup_is_logged_once_and_the_entry_expires(caplog)
 
 
 def test_close_cancels_background_lookups():
-    cache, lookup = AuthCache(ttl_s=0.4), _Lookups((_user(), None), delay_s=0.0)
+    clock = SteppedClock()
+    cache, lookup = AuthCache(ttl_s=0.4, clock=clock), _Lookups((_user(), None), delay_s=0.0)
 
     async def run() -> None:
         await cache.sign_in("h", lookup)
-        await asyncio.sleep(0.4 * (1 - REFRESH_AHEAD_FRACTION) + 0.02)
+        clock.advance(0.4 * (1 - REFRESH_AHEAD_FRACTION) + 0.02)
         lookup.delay_s = 60.0
         cache.get("h", refresh=lookup)
         (task,) = cache._background.tasks
@@ -226,17 +239,35 @@ def test_requests_with_one_token_share_one_database_sign_in(client, headers, mon
     assert codes == [200] * n and calls == 1
 
 
-def test_revocation_elsewhere_applies_within_the_ttl_with_refresh_ahead(client, headers, settings):
+def _settle(cache: AuthCache, *, hang_s: float = 60.0) -> None:
+    """Wait (in real time; the bound only ends a hang) until no background lookup runs."""
+    t0 = time.monotonic()
+    while cache.refreshing:
+        assert time.monotonic() - t0 < hang_s, "a background lookup never ended"
+        time.sleep(0.005)
+
+
+def test_revocation_elsewhere_applies_within_the_ttl_with_refresh_ahead(
+    client, headers, settings, monkeypatch
+):
+    # The cache's clock is stepped 50 ms per poll, after the lookups a poll started have
+    # ended: the rule is checked, not how fast this machine answers.
+    import backend.authcache
+
+    clock = SteppedClock()
+    monkeypatch.setattr(backend.authcache, "time", clock)
     hdr = headers["operator"]
     cache = client.app.state.runtime.auth_cache
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < 1.5 * TTL_S:  # a busy console: its entry refreshed ahead
+    t0 = clock()
+    while clock() - t0 < 1.5 * TTL_S:  # a busy console: its entry refreshed ahead
         assert client.get("/api/robot/state", headers=hdr).status_code == 200
-        time.sleep(0.05)
+        _settle(cache)
+        clock.advance(0.05)
     assert cache.refreshes >= 1
     with sqlite3.connect(_db_file(settings)) as conn:
         conn.execute("UPDATE api_tokens SET revoked = 1")
-    revoked = time.monotonic()
+    revoked = clock()
     while client.get("/api/robot/state", headers=hdr).status_code == 200:
-        assert time.monotonic() - revoked < TTL_S + 0.3, "signed in after the TTL"
-        time.sleep(0.05)
+        assert clock() - revoked < TTL_S, "signed in after the TTL"
+        _settle(cache)
+        clock.advance(0.05)

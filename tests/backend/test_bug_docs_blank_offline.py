@@ -9,6 +9,9 @@ import pytest
 
 from backend.api.docs import DOCS_ASSETS, DOCS_ASSETS_URL
 
+# Every test here only reads or is refused before anything is stored.
+pytestmark = pytest.mark.shared_app
+
 URL = re.compile(r"""(?:src|href)\s*=\s*["']([^"']+)["']|url\(\s*['"]?([^'")]+)""", re.I)
 
 

@@ -8,6 +8,9 @@ import pytest
 
 from backend.api.types import MAX_DB_ID
 
+# Every test here only reads or is refused before anything is stored.
+pytestmark = pytest.mark.shared_app
+
 HUGE = 2**63  # one past SQLite's and PostgreSQL's BIGINT
 
 PATHS = [

@@ -12,6 +12,9 @@ from robot.kinematics import fk, ik
 from robot.model import ASEA
 from vision.calibration import CharucoBoard, Chessboard
 
+# Every test here only reads or is refused before anything is stored.
+pytestmark = pytest.mark.shared_app
+
 READY = [0.0, 1.2, -1.4, -0.5, 0.0]
 POSE = {"x": 0.8, "y": 0.0, "z": 1.0, "u": 0.0, "w": -1.0}
 

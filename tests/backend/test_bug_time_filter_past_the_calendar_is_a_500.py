@@ -13,6 +13,9 @@ from backend.instants import parse_instant
 from backend.reports.filters import parse_time
 from vision.errors import InvalidInput
 
+# Every test here only reads or is refused before anything is stored.
+pytestmark = pytest.mark.shared_app
+
 PAST_9999 = "9999-12-31T23:59:59.999999-01:00"
 BEFORE_1 = "0001-01-01T00:00:00+01:00"
 REPORTS = ("summary", "timeseries", "confusion", "export.csv", "export.jsonl")

@@ -20,6 +20,7 @@ from backend.app import create_app
 from backend.db.models import Cell, ObjectKind, ObjectModel, Role
 from backend.db.session import Database
 from backend.readcache import ALL_TABLES, MAX_REFRESHING, REFRESH_AHEAD_FRACTION, TTL_S, ReadCache
+from tests.utils.clock import SteppedClock
 
 
 def _db_file(settings) -> str:
@@ -44,10 +45,11 @@ def _get(cache: ReadCache, key, reads: _Reads, *, role=Role.viewer, tables=("obj
 
 # -- the cache on its own -------------------------------------------------------------------
 def test_reuse_within_the_ttl_then_read_again() -> None:
-    cache, reads = ReadCache(ttl_s=0.3), _Reads()
+    clock = SteppedClock()
+    cache, reads = ReadCache(ttl_s=0.3, clock=clock), _Reads()
     assert _get(cache, "k", reads) == "v" and _get(cache, "k", reads) == "v"
     assert reads.calls == 1 and (cache.hits, cache.misses) == (1, 1)
-    time.sleep(0.35)
+    clock.advance(0.35)
     _get(cache, "k", reads)
     assert reads.calls == 2
 
@@ -194,21 +196,25 @@ def test_a_write_through_the_api_is_visible_to_the_next_read(client, headers) ->
     assert "fresh-one" not in names(r) and r.json()["count"] == len(r.json()["data"])
 
 
-def test_another_process_write_is_seen_within_the_ttl(client, headers, settings) -> None:
+def test_another_process_write_is_seen_within_the_ttl(
+    client, headers, settings, monkeypatch
+) -> None:
+    # The cache's clock moves only when the test moves it: a stalled test process cannot
+    # make the answer look older or younger than it is.
+    import backend.readcache
+
+    clock = SteppedClock()
+    monkeypatch.setattr(backend.readcache, "time", clock)
     hdr = headers["viewer"]
     r = client.get("/api/cells", headers=hdr)
     assert r.status_code == 200 and r.json()["count"] >= 1
     # Another process (plain sqlite3, not this process's sessions): a second cell's row.
     with sqlite3.connect(_db_file(settings)) as conn:
         conn.execute("UPDATE cells SET description = 'renamed elsewhere'")
-    t0 = time.monotonic()
-    while True:
-        r = client.get("/api/cells", headers=hdr)
-        assert r.status_code == 200
-        if {c["description"] for c in r.json()["data"]} == {"renamed elsewhere"}:
-            break
-        assert time.monotonic() - t0 < TTL_S + 5.0, "still the old answer long after the TTL"
-        time.sleep(0.05)
+    clock.advance(TTL_S)
+    r = client.get("/api/cells", headers=hdr)
+    assert r.status_code == 200
+    assert {c["description"] for c in r.json()["data"]} == {"renamed elsewhere"}
 
 
 def test_roles_are_checked_per_request_with_a_warm_cache(client, headers) -> None:
@@ -321,7 +327,8 @@ def _due_in(cache: ReadCache) -> float:
 
 @pytest.mark.parametrize("how", ["get_or_read", "peek"])
 def test_refresh_ahead_serves_the_old_entry_and_replaces_it_without_a_wait(how) -> None:
-    cache, reads = ReadCache(ttl_s=0.5), _Gated()
+    clock = SteppedClock()
+    cache, reads = ReadCache(ttl_s=0.5, clock=clock), _Gated()
 
     async def hit() -> object:
         if how == "peek":  # the fast path's way in
@@ -333,7 +340,7 @@ def test_refresh_ahead_serves_the_old_entry_and_replaces_it_without_a_wait(how) 
         await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
         first = cache.peek("k", role=Role.viewer, tables=("cells",))
         assert first is not None and cache.refreshing == 0  # young: no refresh yet
-        await asyncio.sleep(_due_in(cache))
+        clock.advance(_due_in(cache))
         # Answered at once from the old entry (the re-read is held at its gate) ...
         assert await asyncio.wait_for(hit(), 0.05) == "v1"
         assert cache.refreshing == 1 and reads.calls == 2
@@ -352,12 +359,13 @@ def test_refresh_ahead_serves_the_old_entry_and_replaces_it_without_a_wait(how) 
 
 
 def test_the_refresh_keeps_the_entry_s_role() -> None:
-    cache, reads = ReadCache(ttl_s=0.3), _Gated()
+    clock = SteppedClock()
+    cache, reads = ReadCache(ttl_s=0.3, clock=clock), _Gated()
     reads.gate.set()
 
     async def run() -> None:
         await cache.get_or_read("k", role=Role.operator, tables=("cells",), read=reads)
-        await asyncio.sleep(_due_in(cache))
+        clock.advance(_due_in(cache))
         # An engineer's hit refreshes it; the new entry is still the operator's.
         await cache.get_or_read("k", role=Role.engineer, tables=("cells",), read=reads)
         while cache.refreshing:
@@ -370,13 +378,14 @@ def test_the_refresh_keeps_the_entry_s_role() -> None:
 
 
 def test_background_re_reads_are_bounded() -> None:
-    cache = ReadCache(ttl_s=0.5)
+    clock = SteppedClock()
+    cache = ReadCache(ttl_s=0.5, clock=clock)
     reads = {k: _Gated() for k in range(MAX_REFRESHING + 3)}
 
     async def run() -> None:
         for k, read in reads.items():
             await cache.get_or_read(k, role=Role.viewer, tables=("cells",), read=read)
-        await asyncio.sleep(_due_in(cache))
+        clock.advance(_due_in(cache))
         for k in reads:
             assert cache.peek(k, role=Role.viewer, tables=("cells",)) is not None
         assert cache.refreshing == MAX_REFRESHING == cache.refreshes
@@ -388,15 +397,16 @@ def test_background_re_reads_are_bounded() -> None:
 
 
 def test_an_entry_is_never_served_past_its_until_while_its_refresh_hangs() -> None:
-    cache, reads = ReadCache(ttl_s=0.3), _Gated()
+    clock = SteppedClock()
+    cache, reads = ReadCache(ttl_s=0.3, clock=clock), _Gated()
 
     async def run() -> None:
         await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
         e = cache.peek("k", role=Role.viewer, tables=("cells",))
         assert e is not None
-        await asyncio.sleep(_due_in(cache))
+        clock.advance(_due_in(cache))
         assert cache.peek("k", role=Role.viewer, tables=("cells",)) is e  # refresh started
-        await asyncio.sleep(max(0.0, e.until - time.monotonic()) + 0.01)
+        clock.advance(max(0.0, e.until - clock()) + 0.01)
         assert cache.peek("k", role=Role.viewer, tables=("cells",)) is None  # expired
         # A request now waits for the re-read in flight (shared), not the old answer.
         waiter = asyncio.create_task(
@@ -411,11 +421,12 @@ def test_an_entry_is_never_served_past_its_until_while_its_refresh_hangs() -> No
 
 
 def test_a_commit_during_a_refresh_is_not_overwritten_by_its_stale_read() -> None:
-    cache, reads = ReadCache(ttl_s=0.5), _Gated()
+    clock = SteppedClock()
+    cache, reads = ReadCache(ttl_s=0.5, clock=clock), _Gated()
 
     async def run() -> None:
         await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
-        await asyncio.sleep(_due_in(cache))
+        clock.advance(_due_in(cache))
         cache.peek("k", role=Role.viewer, tables=("cells",))
         assert cache.refreshing == 1
         assert cache.invalidate({"cells"}) == 1  # a commit wrote cells: the entry goes ...
@@ -430,7 +441,8 @@ def test_a_commit_during_a_refresh_is_not_overwritten_by_its_stale_read() -> Non
 
 
 def test_a_commit_through_a_session_during_a_refresh_wins(settings) -> None:
-    cache = ReadCache(ttl_s=0.5)
+    clock = SteppedClock()
+    cache = ReadCache(ttl_s=0.5, clock=clock)
 
     async def run() -> None:
         db = Database(settings.database_url)
@@ -450,7 +462,7 @@ def test_a_commit_through_a_session_during_a_refresh_wins(settings) -> None:
                 "d", role=Role.viewer, tables=("cells",), read=describe
             )
             gate.clear()
-            await asyncio.sleep(_due_in(cache))
+            clock.advance(_due_in(cache))
             cache.peek("d", role=Role.viewer, tables=("cells",))  # starts the re-read
             await asyncio.sleep(0.05)  # it has read the old description
             async with db.session() as s:
@@ -468,7 +480,8 @@ def test_a_commit_through_a_session_during_a_refresh_wins(settings) -> None:
 
 
 def test_a_failed_refresh_is_logged_once_and_harmless(caplog) -> None:
-    cache, reads = ReadCache(ttl_s=0.3), _Gated()
+    clock = SteppedClock()
+    cache, reads = ReadCache(ttl_s=0.3, clock=clock), _Gated()
     reads.gate.set()
     unhandled: list[dict] = []
 
@@ -479,13 +492,13 @@ def test_a_failed_refresh_is_logged_once_and_harmless(caplog) -> None:
             await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
             e = cache.peek("k", role=Role.viewer, tables=("cells",))
             assert e is not None
-            await asyncio.sleep(_due_in(cache))
+            clock.advance(_due_in(cache))
             reads.fail = True
             assert cache.peek("k", role=Role.viewer, tables=("cells",)) is e  # starts it
             while cache.refreshing:
                 await asyncio.sleep(0.005)
             assert cache.peek("k", role=Role.viewer, tables=("cells",)) is e  # still served
-            await asyncio.sleep(max(0.0, e.until - time.monotonic()) + 0.01)
+            clock.advance(max(0.0, e.until - clock()) + 0.01)
             assert cache.peek("k", role=Role.viewer, tables=("cells",)) is None  # expired
         gc.collect()
         await asyncio.sleep(0)
@@ -500,11 +513,12 @@ def test_a_failed_refresh_is_logged_once_and_harmless(caplog) -> None:
 
 
 def test_shutdown_leaves_no_background_read() -> None:
-    cache, reads = ReadCache(ttl_s=0.3), _Gated()
+    clock = SteppedClock()
+    cache, reads = ReadCache(ttl_s=0.3, clock=clock), _Gated()
 
     async def run() -> asyncio.Task[None]:
         await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=reads)
-        await asyncio.sleep(_due_in(cache))
+        clock.advance(_due_in(cache))
         cache.peek("k", role=Role.viewer, tables=("cells",))
         (task,) = cache._background.tasks
         await asyncio.sleep(0.01)  # the re-read waits at its gate
@@ -512,7 +526,7 @@ def test_shutdown_leaves_no_background_read() -> None:
         assert task.cancelled() and cache.refreshing == 0 and len(cache) == 0
         # Closed: a hit starts no re-read until the cache is opened again.
         await cache.get_or_read("k", role=Role.viewer, tables=("cells",), read=lambda: _v("w"))
-        await asyncio.sleep(_due_in(cache))
+        clock.advance(_due_in(cache))
         cache.peek("k", role=Role.viewer, tables=("cells",))
         assert cache.refreshing == 0
         cache.open()

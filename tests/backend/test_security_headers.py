@@ -8,6 +8,9 @@ from fastapi.testclient import TestClient
 from backend.app import create_app
 from tests.utils.factories import make_settings, migrate
 
+# Every test here only reads or is refused before anything is stored.
+pytestmark = pytest.mark.shared_app
+
 
 def test_console_and_api_carry_the_security_headers(client, settings):
     for path in ("/", "/api/health", "/static/js/main.js", "/api/robot/state"):

@@ -10,10 +10,11 @@ import cv2
 import numpy as np
 
 from backend.auth import create_user
-from backend.db.migrate import upgrade
+from backend.db.migrate import sqlite_file, upgrade
 from backend.db.models import Role
 from backend.db.session import Database
 from backend.settings import Settings
+from tests.utils import templates
 
 TEST_SECRET = "test-secret-0123456789abcdef"
 
@@ -61,7 +62,13 @@ def make_settings(tmp_path: Path, **overrides: object) -> Settings:
 
 
 def migrate(settings: Settings) -> None:
-    upgrade(settings.database_url)
+    """Bring the test's database to head: a new SQLite file is a copy of this process's
+    migrated template (:mod:`tests.utils.templates`), anything else is upgraded."""
+    target = templates.sqlite_copy_target(settings.database_url)
+    if target is not None:
+        templates.copy_migrated(target)
+    else:
+        upgrade(settings.database_url)
 
 
 async def _users(settings: Settings, roles: list[Role]) -> dict[str, str]:
@@ -80,7 +87,13 @@ async def _users(settings: Settings, roles: list[Role]) -> dict[str, str]:
 
 
 def make_tokens(settings: Settings) -> dict[str, str]:
-    """One user per role; returns ``{role: token}``."""
+    """One user per role; returns ``{role: token}``.
+
+    On an untouched copy of the migrated template the users come from the users template
+    (fresh tokens under the settings' secret); otherwise they are created here."""
+    path = sqlite_file(settings.database_url)
+    if path is not None and templates.is_pristine_copy(path):
+        return templates.users_into(path, settings.secret_key.get_secret_value())
     return asyncio.run(_users(settings, list(Role)))
 
 

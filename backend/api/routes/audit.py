@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from fastapi import APIRouter, Query
 from pydantic import BaseModel
@@ -15,8 +15,12 @@ from backend.api.types import Limit, Offset, instant_query
 
 router = APIRouter(prefix="/audit", tags=["audit"])
 
-Since = instant_query("From this time on, inclusive")
-Until = instant_query("Before this time, exclusive")
+if TYPE_CHECKING:  # the value a handler receives; FastAPI reads the Annotated form
+    Since = datetime | None
+    Until = datetime | None
+else:
+    Since = instant_query("From this time on, inclusive")
+    Until = instant_query("Before this time, exclusive")
 
 Kind = Literal[
     "threshold", "model", "view", "negative", "calibration", "user", "token", "estop", "recipe"

@@ -7,7 +7,8 @@ The work is in :mod:`backend.inspection`; handlers only parse, call it and shape
 from __future__ import annotations
 
 from collections.abc import Hashable, Mapping
-from typing import Annotated, Any, Literal
+from datetime import datetime
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from fastapi import APIRouter, Path, Query, status
 from fastapi.responses import Response
@@ -33,8 +34,12 @@ __all__ = ["router"]
 
 router = APIRouter(tags=["inspections"])
 
-Since = instant_query("Started at or after this time")
-Until = instant_query("Started at or before this time")
+if TYPE_CHECKING:  # the value a handler receives; FastAPI reads the Annotated form
+    Since = datetime | None
+    Until = datetime | None
+else:
+    Since = instant_query("Started at or after this time")
+    Until = instant_query("Started at or before this time")
 
 Policy = Literal["naive", "top-only", "two-views", "best-next"]
 

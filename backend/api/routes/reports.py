@@ -8,7 +8,8 @@ Reading needs the viewer role, pruning the engineer role.  Filters (``from``, ``
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from datetime import datetime
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, Query
 from fastapi.responses import Response, StreamingResponse
@@ -42,8 +43,12 @@ __all__ = ["router"]
 
 router = APIRouter(tags=["reports"])
 
-From = instant_query("Inspections started at or after this time", alias="from")
-To = instant_query("Inspections started at or before this time", alias="to")
+if TYPE_CHECKING:  # the value a handler receives; FastAPI reads the Annotated form
+    From = datetime | None
+    To = datetime | None
+else:
+    From = instant_query("Inspections started at or after this time", alias="from")
+    To = instant_query("Inspections started at or before this time", alias="to")
 
 Decision = Literal["recognized", "unknown", "failed"]
 Policy = Literal["naive", "top-only", "two-views", "best-next"]
