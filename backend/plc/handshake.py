@@ -40,7 +40,7 @@ from backend.cell.events import CellStopped, JobState
 from backend.db.models import Role
 from backend.inspection import service
 from backend.plc import recipes
-from vision.errors import VisionCellError
+from vision.errors import NotFound, VisionCellError
 
 __all__ = [
     "DECISION_CODES",
@@ -480,7 +480,7 @@ class Handshake:
         except recipes.RecipesUnavailable as exc:
             return self._fail(ErrorCode.RECIPES_UNAVAILABLE, str(exc))
         except VisionCellError as exc:
-            code = ErrorCode.RECIPE_UNKNOWN if exc.http_status == 404 else ErrorCode.BAD_REQUEST
+            code = ErrorCode.RECIPE_UNKNOWN if isinstance(exc, NotFound) else ErrorCode.BAD_REQUEST
             return self._fail(code, f"{exc.code}: {exc}")
         self._error, self._error_text = ErrorCode.NONE, ""
         self._changed()
