@@ -149,6 +149,34 @@ def _bit(word: int, name: str) -> bool:
     return bool(word >> CONTROL_BITS[name] & 1)
 
 
+#: Most Modbus TCP connections served at once (a line has one PLC, perhaps an HMI and a
+#: diagnostic tool; Modbus has no sign-in, so the count is the only bound on clients).
+MAX_CLIENTS = 16
+
+
+def _capped_server(base: type, max_clients: int) -> type:
+    """``base`` (pymodbus's TCP server) refusing connections beyond ``max_clients``: the
+    extra one is closed as soon as it is made and forgotten."""
+
+    class CappedServer(base):
+        def callback_new_connection(self) -> Any:
+            handler = super().callback_new_connection()
+            if len(self.active_connections) < max_clients:
+                return handler
+            server = self
+
+            def refuse(transport: Any) -> None:
+                server.active_connections.pop(handler.unique_id, None)
+                log.warning("Modbus TCP: %d connections already: one more refused", max_clients)
+                transport.close()
+
+            handler.connection_made = refuse
+            handler.connection_lost = lambda exc: None
+            return handler
+
+    return CappedServer
+
+
 class ModbusLink:
     """The Modbus TCP server over one :class:`Handshake` (on the cell's event loop).
 
@@ -159,9 +187,22 @@ class ModbusLink:
         Where to listen.
     role : Role
         The role every Modbus client acts with (Modbus has no sign-in).
+    max_clients : int
+        Connections served at once (1..:data:`MAX_CLIENTS`); one more is closed as it
+        arrives, so a client that opens connections in a loop cannot exhaust the cell.
     """
 
-    def __init__(self, handshake: Handshake, *, host: str, port: int, role: Role) -> None:
+    def __init__(self, handshake: Handshake, *, host: str, port: int, role: Role,
+                 max_clients: int = MAX_CLIENTS) -> None:  # fmt: skip
+        if (
+            isinstance(max_clients, bool)
+            or not isinstance(max_clients, int)
+            or not (1 <= max_clients <= MAX_CLIENTS)
+        ):
+            raise ValueError(
+                f"max_clients must be an integer in 1..{MAX_CLIENTS}, got {max_clients!r}"
+            )
+        self.max_clients = max_clients
         self.handshake = handshake
         self.host = host
         self.port = port
@@ -180,7 +221,9 @@ class ModbusLink:
                     datatype=DataType.REGISTERS, readonly=True),
         ]  # fmt: skip
         device = SimDevice(0, simdata=blocks, action=self._action)
-        self._server = ModbusTcpServer(device, address=(self.host, self.port))
+        self._server = _capped_server(ModbusTcpServer, self.max_clients)(
+            device, address=(self.host, self.port)
+        )
         await self._server.serve_forever(background=True)
         log.info("Modbus TCP server listening on %s:%d (acting as %s)", self.host, self.port,
                  self.user.role.name)  # fmt: skip
