@@ -22,7 +22,12 @@ from tests.utils.servers import run_uvicorn
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("cli-recipes")
-    settings = make_settings(tmp)
+    layout = tmp / "cell.toml"  # a real cell whose layout has the bin the recipe names
+    layout.write_text(
+        "[station]\nx_m = 0.8\ny_m = 0.0\nsurface_z_m = 0.45\n\n"
+        '[[bins]]\nname = "bin-a"\nparts = ["wheel-a"]\ndrop_m = [0.31, 0.61, 0.30]\n'
+    )
+    settings = make_settings(tmp).model_copy(update={"cell_layout": layout})
     migrate(settings)
     tokens = {role: cli_token(settings, f"cli-{role}", role)
               for role in ("viewer", "operator", "engineer")}  # fmt: skip
