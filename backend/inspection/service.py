@@ -940,8 +940,11 @@ async def _store(ctx: _Ctx, opts: InspectOptions, started: Any, durations: dict[
                  state: dict[str, Any], marker: int | None = None,
                  t_start: float | None = None) -> dict[str, Any]:  # fmt: skip
     duration = None if t_start is None else max(0.0, time.monotonic() - t_start)
+    # One clock read for the end: the stored end is the start plus the duration, so the two
+    # agree even when the thread is preempted between reading two clocks.
+    finished = utcnow() if duration is None else started + timedelta(seconds=duration)
     rec = results.InspectionRecord(
-        started_at=started, finished_at=utcnow(), decision=state["decision"], reason=state["reason"],
+        started_at=started, finished_at=finished, decision=state["decision"], reason=state["reason"],
         policy=opts.policy, model_id=state["model_id"], model_name=state["model"],
         score=state["score"], viewpoints=tuple(state["viewpoints"]), scores=state["scores"],
         pose=state["pose"], durations=durations, pick=state["pick"], truth=state["truth"],
