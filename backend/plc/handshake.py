@@ -92,7 +92,6 @@ class ErrorCode(enum.IntEnum):
     """The inspection's job failed or was cancelled before storing a result."""
     RESULTS_OVERFLOW = 7
     RECIPE_UNKNOWN = 8
-    RECIPES_UNAVAILABLE = 9
     ROLE_TOO_LOW = 10
     NO_RUN = 11
     """Stop was asked with no run going."""
@@ -477,8 +476,6 @@ class Handshake:
             )
         try:
             self._recipe = await recipes.select(self.rt, number, user=user, link=self.name)
-        except recipes.RecipesUnavailable as exc:
-            return self._fail(ErrorCode.RECIPES_UNAVAILABLE, str(exc))
         except VisionCellError as exc:
             code = ErrorCode.RECIPE_UNKNOWN if isinstance(exc, NotFound) else ErrorCode.BAD_REQUEST
             return self._fail(code, f"{exc.code}: {exc}")

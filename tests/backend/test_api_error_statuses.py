@@ -35,7 +35,6 @@ EXPECTED = [
     ("robot.errors", "RobotError", "robot_error", 409),
     ("robot.errors", "SimError", "sim_error", 409),
     ("vision.errors", "Conflict", "conflict", 409),
-    ("backend.plc.recipes", "RecipesUnavailable", "conflict", 409),
     ("vision.errors", "NothingTrained", "nothing_trained", 409),
     ("vision.errors", "StreamEnded", "stream_ended", 409),
     ("vision.recognition.light", "LightChanged", "light_changed", 409),
