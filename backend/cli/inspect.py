@@ -65,19 +65,27 @@ def _line(row: dict[str, Any]) -> str:
             f"{recipe}: {row['reason']}; {pick}{took}")  # fmt: skip
 
 
+#: The options both commands take (the recipe's values unless given).
+TokenOpt = Annotated[str, typer.Option(help="Operator token", envvar="VISIONCELL_TOKEN")]
+UrlOpt = Annotated[str | None, typer.Option(help="Cell URL (default: from the settings)")]
+PolicyOpt = Annotated[
+    str | None, typer.Option(help=", ".join(POLICIES) + " (default: the recipe's)")
+]
+SortOpt = Annotated[
+    bool | None, typer.Option(help="Pick and sort into the part's bin (default: the recipe's)")
+]
+RecipeOpt = Annotated[
+    int | None, typer.Option(help="Recipe id to use (default: the active recipe)")
+]
+
+
 @inspect_app.command("once")
 def once(
-    token: Annotated[str, typer.Option(help="Operator token", envvar="VISIONCELL_TOKEN")],
-    url: Annotated[str | None, typer.Option(help="Cell URL (default: from the settings)")] = None,
-    policy: Annotated[
-        str | None, typer.Option(help=", ".join(POLICIES) + " (default: the recipe's)")
-    ] = None,
-    sort: Annotated[
-        bool | None, typer.Option(help="Pick and sort into the part's bin (default: the recipe's)")
-    ] = None,
-    recipe: Annotated[
-        int | None, typer.Option(help="Recipe id to use (default: the active recipe)")
-    ] = None,
+    token: TokenOpt,
+    url: UrlOpt = None,
+    policy: PolicyOpt = None,
+    sort: SortOpt = None,
+    recipe: RecipeOpt = None,
     wait: Annotated[float, typer.Option(help="Longest wait for the object, s")] = 60.0,
 ) -> None:
     """Inspect the object at the station and print the stored result."""
@@ -91,17 +99,11 @@ def once(
 
 @inspect_app.command("run")
 def run(
-    token: Annotated[str, typer.Option(help="Operator token", envvar="VISIONCELL_TOKEN")],
-    url: Annotated[str | None, typer.Option(help="Cell URL (default: from the settings)")] = None,
-    policy: Annotated[
-        str | None, typer.Option(help=", ".join(POLICIES) + " (default: the recipe's)")
-    ] = None,
-    sort: Annotated[
-        bool | None, typer.Option(help="Pick and sort into the part's bin (default: the recipe's)")
-    ] = None,
-    recipe: Annotated[
-        int | None, typer.Option(help="Recipe id to use (default: the active recipe)")
-    ] = None,
+    token: TokenOpt,
+    url: UrlOpt = None,
+    policy: PolicyOpt = None,
+    sort: SortOpt = None,
+    recipe: RecipeOpt = None,
     count: Annotated[
         int | None, typer.Option(help="Objects to inspect (default: until Ctrl-C)")
     ] = None,
