@@ -102,22 +102,64 @@ def settings_for(tmp: Path, url: str, *, time_scale: float, busy_s: float = 1.0,
 @dataclass
 class MotionWatch:
     """When the cell commands motions (the harness waits on it); whether they were safe is
-    judged from the motion log afterwards (:func:`apply_motion_audit`)."""
+    judged from the motion log afterwards (:func:`apply_motion_audit`).
+
+    It also places the faults: :meth:`arm` hands it a coroutine function that starts a
+    fault, run as its own task on the first motion commanded *inside* an inspection (after
+    the inspection's durable marker, before its row is stored: past the search for the
+    part, which stores nothing when cut short) -- the move to the second view, or the
+    pick's.  The fault then starts while that motion is under way, on any machine load."""
 
     rt: Any
     commands: int = 0
     times: list[float] = field(default_factory=list)
+    inside: bool = False
+    _inject: Any = None
+    _originals: list[tuple[Any, str, Any]] = field(default_factory=list)
 
     def install(self) -> None:
+        from backend.inspection import recovery, results
+
         driver = self.rt.cell.driver
         inner = driver.move
+        begin, store = recovery.begin, results.store
 
         async def move(traj: Any) -> Any:
             self.commands += 1
             self.times.append(time.monotonic())
+            if self.inside and self._inject is not None:
+                inject, self._inject = self._inject, None
+                task = asyncio.get_running_loop().create_task(inject())
+                INJECTIONS.append(task)  # runs at the loop's next turn, the motion under way
             return await inner(traj)
 
+        async def begin_(*a: Any, **kw: Any) -> int:
+            mid = await begin(*a, **kw)
+            self.inside = True
+            return mid
+
+        async def store_(*a: Any, **kw: Any) -> int:
+            iid = await store(*a, **kw)
+            self.inside = False
+            return iid
+
         driver.move = move
+        recovery.begin = begin_  # type: ignore[assignment]
+        results.store = store_  # type: ignore[assignment]
+        self._originals = [(recovery, "begin", begin), (results, "store", store)]
+
+    def uninstall(self) -> None:
+        for mod, name, fn in reversed(self._originals):
+            setattr(mod, name, fn)
+        self._originals = []
+
+    def arm(self, inject: Any) -> None:
+        """Run ``inject()`` (a coroutine function) on the next motion inside an inspection."""
+        self._inject = inject
+
+
+#: The fault-starting tasks :class:`MotionWatch` ran (awaited by the harness).
+INJECTIONS: list[asyncio.Task[Any]] = []
 
 
 def keep_log(args: argparse.Namespace, path: Path, part: str) -> None:
@@ -166,6 +208,15 @@ class Feeder:
     _seen: float = 0.0
     _next: asyncio.Event = field(default_factory=asyncio.Event)
     _k: int = 0
+    _held: bool = False
+
+    def hold(self) -> None:
+        """Put no new object at the station (the end of a part of the campaign)."""
+        self._held = True
+
+    def settled(self) -> bool:
+        """Holding, and the object last put at the station has a complete row."""
+        return self._held and (self.current is None or self.current in self.complete)
 
     def start(self) -> None:
         from backend.inspection.service import InspectionDone
@@ -219,19 +270,17 @@ class Feeder:
             t0 = time.monotonic()
             while self._seen <= self._cleared and time.monotonic() - t0 < 60.0:
                 await asyncio.sleep(0.02)
-            self.spawn()
+            if not self._held:
+                self.spawn()
 
 
-_ORIGINAL_STORE: dict[str, Any] = {}
-
-
-def watch_truths(rt: Any, feeder: Feeder) -> None:
+def watch_truths(rt: Any, feeder: Feeder) -> Any:
     """Map inspection ids to the object they saw (the row's simulator truth), from the
-    store's own event (read from the stored row by the service before publishing)."""
+    record the service stores.  Returns the function that puts the store back."""
     from backend.inspection import results
 
     feeder._truths = {}  # type: ignore[attr-defined]
-    inner = _ORIGINAL_STORE.setdefault("store", results.store)
+    inner = results.store
 
     async def store(db: Any, cell_id: int, rec: Any, **kw: Any) -> int:
         iid = await inner(db, cell_id, rec, **kw)
@@ -239,6 +288,11 @@ def watch_truths(rt: Any, feeder: Feeder) -> None:
         return iid
 
     results.store = store  # type: ignore[assignment]
+
+    def undo() -> None:
+        results.store = inner  # type: ignore[assignment]
+
+    return undo
 
 
 # -- the cell -----------------------------------------------------------------------------
@@ -440,7 +494,7 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgDatabase | None,
             audit = MotionWatch(rt)
             audit.install()
             feeder = Feeder(rt, (TAUGHT, untrained_name()))
-            watch_truths(rt, feeder)
+            unwatch = watch_truths(rt, feeder)
             feeder.start()
             feed_task = asyncio.create_task(feeder.run())
             WATCHED[:] = [feed_task]
@@ -463,33 +517,32 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgDatabase | None,
                     if kind == "baseline":
                         progress(f"baseline {k + 1}/{n}")
                         continue
-                    # The e-stop lands inside an inspection (past its search for the part,
-                    # which stores nothing when cut short): after the inspection's second
-                    # motion (the top view's, then a side view's or the pick's).
-                    m0 = audit.commands + (1 if kind == "estop" else 0)
-                    await wait_until(lambda m0=m0: audit.commands > m0, 120,  # noqa: B023 (awaited in this iteration)
+                    # The fault starts while the arm moves inside an inspection (past its
+                    # search for the part, which stores nothing when cut short): on the
+                    # first motion after its durable marker (:meth:`MotionWatch.arm`).
+                    began: list[float] = []
+                    ending: list[Any] = []
+                    inject = _injector(kind, rt, dbf, emu, args.fault_s, began, ending)
+                    audit.arm(inject)
+                    await wait_until(lambda: bool(INJECTIONS) and INJECTIONS[-1].done(), 300,
                                      f"{kind}: the next inspection to move the arm")  # fmt: skip
-                    await asyncio.sleep(float(np.random.default_rng(k).uniform(0.05, 0.6)))
-                    w_start = time.time()
+                    INJECTIONS.pop().result()  # a fault that could not start ends the campaign
+                    w_start = began[0]
                     res.injected += 1
                     progress(f"{kind} fault {k + 1}/{n}")
                     if kind == "camera":
-                        release = stall_camera(rt)
                         await asyncio.sleep(args.fault_s)
-                        release()
+                        ending[0]()
                     elif kind == "estop":
-                        await rt.cell.estop()
                         await asyncio.sleep(args.fault_s)
                         await rt.cell.reset()
                         await wait_until(_ended(run), 30, "the run to end on e-stop")
                         run = await start_run(rt)  # the operator starts it again
                     elif kind == "database":
-                        await dbf.down()
                         await asyncio.sleep(args.fault_s)
                         await dbf.up()
                     elif kind == "serial":
-                        assert emu is not None
-                        await emu.vanish(args.fault_s)
+                        await ending[0]
                     windows.append(FaultWindow(kind, w_start, time.time()))
                     t_clear = time.monotonic()
                     c1 = sum(1 for t, d in feeder.done_times if d != "failed" and t > t_clear)
@@ -507,9 +560,15 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgDatabase | None,
                 res.failed = sum(1 for _, d in feeder.done_times[since:] if d == "failed")
             from backend.inspection import service
 
+            # A clean end: no new object, and the one at the station finished (a complete
+            # row names it) before the run is stopped, so the stop cuts no inspection short.
+            feeder.hold()
+            await wait_until(feeder.settled, 300, "the last object's complete inspection")
             with contextlib.suppress(Exception):
                 service.stop_run(rt)
             await wait_until(_ended(run), 300, "the run to stop")
+            unwatch()
+            audit.uninstall()
             partial, markers, rows = await audit_rows(rt.database, rt.cell_id, first_id)
             assert settings.motion_log is not None
             info.setdefault("unsafe", []).extend(
@@ -519,10 +578,6 @@ async def in_process(args: argparse.Namespace, url: str, pg: PgDatabase | None,
             Path(settings.motion_log).unlink(missing_ok=True)  # the next part's own log
             tally(results_, todo, feeder, partial, markers, rows)
             feed_task.cancel()
-    from backend.inspection import results as results_mod
-
-    if "store" in _ORIGINAL_STORE:
-        results_mod.store = _ORIGINAL_STORE.pop("store")
     shutil.rmtree(tmp, ignore_errors=True)
     return results_, info
 
@@ -556,6 +611,26 @@ def tally(res: dict[str, KindResult], todo: list[str], feeder: Feeder, partial: 
     res[todo[-1]].lost += lost
     res[todo[-1]].duplicated += dup
     res[todo[-1]].partial += partial
+
+
+def _injector(kind: str, rt: Any, dbf: DbFault, emu: Any, fault_s: float,
+              began: list[float], ending: list[Any]) -> Any:  # fmt: skip
+    """The coroutine function that starts a ``kind`` fault, noting when it began in
+    ``began`` and what ends it (the camera's release, the serial link's return) in
+    ``ending``."""
+
+    async def inject() -> None:
+        began.append(time.time())
+        if kind == "camera":
+            ending.append(stall_camera(rt))
+        elif kind == "estop":
+            await rt.cell.estop()
+        elif kind == "database":
+            await dbf.down()
+        elif kind == "serial":
+            ending.append(asyncio.ensure_future(emu.vanish(fault_s)))
+
+    return inject
 
 
 def _reason_kind(reason: str) -> str:

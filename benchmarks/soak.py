@@ -135,7 +135,7 @@ async def soak(args: argparse.Namespace, progress: Any) -> dict[str, Any]:
             idle.append({"t": time.monotonic() - t_idle, **sample(rt.database)})
             await asyncio.sleep(0.5)
         feeder = Feeder(rt, names)
-        watch_truths(rt, feeder)
+        unwatch = watch_truths(rt, feeder)
         done_at: list[float] = []
 
         def on_done(ev: Any) -> None:
@@ -163,17 +163,13 @@ async def soak(args: argparse.Namespace, progress: Any) -> dict[str, Any]:
         guard = asyncio.create_task(budget())
         await rt.jobs.wait(run.job)
         guard.cancel()
+        unwatch()
         if task.done() and not task.cancelled() and task.exception() is not None:
             raise RuntimeError("the feeder died during the soak") from task.exception()
         wall = time.monotonic() - t0
         task.cancel()
         if run.job.state.value != "done":
             raise RuntimeError(f"the run ended {run.job.state.value}: {run.job.error}")
-    from backend.inspection import results as results_mod
-    from benchmarks import faults as fmod
-
-    if "store" in fmod._ORIGINAL_STORE:
-        results_mod.store = fmod._ORIGINAL_STORE.pop("store")
     warm = [s for s in samples if s["n"] > args.warmup]
     series = {}
     for key in {**BOUNDS, **EXTRA_BOUNDS}:
