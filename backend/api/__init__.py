@@ -23,6 +23,7 @@ from backend.api.routes import (
     sim,
     users,
     view3d,
+    views,
 )
 from backend.api.schemas import BODY_ERROR_RESPONSES, ERROR_RESPONSES
 
@@ -39,6 +40,7 @@ for _r in (
     camera,
     recognition,
     models,
+    views,
     recipes,
     inspections,
     belt,
