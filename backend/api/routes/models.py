@@ -84,6 +84,9 @@ def _live_out(public: dict[str, Any], live: LiveIndex) -> dict[str, Any]:
     }
 
 
+# -- models ---------------------------------------------------------------------------------
+
+
 #: What the model list reads (its read-cache entries go when one of them is written).
 MODEL_TABLES = ("object_models", "trained_views")
 
@@ -211,6 +214,9 @@ async def delete_model(
     await svc.delete_model(db, model_id, by=_by(user, reason))
     live.drop_model(model_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+# -- teaching -------------------------------------------------------------------------------
 
 
 def get_backgrounds(runtime: RuntimeDep) -> teach_svc.BackgroundStore:
