@@ -90,7 +90,6 @@ __all__ = [
 
 #: Survey views tried before the run gives up on finding the board.
 SURVEY_TRIES = 3
-
 #: Accepted views after which the planning model is replaced by a quick calibration.
 UPDATE_AFTER_VIEWS = 6
 

@@ -15,9 +15,7 @@ _VP_PATTERNS = (
     (re.compile(r"(^|[^a-z0-9])(inner|vp2|v2|view2)([^a-z0-9]|$)"), 2),
     (re.compile(r"(^|[^a-z0-9])(outer|vp3|v3|view3)([^a-z0-9]|$)"), 3),
 )
-
 _SUFFIXES = (".png", ".jpg", ".jpeg")
-
 MAX_IMPORT_FILES = 500
 
 

@@ -52,16 +52,12 @@ __all__ = ["NAMESPACE", "OpcUaServer", "nodeset_files"]
 log = logging.getLogger(__name__)
 
 NAMESPACE = "urn:visioncell:plc"
-
 #: The server's application URI (in its certificate).
 APP_URI = "urn:visioncell:server"
-
 #: Most OPC UA sessions at once.
 MAX_SESSIONS = 64
-
 #: The nodesets loaded, in order (DI first: MachineVision builds on it).
 NODESETS = ("Opc.Ua.Di.NodeSet2.xml", "Opc.Ua.MachineVision.NodeSet2.xml")
-
 #: Longest wait for the server's thread to come up or go down, seconds (a hang's bound).
 START_BOUND_S = 300.0
 

@@ -81,7 +81,6 @@ class IndexDiff:
 #: A stored view as :meth:`LiveIndex.apply` takes it:
 #: ``(view_id, model_id, viewpoint, features blob, descriptor kind, descriptor version)``.
 ViewRow = tuple[int, int, int, bytes, str, str]
-
 #: The columns of a :data:`ViewRow`, in its order (for ``select(*VIEW_ROW_COLUMNS)``).
 VIEW_ROW_COLUMNS = (
     TrainedView.id,

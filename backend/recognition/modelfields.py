@@ -17,7 +17,6 @@ NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}$")
 
 #: Tallest object and farthest grasp point from the footprint centre a model may give, m.
 MAX_HEIGHT_M = 0.5
-
 MAX_GRASP_OFFSET_M = 0.5
 
 

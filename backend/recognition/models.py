@@ -55,7 +55,6 @@ __all__ = [
 
 #: Most models one database holds (a plant's catalogue; the index stays in memory).
 MAX_MODELS = 10_000
-
 _FIELDS = ("name", "part", "sitting_base", "kind", "threshold", "description", "height_m",
            "grasp_x_m", "grasp_y_m", "grasp_z_m", "geometry_source")  # fmt: skip
 

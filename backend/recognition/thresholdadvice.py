@@ -23,7 +23,6 @@ DEFAULT_TARGET_FAR = 0.01
 #: an untrained part turned off a taught yaw scored up to 0.10-0.15 from the top: a bar
 #: below this lets untrained parts through as models.
 MIN_AUTO_THRESHOLD = 0.15
-
 #: Teach rounds (object yaws spread evenly over the whole turn) a model of each kind needs
 #: to be recognised at any yaw; the wizard and ``visioncell models teach`` guide to them.
 #: A 3d model is decided by its side views, which the 5-DOF arm can only take from two

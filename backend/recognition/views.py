@@ -43,13 +43,10 @@ __all__ = [
 
 #: Most trained views of one model (3 viewpoints x yaw steps x retakes, with room).
 MAX_VIEWS_PER_MODEL = 500
-
 #: Most views one upload or teach adds.
 MAX_VIEWS_PER_REQUEST = 72
-
 #: Fewest features a view needs (a match is verified by an affine fit: 3 points).
 MIN_FEATURES = 3
-
 Source = Literal["teach", "upload", "import"]
 
 

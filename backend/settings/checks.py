@@ -10,7 +10,6 @@ import re
 #: environment and only while every listener is bound to the loopback interface.
 DEV_SECRET = "visioncell-development-secret-change-me"
 
-
 #: A cell name: a short slug (lower-case letters and digits, inner '-' or '_', <= 40 chars).
 CELL_NAME_PATTERN = re.compile(r"^[a-z0-9](?:[a-z0-9_-]{0,38}[a-z0-9])?$")
 
@@ -27,10 +26,8 @@ _OPCUA_ENDPOINT = re.compile(
     r"(?P<path>/[A-Za-z0-9._~/-]{0,128})?$"
 )
 
-
 #: Most entries of ``VISIONCELL_TRUSTED_PROXIES``.
 MAX_TRUSTED_PROXIES = 32
-
 
 Network = ipaddress.IPv4Network | ipaddress.IPv6Network
 

@@ -46,12 +46,9 @@ log = logging.getLogger(__name__)
 #: Where the frustum is drawn until a hand-eye calibration is active: the drawing's
 #: mounting, the same one the calibration planner starts from.
 T_EE_CAM_PLACEHOLDER = NOMINAL_T_EE_CAM
-
 #: Where a new view's camera stands and what it looks at, base frame, metres.
 INITIAL_CAMERA_M = (2.2, -1.9, 1.7)
-
 INITIAL_LOOK_AT_M = (0.45, 0.0, 0.75)
-
 #: Height of the console's embedded 3D view (web/style.css, 32rem), CSS pixels.
 EMBEDDED_VIEW_PX = 512.0
 

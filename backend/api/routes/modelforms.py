@@ -17,23 +17,13 @@ from vision.errors import InvalidInput
 
 #: Database integer keys are 32-bit signed on PostgreSQL.
 DB_ID_MAX = 2**31 - 1
-
-
 ModelId = Annotated[int, Path(ge=1, le=DB_ID_MAX, description="Object model id")]
-
-
 ViewId = Annotated[int, Path(ge=1, le=DB_ID_MAX, description="Trained view id")]
-
-
 Name = Annotated[str, Field(min_length=1, max_length=64, pattern=svc.NAME_PATTERN.pattern)]
-
-
 #: Why a change is made (kept in the audit trail).
 Reason = Annotated[
     str | None, Field(max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)")
 ]
-
-
 ReasonQuery = Annotated[
     str | None, Query(max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)")
 ]
@@ -45,8 +35,6 @@ HeightM = Annotated[
     Field(gt=0.0, le=0.5, allow_inf_nan=False,
           description="Height above the sitting base, metres (what the pick plans with)"),
 ]  # fmt: skip
-
-
 #: The same height in millimetres (the console's and the CLI's unit); give one of the two.
 HeightMm = Annotated[
     float,

@@ -44,7 +44,6 @@ from vision.errors import InvalidInput
 
 #: Database integer keys are 32-bit signed on PostgreSQL.
 DB_ID_MAX = 2**31 - 1
-
 #: What the thresholds in force are read from (the read cache drops them on a write).
 CHOICE_TABLES = ("recognition_settings", "object_models")
 
