@@ -16,6 +16,7 @@ from backend.api.routes import (
     kinematics,
     live,
     models,
+    negatives,
     recipes,
     recognition,
     reports,
@@ -23,6 +24,7 @@ from backend.api.routes import (
     sim,
     users,
     view3d,
+    views,
 )
 from backend.api.schemas import BODY_ERROR_RESPONSES, ERROR_RESPONSES
 
@@ -38,7 +40,9 @@ for _r in (
     cells,
     camera,
     recognition,
+    negatives,
     models,
+    views,
     recipes,
     inspections,
     belt,

@@ -33,11 +33,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import contextvars
 import logging
 import math
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -45,6 +44,7 @@ from urllib.parse import urlsplit
 
 from backend.db.models import Role
 from backend.plc.handshake import ErrorCode, LinkUser, Snapshot
+from backend.plc.opcua_access import _hook_sessions, _ruleset, _session_user, _UserManager
 from backend.plc.signin import Credentials
 
 __all__ = ["NAMESPACE", "OpcUaServer", "nodeset_files"]
@@ -60,8 +60,6 @@ MAX_SESSIONS = 64
 NODESETS = ("Opc.Ua.Di.NodeSet2.xml", "Opc.Ua.MachineVision.NodeSet2.xml")
 #: Longest wait for the server's thread to come up or go down, seconds (a hang's bound).
 START_BOUND_S = 300.0
-
-_session_user: contextvars.ContextVar[Any] = contextvars.ContextVar("opcua_user", default=None)
 
 
 def nodeset_files(data_dir: Path) -> list[Path]:
@@ -402,123 +400,6 @@ def _status(code: int) -> Any:
 
 def _value(v: Any) -> Any:
     return getattr(v, "Value", v)
-
-
-def _hook_sessions(server: Any, refresh: Callable[[], Awaitable[None]], throttle: Any,
-                   manager: Any) -> None:  # fmt: skip
-    """Re-read the sign-in table when a session is created (before it signs in), count
-    failed sign-ins per client address in ``throttle`` (REST's rule, the server's own count:
-    a blocked address is refused before its credentials are looked at), and make the session's user known to the method callbacks of its calls."""
-    from asyncua import ua
-    from asyncua.common.utils import ServiceError
-
-    refused = {ua.StatusCodes.BadUserAccessDenied, ua.StatusCodes.BadIdentityTokenInvalid,
-               ua.StatusCodes.BadIdentityTokenRejected}  # fmt: skip
-    iserver = server.iserver
-    make = iserver.create_session
-
-    def create_session(*args: Any, **kwargs: Any) -> Any:
-        session = make(*args, **kwargs)
-        create, call, activate = session.create_session, session.call, session.activate_session
-        peer = session.name[0] if isinstance(session.name, tuple) else str(session.name)
-        client = f"opcua:{peer}"
-
-        def activate_hooked(*a: Any, **kw: Any) -> Any:
-            params = a[0] if a else kw.get("params")
-            token = getattr(params, "UserIdentityToken", None)
-            # the user manager is told which kind of identity it checks (asyncua hands it
-            # the channel's certificate with every kind); no await between here and there
-            manager.token_kind = "x509" if isinstance(token, ua.X509IdentityToken) else "other"
-            if throttle is not None:
-                try:
-                    throttle.check(client)
-                except Exception:
-                    log.warning("OPC UA: sign-in from %s refused: too many failures", peer)
-                    raise ServiceError(ua.StatusCodes.BadUserAccessDenied) from None
-            try:
-                return activate(*a, **kw)
-            except ServiceError as exc:
-                if throttle is not None and exc.code in refused:
-                    throttle.failure(client)
-                raise
-
-        async def create_hooked(*a: Any, **kw: Any) -> Any:
-            await refresh()
-            return await create(*a, **kw)
-
-        async def call_hooked(params: Any) -> Any:
-            token = _session_user.set(session.user)
-            try:
-                return await call(params)
-            finally:
-                _session_user.reset(token)
-
-        session.create_session, session.call = create_hooked, call_hooked
-        session.activate_session = activate_hooked
-        return session
-
-    iserver.create_session = create_session
-
-
-def _ruleset(anonymous_read: bool) -> Any:
-    """Signed-in users read, subscribe and call (each method checks the role); anonymous
-    clients read and subscribe when allowed, nothing else; nobody changes the address space."""
-    from asyncua import ua
-    from asyncua.crypto.permission_rules import USER_TYPES, SimpleRoleRuleset, UserRole
-
-    def ids(types: Any) -> set[Any]:
-        return {ua.NodeId(t) for t in types}
-
-    oid = ua.ObjectIds
-    rules = SimpleRoleRuleset()
-    users = ids(USER_TYPES)
-    rules._permission_dict[UserRole.Admin] = set(users)
-    rules._permission_dict[UserRole.User] = set(users)
-    calls = ids((oid.CallRequest_Encoding_DefaultBinary, oid.WriteRequest_Encoding_DefaultBinary))
-    session_only = ids((oid.CreateSessionRequest_Encoding_DefaultBinary,
-                        oid.ActivateSessionRequest_Encoding_DefaultBinary,
-                        oid.CloseSessionRequest_Encoding_DefaultBinary,
-                        oid.GetEndpointsRequest_Encoding_DefaultBinary,
-                        oid.FindServersRequest_Encoding_DefaultBinary,
-                        oid.CloseSecureChannelRequest_Encoding_DefaultBinary))  # fmt: skip
-    rules._permission_dict[UserRole.Anonymous] = (users - calls) if anonymous_read else session_only
-    return rules
-
-
-class _UserManager:
-    """asyncua's user manager over :class:`Credentials`."""
-
-    def __init__(self, credentials: Credentials, anonymous_read: bool) -> None:
-        self.credentials = credentials
-        self.anonymous_read = anonymous_read
-        self.token_kind = "other"
-        """The identity token being checked: ``x509`` or another kind (set just before)."""
-
-    def get_user(self, iserver: Any, username: Any = None, password: Any = None,
-                 certificate: Any = None) -> Any:  # fmt: skip
-        from asyncua.crypto.permission_rules import User, UserRole
-
-        if self.token_kind == "x509":
-            cred = None if certificate is None else self.credentials.check_certificate(certificate)
-            if cred is None:
-                log.warning("OPC UA: sign-in refused for a certificate of no user")
-                return None
-            user = User(role=UserRole.User, name=cred.name)
-            user.vc_role = cred.role  # type: ignore[attr-defined]
-            return user
-        if username is None and password is None:
-            if not self.anonymous_read:
-                return None
-            user = User(role=UserRole.Anonymous, name="anonymous")
-            user.vc_role = None  # type: ignore[attr-defined]
-            return user
-        cred = self.credentials.check(username, password)
-        if cred is None:
-            log.warning("OPC UA: sign-in refused for user name %r", str(username)[:64])
-            return None
-        user = User(role=UserRole.User, name=cred.name)
-        user.vc_role = cred.role  # type: ignore[attr-defined]
-        return user
 
 
 def endpoint_host(endpoint: str) -> str:

@@ -1,7 +1,8 @@
-"""Trained views in the database: add (teach, upload, import), list, read images, delete,
-re-extract stale features.  Every change is made in one transaction and mirrored in the
-live index only once it is certain (a failed commit takes its views back out), so the
-database and the index never disagree and bad input leaves no row behind.
+"""Trained views in the database: add (teach, upload, import), delete, re-extract stale
+features.  Every change is made in one transaction and mirrored in the live index only once
+it is certain (a failed commit takes its views back out), so the database and the index
+never disagree and bad input leaves no row behind.  Reading them (list, images) is in
+:mod:`backend.recognition.viewreads`, re-exported here.
 """
 
 from __future__ import annotations
@@ -14,9 +15,7 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from sqlalchemy import delete, func, select
-from sqlalchemy.ext.asyncio import AsyncSession
-from sqlalchemy.orm import defer
+from sqlalchemy import delete, select
 
 from backend import audit
 from backend.db.models import ObjectModel, TrainedView
@@ -24,7 +23,8 @@ from backend.db.session import Database
 from backend.recognition import images as im
 from backend.recognition.index import IndexedModel, LiveIndex
 from backend.recognition.models import get_model
-from vision.errors import Conflict, InvalidInput, NotFound
+from backend.recognition.viewreads import _view_total, get_view, list_views, view_image, view_public
+from vision.errors import Conflict, InvalidInput
 from vision.features import Features
 
 __all__ = [
@@ -104,93 +104,6 @@ class ViewInput:
                 raise InvalidInput(f"{self.name}: the mask is empty")
         if self.source not in ("teach", "upload", "import"):
             raise InvalidInput(f"source must be teach, upload or import, got {self.source!r}")
-
-
-def view_public(row: TrainedView) -> dict[str, Any]:
-    """JSON form of a view, with URLs of its image, thumbnail and mask."""
-    base = f"/api/models/{row.model_id}/views/{row.id}/image"
-    return {
-        "id": row.id,
-        "model_id": row.model_id,
-        "viewpoint": row.viewpoint,
-        "width": row.width,
-        "height": row.height,
-        "keypoints": row.keypoint_count,
-        "descriptor": {"kind": row.descriptor_kind, "version": row.descriptor_version},
-        "yaw_rad": row.yaw_rad,
-        "roll_rad": row.roll_rad,
-        "source": row.source,
-        "joints": row.joints,
-        "T_base_cam": row.T_base_cam,
-        "created_at": row.created_at.isoformat(),
-        "image_url": base,
-        "thumbnail_url": f"{base}?thumb=1",
-        "mask_url": f"{base}?mask=1",
-    }
-
-
-async def _view_total(session: AsyncSession, model_id: int) -> int:
-    n = await session.scalar(
-        select(func.count()).select_from(TrainedView).where(TrainedView.model_id == model_id)
-    )
-    return int(n or 0)
-
-
-async def list_views(
-    session: AsyncSession,
-    model_id: int,
-    *,
-    viewpoint: int | None = None,
-    limit: int = 100,
-    offset: int = 0,
-) -> tuple[list[TrainedView], int]:
-    """A page of a model's views (image blobs not loaded) and the total."""
-    await get_model(session, model_id)
-    where = [TrainedView.model_id == model_id]
-    if viewpoint is not None:
-        where.append(TrainedView.viewpoint == viewpoint)
-    total = await session.scalar(select(func.count()).select_from(TrainedView).where(*where))
-    rows = await session.scalars(
-        select(TrainedView)
-        .where(*where)
-        .options(
-            defer(TrainedView.image_png),
-            defer(TrainedView.mask_png),
-            defer(TrainedView.features),
-            defer(TrainedView.thumbnail_jpeg),
-        )
-        .order_by(TrainedView.id)
-        .limit(limit)
-        .offset(offset)
-    )
-    return list(rows), int(total or 0)
-
-
-async def get_view(session: AsyncSession, model_id: int, view_id: int) -> TrainedView:
-    """The view ``view_id`` of model ``model_id``, or :class:`NotFound`."""
-    row = await session.get(TrainedView, view_id)
-    if row is None or row.model_id != model_id:
-        await get_model(session, model_id)
-        raise NotFound(f"model {model_id} has no trained view with id {view_id}")
-    return row
-
-
-async def view_image(
-    session: AsyncSession, model_id: int, view_id: int, *, part: str = "image"
-) -> tuple[bytes, str]:
-    """Bytes and media type of a view's ``image`` (PNG), ``thumb`` (JPEG) or ``mask`` (PNG)."""
-    row = await get_view(session, model_id, view_id)
-    if part == "thumb":
-        if row.thumbnail_jpeg is None:
-            rgb = im.rgb_from_png(row.image_png)
-            mask = None if row.mask_png is None else im.mask_from_png(row.mask_png)
-            return im.thumbnail(rgb, mask), "image/jpeg"
-        return row.thumbnail_jpeg, "image/jpeg"
-    if part == "mask":
-        if row.mask_png is None:
-            raise NotFound(f"view {view_id} has no mask (its whole image is the object)")
-        return row.mask_png, "image/png"
-    return row.image_png, "image/png"
 
 
 def _audit_value(row: TrainedView, model_name: str) -> dict[str, Any]:

@@ -31,6 +31,7 @@ from backend.cell import Cell
 from backend.view3d.access import ViewAccess, link_from_path
 from backend.view3d.arm import arm_shapes, link_poses
 from backend.view3d.calibviews import CalibrationFrusta
+from backend.view3d.clients import _client_address, _request_path
 from backend.view3d.guard import MessageGuard
 from backend.view3d.panel import ClientPanel
 from backend.view3d.simscene import SimScene
@@ -54,31 +55,6 @@ EMBEDDED_VIEW_PX = 512.0
 
 def _wxyz(R: np.ndarray) -> np.ndarray:
     return vtf.SO3.from_matrix(R).wxyz
-
-
-def _request_path(server: viser.ViserServer | None, client_id: int) -> str | None:
-    """The path (with query) of a client's websocket request, or None.
-
-    viser 1.1 has no public accessor for it; the connection object it keeps per client
-    (a ``websockets`` ``ServerConnection``) carries the opening request.  If a later viser
-    changes these internals, this answers None and clients sign in with a token instead.
-    """
-    ws_server = getattr(server, "_websock_server", None)
-    conn = getattr(ws_server, "_live_connections", {}).get(client_id)
-    request = getattr(conn, "request", None)
-    path = getattr(request, "path", None)
-    return path if isinstance(path, str) else None
-
-
-def _client_address(server: viser.ViserServer | None, client_id: int) -> str | None:
-    """The peer address of a client's websocket (the sign-in throttle's key), or None
-    (same viser internals as :func:`_request_path`)."""
-    ws_server = getattr(server, "_websock_server", None)
-    conn = getattr(ws_server, "_live_connections", {}).get(client_id)
-    remote = getattr(conn, "remote_address", None)
-    if isinstance(remote, tuple) and remote and isinstance(remote[0], str):
-        return remote[0]
-    return None
 
 
 class View3D:
