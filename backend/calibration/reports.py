@@ -110,8 +110,18 @@ def _hand_eye_summary(r: HandEyeResult) -> dict[str, Any]:
     }
 
 
+def _check_solved(cal: Calibration) -> None:
+    """:class:`NotFound` for a calibration without a solve's residuals (an imported one)."""
+    if not cal.residuals:
+        raise NotFound(
+            f"calibration {cal.id} has no report: it was not solved here (imported), so it "
+            "has no residuals"
+        )
+
+
 def calibration_report(cal: Calibration) -> dict[str, Any]:
     """The report of a calibration: the row, a readable summary and the links to its plots."""
+    _check_solved(cal)
     result = result_of(cal)
     summary = (
         _intrinsic_summary(result)
@@ -131,6 +141,7 @@ def report_png(cal: Calibration, plot: str) -> bytes:
     """One of the :data:`PLOTS` of a calibration as PNG bytes."""
     if plot not in PLOTS:
         raise NotFound(f"no plot {plot!r}; there are {', '.join(PLOTS)}")
+    _check_solved(cal)
     result = result_of(cal)
     if plot == "residuals":
         return plots.residuals_png(result)

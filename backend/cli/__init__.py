@@ -1,6 +1,7 @@
 """The ``visioncell`` command line, one module per command group: ``serve``
 (:mod:`backend.cli.serve`), ``db`` (:mod:`backend.cli.db`), ``user``
-(:mod:`backend.cli.users`), ``calibrate`` (:mod:`backend.cli.calibrate`), ``train-pca``
+(:mod:`backend.cli.users`), ``calibrate`` (:mod:`backend.cli.calibrate`, with ``export``
+and ``import`` in :mod:`backend.cli.calibration_io`), ``train-pca``
 (:mod:`backend.cli.features`), ``emulator`` (:mod:`backend.cli.emulator`), ``estop``
 (:mod:`backend.cli.estop`), ``models`` (:mod:`backend.cli.models`), ``inspect``
 (:mod:`backend.cli.inspect`), ``recipes`` (:mod:`backend.cli.recipes`), ``report``
@@ -12,6 +13,7 @@ import typer
 
 from backend import __version__
 from backend.cli.calibrate import calibrate_app
+from backend.cli.calibration_io import register as register_calibration_io
 from backend.cli.common import err, load_settings, out
 from backend.cli.db import db_app
 from backend.cli.emulator import emulator
@@ -37,6 +39,7 @@ app = typer.Typer(
 app.add_typer(db_app, name="db")
 app.add_typer(user_app, name="user")
 app.add_typer(calibrate_app, name="calibrate")
+register_calibration_io(calibrate_app)
 app.command("train-pca")(train_pca)
 register_models(app)
 register_inspect(app)

@@ -92,7 +92,9 @@ def test_every_operation_is_fuzzed():
     assert ("POST", "/api/robot/move") in OPERATIONS
     for op in (("POST", "/api/recognition/recognise"), ("GET", "/api/recognition/threshold"),
                ("GET", "/api/recognition/negatives"), ("POST", "/api/recognition/negatives"),
-               ("DELETE", "/api/recognition/negatives/{negative_id}")):  # fmt: skip
+               ("DELETE", "/api/recognition/negatives/{negative_id}"),
+               ("GET", "/api/calibration/calibrations/{calibration_id}/export"),
+               ("POST", "/api/calibration/calibrations/import")):  # fmt: skip
         assert op in OPERATIONS, op
 
 

@@ -4,15 +4,17 @@
 images, ``VISIONCELL_CELL_LAYOUT`` naming a TOML layout with bins); the token it prints
 signs in; an inspection with ``sort`` sorts the part into the bin the layout gives its
 model: uncalibrated it says where the part would go and why it is not picked; with a camera
-calibration activated over REST the pick is planned and made into that bin.  A layout
-without bins says so, naming the layout; a bad layout stops the start naming the value.
+calibration imported and activated with the CLI the pick is planned and made into that
+bin.  A layout without bins says so, naming the layout; a bad layout stops the start
+naming the value.
 """
 
 from __future__ import annotations
 
-import asyncio
+import json
 import os
 import re
+import socket
 import subprocess
 import sys
 import time
@@ -26,16 +28,11 @@ from pydantic import ValidationError
 
 from backend.app import create_app
 from backend.calibration import NOMINAL_T_EE_CAM
-from backend.db.models import Calibration, CalibrationKind
-from backend.db.session import Database
-from backend.runtime import ensure_cell_row
 from tests.utils.factories import make_settings, make_tokens, migrate
 from tests.utils.recorded import coil_dir, coil_file, link_sequence, upload_views, wait_job
 
 #: Bounds a hang only (a loaded machine is slow to start a server); never a speed claim.
 HANG_S = 240.0
-#: This test's own port (a server it starts).
-PORT = 18201
 
 LAYOUT = """
 [station]
@@ -87,41 +84,49 @@ def _inspect_sorted(client: object, headers: dict[str, str]) -> dict:
     return r.json()
 
 
-async def _calibrations(url: str, cell: str) -> list[int]:
-    """Two solved (not active) calibrations of the cell: intrinsics of the 128 x 128 images
-    and the camera's mounting.  They stand in for sessions solved from board images, which
-    this camera (a folder of object photos) cannot take; activating them is the user's step."""
-    db = Database(url)
-    try:
-        cell_id = await ensure_cell_row(db, cell)
-        async with db.session() as session:
-            rows = [
-                Calibration(cell_id=cell_id, kind=CalibrationKind.intrinsic, sample_count=12,
-                            parameters={"K": [[150.0, 0, 64.0], [0, 150.0, 64.0], [0, 0, 1]],
-                                        "dist": [0.0] * 5, "image_size": [128, 128]}),
-                Calibration(cell_id=cell_id, kind=CalibrationKind.hand_eye, sample_count=12,
-                            parameters={"T_ee_cam": NOMINAL_T_EE_CAM.tolist()}),
-            ]  # fmt: skip
-            session.add_all(rows)
-            await session.flush()
-            return [int(r.id) for r in rows]
-    finally:
-        await db.dispose()
+def _import_calibrations(tmp_path: Path, url: str, token: str) -> None:
+    """Import and activate two calibrations with the CLI as a user would: intrinsics of the
+    128 x 128 images and the camera's mounting.  They stand in for calibrations solved on
+    another cell or by another tool (this camera, a folder of object photos, shows no
+    board)."""
+    docs = {
+        "intrinsics.json": {"kind": "intrinsic", "sample_count": 12, "parameters": {
+            "K": [[150.0, 0, 64.0], [0, 150.0, 64.0], [0, 0, 1]], "dist": [0.0] * 5,
+            "image_size": [128, 128]}},
+        "hand-eye.json": {"kind": "hand_eye", "sample_count": 12,
+                          "parameters": {"T_ee_cam": NOMINAL_T_EE_CAM.tolist()}},
+    }  # fmt: skip
+    exe = Path(sys.executable).with_name("visioncell")
+    for name, doc in docs.items():
+        path = tmp_path / name
+        path.write_text(json.dumps({"format": "visioncell-calibration", "version": 1, **doc}))
+        done = subprocess.run(
+            [str(exe), "calibrate", "import", str(path), "--activate", "--url", url,
+             "--token", token], capture_output=True, text=True, timeout=HANG_S,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        assert f"({doc['kind']}, active)" in done.stdout, done.stdout
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
 
 
 @pytest.fixture
-def served(tmp_path: Path, data_dir: Path) -> Iterator[tuple[httpx.Client, dict[str, str], Path]]:
+def served(tmp_path: Path, data_dir: Path) -> Iterator[tuple[httpx.Client, dict[str, str], str]]:
     coil, folder = _camera(tmp_path, data_dir)
     layout = tmp_path / "cell.toml"
     layout.write_text(LAYOUT)
     settings = make_settings(tmp_path, camera_folder=folder, data_dir=data_dir)
     migrate(settings)
-    calibrations = asyncio.run(_calibrations(settings.database_url, settings.cell_name))
+    port = _free_port()
     env = {
         **os.environ,
         "VISIONCELL_DATABASE_URL": settings.database_url,
         "VISIONCELL_HTTP_HOST": "127.0.0.1",
-        "VISIONCELL_HTTP_PORT": str(PORT),
+        "VISIONCELL_HTTP_PORT": str(port),
         "VISIONCELL_VIEW3D_ENABLED": "false",
         "VISIONCELL_DRIVER": "ideal",
         "VISIONCELL_CAMERA": "folder",
@@ -137,7 +142,7 @@ def served(tmp_path: Path, data_dir: Path) -> Iterator[tuple[httpx.Client, dict[
         proc = subprocess.Popen([str(exe), "serve"], env=env, stdout=log, stderr=log)
     try:
         deadline = time.monotonic() + HANG_S
-        with httpx.Client(base_url=f"http://127.0.0.1:{PORT}", timeout=60.0) as client:
+        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=60.0) as client:
             while True:
                 assert proc.poll() is None, out.read_text()[-2000:]
                 assert time.monotonic() < deadline, "serve never answered /api/health"
@@ -151,7 +156,7 @@ def served(tmp_path: Path, data_dir: Path) -> Iterator[tuple[httpx.Client, dict[
             assert tokens, out.read_text()[-2000:]
             eng = {"Authorization": f"Bearer {tokens[-1]}"}
             _teach(client, eng, coil)
-            yield client, eng, calibrations
+            yield client, eng, tokens[-1]
     finally:
         proc.terminate()
         try:
@@ -161,8 +166,8 @@ def served(tmp_path: Path, data_dir: Path) -> Iterator[tuple[httpx.Client, dict[
             proc.wait(60)
 
 
-def test_a_real_cell_plans_the_pick_into_the_bin_of_its_layout(served):
-    client, eng, calibrations = served
+def test_a_real_cell_plans_the_pick_into_the_bin_of_its_layout(served, tmp_path):
+    client, eng, token = served
     row = _inspect_sorted(client, eng)
     assert row["decision"] == "recognized" and row["model"] == "obj1", row["reason"]
     pick = row["pick"]
@@ -176,11 +181,12 @@ def test_a_real_cell_plans_the_pick_into_the_bin_of_its_layout(served):
     assert r.status_code == 200 and r.json()["belt"] is None, r.text
     r = client.post("/api/belt", json={"running": True}, headers=eng)
     assert r.status_code == 409 and r.json()["error"] == "conflict", r.text
-    # Calibrated: the part is picked (a guarded descent: imported views give no pose) and
-    # dropped into its bin by the ideal driver.
-    for cid in calibrations:
-        r = client.post(f"/api/calibration/calibrations/{cid}/activate", headers=eng)
-        assert r.status_code == 200, r.text
+    # Calibrated (imported and activated with the CLI): the part is picked (a guarded
+    # descent: imported views give no pose) and dropped into its bin by the ideal driver.
+    _import_calibrations(tmp_path, str(client.base_url), token)
+    active = client.get("/api/calibration/active", headers=eng).json()
+    assert active["intrinsic"]["parameters"]["K"][0][0] == 150.0, active
+    assert active["hand_eye"]["parameters"]["T_ee_cam"] == NOMINAL_T_EE_CAM.tolist(), active
     row = _inspect_sorted(client, eng)
     assert row["decision"] == "recognized" and row["model"] == "obj1", row["reason"]
     assert "uncalibrated" not in row["reason"], row["reason"]

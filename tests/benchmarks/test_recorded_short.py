@@ -26,7 +26,8 @@ def test_recorded_benchmark_short(data_dir, capsys) -> None:
     assert "recorded cell: inspecting" in out.err
     e, lib = res["endpoint"], res["library"]
     assert res["trained_views"] == 180 and e["known"] == lib["known"] == 60
-    assert e["unknown"] == 15 and res["stored_rows"] == e["known"] + e["unknown"]
+    # One row per image of each pass: one image per request, then the CLI's batches.
+    assert e["unknown"] == 15 and res["stored_rows"] == 2 * (e["known"] + e["unknown"])
     assert res["threshold"] >= 0.03 and res["threshold_runs"] >= 1
     # The endpoint decides as the library does on the same images and thresholds (up to
     # the approximate search's randomness, which another part of the product removes).
@@ -35,6 +36,10 @@ def test_recorded_benchmark_short(data_dir, capsys) -> None:
     assert e["top1"] >= 0.9
     assert res["endpoint_ms_per_image"] > 0 and res["library_ms_per_image"] > 0
     assert res["time_ratios"] == [res["time_ratio"]] and res["store_ms_per_image"] > 0
+    # The CLI's way: batches of its size, the same answers as one image per request.
+    assert res["cli_batch"] == 8 and res["cli_answers_identical"] is True
+    assert res["cli_time_ratios"] == [res["cli_time_ratio"]] and res["cli_ms_per_image"] > 0
+    assert "8 images per request (the CLI's way)" in out.err and "CLI / library" in out.out
     assert len(res["load_average"]["before"]) == 3
     # The recorded cell: every image of the recording inspected once, in its order, and
     # decided as the endpoint decided it.
