@@ -58,7 +58,7 @@ from backend.inspection.waiting import PartTracker, belt_status, conveyor_of, wa
 from backend.recognition import thresholds
 from backend.recognition.images import encode_jpeg
 from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
-from backend.recognition.teach import plan_shots
+from backend.planning import plan_shots
 from backend.reports.scenes import SceneRecorder
 from robot.errors import Unreachable
 from robot.kinematics import T_base_ee

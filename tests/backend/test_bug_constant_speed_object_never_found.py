@@ -27,7 +27,7 @@ import pytest
 
 from backend.inspection import service
 from backend.inspection.state import InspectionState
-from backend.recognition.teach import BackgroundStore
+from backend.planning import BackgroundStore
 from robot.drivers.conveyor import BeltStatus
 from robot.kinematics import T_base_ee
 from vision.camera import PinholeCamera

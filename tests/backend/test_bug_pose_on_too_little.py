@@ -26,7 +26,7 @@ import pytest
 from backend.calibration import NOMINAL_T_EE_CAM
 from backend.calibration.auto import nominal_camera
 from backend.inspection import service
-from backend.recognition.teach import plan_shots
+from backend.planning import plan_shots
 from robot.drivers.conveyor import BeltStatus, FixedStation
 from robot.sim.world import ConveyorSpec
 from vision.pose import ObjectPose, PoseFailed

@@ -19,7 +19,7 @@ import numpy as np
 
 from backend.inspection import service
 from backend.inspection.state import InspectionState
-from backend.recognition.teach import BackgroundStore, Shot
+from backend.planning import BackgroundStore, Shot
 from robot.drivers.conveyor import FixedStation
 from tests.backend.test_bug_constant_speed_object_never_found import (
     CAM,

@@ -10,7 +10,7 @@ import pytest
 
 from backend.calibration.autoplan import NOMINAL_T_EE_CAM
 from backend.inspection import service
-from backend.recognition.teach import plan_shots
+from backend.planning import plan_shots
 from robot.drivers.conveyor import FixedStation
 from robot.kinematics import T_base_ee
 from robot.sim.camera import CameraSpec
