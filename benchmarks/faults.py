@@ -168,7 +168,7 @@ class Feeder:
     _k: int = 0
 
     def start(self) -> None:
-        from backend.inspection.service import InspectionDone
+        from backend.cell.events import InspectionDone
 
         self.rt.bus.add_listener(self._on_done, InspectionDone)
         cell = self.rt.cell

@@ -33,8 +33,7 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,13 +41,14 @@ from numpy.typing import NDArray
 from backend import audit
 from backend.db.session import Database
 from backend.heavy import HeavyPool
+from backend.planning import BackgroundStore, Shot, mounting_or_nominal, plan_shots
 from backend.recognition import thresholds
 from backend.recognition.autothreshold import ThresholdKeeper
-from backend.planning import BackgroundStore, Shot, mounting_or_nominal, plan_shots
 from backend.recognition.geometry import Silhouette, TopShot
 from backend.recognition.index import LiveIndex
 from backend.recognition.models import get_model, taught_rounds
 from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
+from backend.recognition.teachheight import geometry_shot, measure, store_geometry
 from backend.recognition.teachoptions import (
     MAX_ROUNDS,
     MAX_WAIT_S,
@@ -58,12 +58,11 @@ from backend.recognition.teachoptions import (
     rounds_guide,
     teach_yaws_rad,
 )
-from backend.recognition.teachheight import geometry_shot, measure, store_geometry
 from backend.recognition.views import ViewInput, add_views, view_public
 from robot.collision import CollisionWorld
 from robot.kinematics import T_base_ee
 from vision.camera import PinholeCamera
-from vision.errors import Conflict, InvalidInput, VisionCellError
+from vision.errors import Conflict, InvalidInput
 from vision.features.types import Features
 from vision.segmentation import iou
 
@@ -71,14 +70,15 @@ __all__ = [
     "MAX_ROUNDS",
     "MAX_WAIT_S",
     "TOP_ROLLS_RAD",
-    "check_live_camera",
-    "start_teach",
     "TeachOptions",
     "TeachTimeout",
+    "check_live_camera",
     "rounds_guide",
     "run_teach",
+    "start_teach",
     "teach_yaws_rad",
 ]
+
 
 async def _wait_for_object(
     cell: Any, shot: Shot, background: NDArray[np.uint8], wait_s: float, job: Any

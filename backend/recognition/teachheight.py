@@ -107,5 +107,3 @@ async def store_geometry(
         out["ask"] = (f"The part's height could not be measured ({got.note}). Enter it (mm) so "
                       "the cell can pick the part into its bin.")  # fmt: skip
     return out
-
-

@@ -137,5 +137,3 @@ def rounds_guide(taught: int, recommended: int) -> dict[str, Any]:
         out["next_round"] = taught + 1
         out["next_yaw_deg"] = round(math.degrees(teach_yaws_rad(recommended)[taught]), 1)
     return out
-
-
