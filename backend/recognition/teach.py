@@ -54,7 +54,6 @@ from backend.recognition.teachoptions import (
     MAX_WAIT_S,
     TOP_ROLLS_RAD,
     TeachOptions,
-    TeachTimeout,
     rounds_guide,
     teach_yaws_rad,
 )
@@ -62,7 +61,7 @@ from backend.recognition.views import ViewInput, add_views, view_public
 from robot.collision import CollisionWorld
 from robot.kinematics import T_base_ee
 from vision.camera import PinholeCamera
-from vision.errors import Conflict, InvalidInput
+from vision.errors import Conflict, InvalidInput, VisionCellError
 from vision.features.types import Features
 from vision.segmentation import iou
 
@@ -78,6 +77,12 @@ __all__ = [
     "start_teach",
     "teach_yaws_rad",
 ]
+
+
+class TeachTimeout(VisionCellError):
+    """No object arrived at the station in time."""
+
+    code = "teach_timeout"
 
 
 async def _wait_for_object(

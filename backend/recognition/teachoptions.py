@@ -8,9 +8,9 @@ import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from vision.errors import InvalidInput, VisionCellError
+from vision.errors import InvalidInput
 
-__all__ = ["MAX_ROUNDS", "MAX_WAIT_S", "TOP_ROLLS_RAD", "TeachOptions", "TeachTimeout",
+__all__ = ["MAX_ROUNDS", "MAX_WAIT_S", "TOP_ROLLS_RAD", "TeachOptions",
            "rounds_guide", "teach_yaws_rad"]  # fmt: skip
 
 #: Camera rolls (q5 offsets, radians) of the top view: 0 and +-120 deg cover the circle in
@@ -46,12 +46,6 @@ def teach_yaws_rad(rounds: int) -> tuple[float, ...]:
     if isinstance(rounds, bool) or not isinstance(rounds, int) or not 1 <= rounds <= MAX_ROUNDS:
         raise InvalidInput(f"rounds must be an integer in 1..{MAX_ROUNDS}, got {rounds!r}")
     return tuple(math.remainder(2.0 * math.pi * k / rounds, 2.0 * math.pi) for k in range(rounds))
-
-
-class TeachTimeout(VisionCellError):
-    """No object arrived at the station in time."""
-
-    code = "teach_timeout"
 
 
 @dataclass(frozen=True)
