@@ -8,9 +8,9 @@ stand on this module and on neither of each other:
   inspection's top view is the teach's and the empty-belt background grabbed by a teach
   applies to it;
 - :class:`BackgroundStore`: the empty-belt image of each shot, by its joints;
-- :func:`plan_mounting`: the camera mounting the plans use, the cell's active hand-eye
-  calibration, else the drawing's nominal one (the shots, and so their stored backgrounds,
-  stay the same until a hand-eye calibration is activated);
+- :func:`mounting_or_nominal`: the camera mounting the plans use, the cell's active
+  hand-eye calibration, else the drawing's nominal one (the shots, and so their stored
+  backgrounds, stay the same until a hand-eye calibration is activated);
 - :func:`station_top`: the top view at the station as an inspection plans it.
 """
 
@@ -28,11 +28,16 @@ from numpy.typing import NDArray
 from robot.viewpoints import VIEW_NAMES, plan_viewpoints
 
 if TYPE_CHECKING:
-    from sqlalchemy.ext.asyncio import AsyncSession
-
     from robot.collision import CollisionWorld
 
-__all__ = ["AIM_HEIGHT_M", "BackgroundStore", "Shot", "plan_mounting", "plan_shots", "station_top"]
+__all__ = [
+    "AIM_HEIGHT_M",
+    "BackgroundStore",
+    "Shot",
+    "mounting_or_nominal",
+    "plan_shots",
+    "station_top",
+]
 
 #: Aiming height of the viewpoints (the teach's default object height), metres.
 AIM_HEIGHT_M = 0.1
@@ -111,14 +116,6 @@ def mounting_or_nominal(T_ee_cam: NDArray[np.float64] | None) -> NDArray[np.floa
     from backend.calibration import NOMINAL_T_EE_CAM
 
     return np.asarray(NOMINAL_T_EE_CAM if T_ee_cam is None else T_ee_cam, dtype=np.float64)
-
-
-async def plan_mounting(session: AsyncSession, cell_id: int) -> NDArray[np.float64]:
-    """The camera mounting the station's shots are planned with: the cell's active hand-eye
-    calibration, else the nominal one (:func:`mounting_or_nominal`)."""
-    from backend.calibration import active_camera_calibration
-
-    return mounting_or_nominal((await active_camera_calibration(session, cell_id)).T_ee_cam)
 
 
 async def station_top(station: NDArray[np.float64], T_plan: NDArray[np.float64]) -> Shot:

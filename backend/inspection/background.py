@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from backend.inspection.context import Context, cam_pose, context, travel_of
-from backend.planning import Shot, plan_mounting, station_top
+from backend.planning import Shot, mounting_or_nominal, station_top
 from vision.errors import Conflict, InvalidInput
 
 if TYPE_CHECKING:
@@ -26,10 +26,8 @@ __all__ = ["grab_background", "grab_belt_background", "start_belt_background"]
 async def _station_top(rt: CellRuntime) -> tuple[Context, Shot]:
     """The context and the top view at the station, planned with the active hand-eye
     calibration (the nominal mounting without one)."""
-    async with rt.database.session() as session:
-        T = await plan_mounting(session, rt.cell_id)
     ctx = await context(rt)
-    return ctx, await station_top(ctx.station, T)
+    return ctx, await station_top(ctx.station, mounting_or_nominal(ctx.T_plan))
 
 
 async def grab_background(rt: CellRuntime, *, speed: float | None = None) -> None:

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from backend.inspection.errors import NOT_TRAINED, NotReady
-from backend.planning import Shot, plan_mounting, station_top
+from backend.planning import Shot, mounting_or_nominal, station_top
 from backend.recognition import thresholds
 from backend.recognition.images import encode_jpeg
 from robot.kinematics import T_base_ee
@@ -40,12 +40,17 @@ class Context:
     uncalibrated: str = ""
     #: Where parts leave the belt (base y, metres; infinite: no belt).
     belt_end_y_m: float = math.inf
+    #: The active hand-eye calibration's mounting, which the station's shots are planned
+    #: with (None: the nominal one, :func:`backend.planning.mounting_or_nominal`).
+    T_plan: NDArray[np.float64] | None = None
 
 
 async def context(rt: CellRuntime) -> Context:
     """Camera model and mounting: the cell's active calibrations, else the camera's exact
     nominal ones (the simulator's), else the drawing's (reported in ``source``); the
-    station, its surface and the belt's end from the cell's layout."""
+    station, its surface and the belt's end from the cell's layout; the mounting the shots
+    are planned with (the active hand-eye calibration, else the drawing's: the teach's
+    shots and backgrounds).  The calibration is read once, for all of them."""
     from backend.calibration import NOMINAL_T_EE_CAM, active_camera_calibration, nominal_camera
 
     async with rt.database.session() as session:
@@ -78,7 +83,8 @@ async def context(rt: CellRuntime) -> Context:
            + " and the ".join(missing)) if missing else ""  # fmt: skip
     return Context(rt, camera, np.asarray(T, dtype=np.float64), ", ".join(src),
                    layout.station_point, float(layout.surface_z_m), why,
-                   math.inf if end is None else float(end))  # fmt: skip
+                   math.inf if end is None else float(end),
+                   None if cal.T_ee_cam is None else np.asarray(cal.T_ee_cam, np.float64))  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,14 +99,14 @@ class TopPlan:
 
 
 async def read_plan(ctx: Context) -> TopPlan:
-    """:class:`TopPlan`, in one database session; :class:`NotReady` when nothing is trained
-    or the top view has no empty-belt background (a setup step missing: no inspection, no
-    row)."""
+    """:class:`TopPlan` (the thresholds read from the database, the mounting the context
+    read); :class:`NotReady` when nothing is trained or the top view has no empty-belt
+    background (a setup step missing: no inspection, no row)."""
     rt = ctx.rt
     if len(rt.live_index) == 0:
         raise NotReady(NOT_TRAINED)
+    T_plan = mounting_or_nominal(ctx.T_plan)
     async with rt.database.session() as session:
-        T_plan = await plan_mounting(session, rt.cell_id)
         choice = await thresholds.current_choice(session)
     top = await station_top(ctx.station, T_plan)
     bg = rt.teach_backgrounds.get(top)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from backend.inspection import recovery
-from backend.inspection.context import belt_state, context
+from backend.inspection.context import Context, belt_state, context
 from backend.inspection.errors import NOT_TRAINED, NotReady
 from backend.inspection.find import Waiting
 from backend.inspection.inspect import inspect_object
@@ -144,6 +144,14 @@ def start_run(
     run = InspectionRun(opts, count, resolve)
 
     async def body(job: Any) -> dict[str, Any]:
+        async def read_context(progress: float) -> Context:
+            def holding(m: str) -> None:
+                job.report(progress, "holding: " + m)
+
+            return await recovery.retry_database(
+                "reading the calibration", lambda: context(rt), on_wait=holding
+            )
+
         ctx = await recovery.retry_database(
             "reading the calibration", lambda: context(rt), on_wait=lambda m: job.report(0.0, m)
         )
@@ -153,6 +161,7 @@ def start_run(
         except Exception:  # the pose triangulates on first use instead
             log.warning("could not triangulate the taught views ahead of the run", exc_info=True)
         decisions: dict[str, int] = {}
+        first = True  # the context read above is the first object's
         tracker = PartTracker()
         conveyor = conveyor_of(rt)
         if conveyor is not None:  # the run indexes the belt: each part waits for its release
@@ -166,6 +175,9 @@ def start_run(
                                   stopped=lambda: run.stop_requested, forever=True)  # fmt: skip
                 try:
                     await apply_belt_mode(rt, run.options)
+                    if not first:  # each object's own context (calibration)
+                        ctx = await read_context(progress)
+                    first = False
                     out = await inspect_object(ctx, run.options, None, tracker=tracker,
                                                waiting=waiting, resolve=resolve)  # fmt: skip
                 except NotReady:
