@@ -175,7 +175,7 @@ async def next_frame(cell: Any, prev: Any) -> Any:
 class Found:
     """A part at the station: its top-view frame, the belt's travel at its exposure, the
     background it was found against, its belt coordinate (:mod:`backend.inspection.waiting`;
-    NaN when not measured), when its inspection began (``time.monotonic()``: the start of
+    NaN when not measured), when its inspection began (on the stopwatch's clock: the start of
     the search, or the moment the part came when the search had to wait for it) and its
     region in the frame as found."""
 
