@@ -45,9 +45,9 @@ from backend.inspection import recovery
 from backend.inspection.state import InspectionState
 from backend.jobs import JobManager
 from backend.knowntokens import KnownTokens
+from backend.planning import BackgroundStore
 from backend.readcache import ReadCache
 from backend.recognition.index import LiveIndex, load_live_index
-from backend.recognition.teach import BackgroundStore
 from backend.settings import Settings
 from backend.taskutil import cancel_and_wait
 from backend.throttle import SignInThrottle

@@ -219,7 +219,7 @@ class Feeder:
         return self._held and (self.current is None or self.current in self.complete)
 
     def start(self) -> None:
-        from backend.inspection.service import InspectionDone
+        from backend.cell.events import InspectionDone
 
         self.rt.bus.add_listener(self._on_done, InspectionDone)
         cell = self.rt.cell

@@ -165,9 +165,11 @@ def pose_errors(T: Any, T_true: Any, symmetric: bool = False) -> tuple[float, fl
 async def _inspect(service: Any, ctx: Any, opts: Any) -> dict[str, Any]:
     """One inspection's row; an object the search never found counts as a failed one here
     (the product stores no row for a wait that ends without a part)."""
+    from backend.inspection.errors import NoObject
+
     try:
         return dict(await service.inspect_object(ctx, opts))
-    except service.NoObject as exc:
+    except NoObject as exc:
         return {"decision": "failed", "model": None, "score": None, "scores": {},
                 "viewpoints_visited": [], "durations": {}, "pose": None, "pick": None,
                 "truth": None, "reason": f"no_object: {exc.detail}"}  # fmt: skip
@@ -240,6 +242,7 @@ def _bin_for(engine: Any, name: str) -> str:
 async def _run(args: argparse.Namespace) -> dict[str, Any]:
     from backend.db.migrate import upgrade
     from backend.inspection import service
+    from backend.inspection.pose import warm_feature_heights
     from backend.runtime import CellRuntime
     from robot.sim.catalogue import CATALOGUE
 
@@ -276,7 +279,7 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
         ctx = await service.context(rt)
         # as a continuous run does before its first object (service.start_run)
         t_warm = time.perf_counter()
-        warmed = await service.warm_feature_heights(ctx)
+        warmed = await warm_feature_heights(ctx)
         err.print(f"taught top views triangulated: {warmed} models in "
                   f"{time.perf_counter() - t_warm:.1f} s")  # fmt: skip
 

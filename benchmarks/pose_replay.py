@@ -150,11 +150,12 @@ def load_record(path: Path) -> dict[str, Any]:
 
 def record(out_dir: Path, argv: list[str]) -> None:
     """Run ``benchmarks.inspection`` with ``argv``, saving every pose fit in ``out_dir``."""
-    import backend.inspection.service as service
+    from backend.inspection import pose as pose_stage
+    from backend.inspection import recognise as recognise_stage
     from benchmarks import inspection
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    fit, truth_near = service.estimate_pose_views, service._truth_near
+    fit, truth_near = pose_stage.estimate_pose_views, recognise_stage.truth_near
     count = [len(list(out_dir.glob("*.npz")))]
 
     def truth_wrapper(*a: Any, **k: Any) -> Any:
@@ -178,11 +179,11 @@ def record(out_dir: Path, argv: list[str]) -> None:
             raise error
         return result
 
-    service.estimate_pose_views, service._truth_near = fit_wrapper, truth_wrapper
+    pose_stage.estimate_pose_views, recognise_stage.truth_near = fit_wrapper, truth_wrapper
     try:
         inspection.main(argv)
     finally:
-        service.estimate_pose_views, service._truth_near = fit, truth_near
+        pose_stage.estimate_pose_views, recognise_stage.truth_near = fit, truth_near
     Console(stderr=True).print(f"[pose_replay] {count[0]} records in {out_dir}")
 
 

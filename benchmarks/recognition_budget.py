@@ -87,8 +87,9 @@ def run(
 
     headless_mujoco()
     from backend.calibration.autoplan import NOMINAL_T_EE_CAM
+    from backend.planning import plan_shots
     from backend.recognition.index import FEATURE_OPTIONS
-    from backend.recognition.teach import TOP_ROLLS_RAD, plan_shots, teach_yaws_rad
+    from backend.recognition.teach import TOP_ROLLS_RAD, teach_yaws_rad
     from robot.sim import CATALOGUE, SimEngine
     from robot.sim.imaging import capture
     from vision.recognition import ViewIndex, choose_threshold, recognise

@@ -47,8 +47,8 @@ def _render(parts: tuple[str, ...], yaws: tuple[int, ...]) -> dict[str, Any]:
 
     headless_mujoco()
     from backend.calibration.autoplan import NOMINAL_T_EE_CAM
+    from backend.planning import plan_shots
     from backend.recognition.segment import segment_object
-    from backend.recognition.teach import plan_shots
     from robot.sim import SimEngine
     from robot.sim.imaging import capture
 

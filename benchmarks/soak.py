@@ -107,6 +107,7 @@ def slope_per_1000(x: list[float], y: list[float]) -> float:
 
 
 async def soak(args: argparse.Namespace, progress: Any) -> dict[str, Any]:
+    from backend.cell.events import InspectionDone
     from backend.db.migrate import upgrade
     from backend.inspection import service
     from backend.runtime import CellRuntime
@@ -148,7 +149,7 @@ async def soak(args: argparse.Namespace, progress: Any) -> dict[str, Any]:
                 progress(f"{len(samples)}/{args.inspections} inspections, "
                          f"RSS {s['rss_mb']:.1f} MB, {int(s['open_files'])} files")  # fmt: skip
 
-        rt.bus.add_listener(on_done, service.InspectionDone)
+        rt.bus.add_listener(on_done, InspectionDone)
         feeder.start()
         task = asyncio.create_task(feeder.run())
         opts = service.InspectOptions(policy=args.policy, max_views=2, wait_s=30.0)

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from backend.inspection.service import MEASURED_MARGIN_M
+from backend.inspection.sort import MEASURED_MARGIN_M
 
 #: What the cell assumes of an object whose height it does not know, metres.
 BASELINE_M = 0.25
@@ -37,11 +37,12 @@ def run(*, objects: int = 12, yaws: int = 2) -> dict[str, Any]:
 
     headless_mujoco()
     from backend.calibration.autoplan import NOMINAL_T_EE_CAM
-    from backend.recognition import teach
+    from backend.planning import plan_shots
+    from backend.recognition import teachheight
     from backend.recognition.geometry import Silhouette, TopShot
     from backend.recognition.index import FEATURE_OPTIONS
     from backend.recognition.segment import segment_object
-    from backend.recognition.teach import TOP_ROLLS_RAD, plan_shots
+    from backend.recognition.teach import TOP_ROLLS_RAD
     from robot.kinematics import T_base_ee
     from robot.sim import CATALOGUE, SimEngine
     from robot.sim.imaging import capture
@@ -79,7 +80,9 @@ def run(*, objects: int = 12, yaws: int = 2) -> dict[str, Any]:
                     if s.viewpoint == 1:
                         feats = index.features(rgb, mask=region.mask.astype(np.uint8))
                         tops.append(TopShot(feats, T))
-                got = asyncio.run(teach._measure(sils, tops, camera, (640, 480), float(point[2])))
+                got = asyncio.run(
+                    teachheight.measure(sils, tops, camera, (640, 480), float(point[2]))
+                )
                 rows.append({
                     "name": name, "yaw_deg": round(math.degrees(yaw), 1),
                     "truth_mm": round(truth * 1e3, 1),

@@ -39,9 +39,9 @@ def run(*, queries: int = 4, objects: int = 12, seed: int = 0) -> dict[str, Any]
 
     headless_mujoco()
     from backend.calibration.autoplan import NOMINAL_T_EE_CAM
+    from backend.planning import plan_shots
     from backend.recognition.index import FEATURE_OPTIONS
     from backend.recognition.segment import segment_object
-    from backend.recognition.teach import plan_shots
     from robot.sim import CATALOGUE, SimEngine
     from robot.sim.imaging import capture
     from vision.recognition import ViewIndex, recognise

@@ -114,3 +114,38 @@ def test_cycle_finder_finds_a_lazy_cycle():
 @pytest.mark.parametrize("package", ["robot", "vision"])
 def test_no_import_cycle(package):
     assert _cycles(_graph(_modules(package))) == []
+
+
+def _reaches(graph: dict[str, set[str]], start: str, prefix: str) -> list[str]:
+    """The modules under ``prefix`` that ``start`` imports, directly or through others
+    (a path to each, for the message)."""
+    seen, todo, found = {start: [start]}, [start], []
+    while todo:
+        v = todo.pop()
+        for w in sorted(graph.get(v, ())):
+            if w in seen:
+                continue
+            seen[w] = [*seen[v], w]
+            if w == prefix or w.startswith(prefix + "."):
+                found.append(" -> ".join(seen[w]))
+            todo.append(w)
+    return found
+
+
+def test_reaches_follows_imports_through_other_modules():
+    graph = {"a": {"b"}, "b": {"p.x"}, "p.x": set(), "c": set()}
+    assert _reaches(graph, "a", "p") == ["a -> b -> p.x"]
+    assert _reaches(graph, "c", "p") == []
+
+
+@pytest.mark.parametrize(
+    ("start", "other"),
+    [
+        ("backend.recognition.teach", "backend.inspection"),
+        ("backend.inspection.service", "backend.recognition.teach"),
+    ],
+)
+def test_teach_and_inspect_do_not_import_each_other(start, other):
+    """Both stand on the planning layer (``backend.planning``), not on each other."""
+    graph = _graph(_modules("backend"))
+    assert _reaches(graph, start, other) == []

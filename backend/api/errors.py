@@ -28,7 +28,7 @@ from backend.calibration.sessions import OtherCell
 from backend.cell.errors import MoveAborted, PathBlocked
 from backend.db.session import DatabaseBusy
 from backend.heavy import Busy, ClientGone, PixelBudgetExceeded
-from backend.inspection.service import CarriedAway, NoObject
+from backend.inspection.errors import CarriedAway, NoObject
 from backend.recognition.images import ImageTooLarge, UnsupportedImage
 from backend.recognition.index import StaleFeatures
 from backend.recognition.segment import SegmentationFailed

@@ -18,7 +18,7 @@ Events
 - :class:`CameraStatus`: the camera's health changed (``ok`` or ``error``).
 - :class:`CellStopped`: the cell-wide emergency stop was pressed or reset.
 - :class:`CalibrationView`: an automatic calibration run cleared its views or stored one.
-- Inspection results (next issue) derive from :class:`CellEvent` like these.
+- :class:`InspectionDone`: an inspection ended and its result was stored.
 """
 
 from __future__ import annotations
@@ -45,6 +45,7 @@ __all__ = [
     "CellEvent",
     "CellStopped",
     "EventBus",
+    "InspectionDone",
     "JobProgress",
     "JobState",
     "Subscription",
@@ -173,6 +174,39 @@ class CalibrationView(CellEvent):
     """Pose of the camera of the stored view (4x4, metres); None when ``cleared``."""
     board_found: bool = False
     """Whether the board was detected in that view."""
+
+
+@dataclass(frozen=True)
+class InspectionDone(CellEvent):
+    """An inspection ended (WebSocket ``{"type": "inspection", ...}``)."""
+
+    inspection_id: int
+    decision: str
+    model: str | None
+    reason: str
+    score: float | None
+    viewpoints: tuple[int, ...]
+    T_base_obj: tuple[tuple[float, ...], ...] | None
+    T_base_cams: tuple[tuple[tuple[float, ...], ...], ...]
+    pick: dict[str, Any] | None = None
+    #: The recipe the inspection ran under (id, name; None: none).
+    recipe_id: int | None = None
+    recipe: str | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "id": self.inspection_id,
+            "decision": self.decision,
+            "model": self.model,
+            "reason": self.reason,
+            "score": self.score,
+            "viewpoints": list(self.viewpoints),
+            "T_base_obj": None if self.T_base_obj is None else [list(r) for r in self.T_base_obj],
+            "T_base_cams": [[list(r) for r in T] for T in self.T_base_cams],
+            "pick": self.pick,
+            "recipe_id": self.recipe_id,
+            "recipe": self.recipe,
+        }
 
 
 E = TypeVar("E", bound=CellEvent)

@@ -7,6 +7,7 @@ fails or is cut short: a complete ``failed`` row with the reason, never a partia
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any, cast
@@ -27,7 +28,8 @@ from backend.db.types import utcnow
 from vision.errors import InvalidInput, NotFound
 
 __all__ = ["PICK_OUTCOMES", "InspectionRecord", "ViewRecord", "get_image", "get_inspection",
-           "inspection_public", "list_inspections", "pick_outcome", "store", "store_all"]  # fmt: skip
+           "inspection_public", "list_inspections", "pick_outcome", "store", "store_all",
+           "stored_public"]  # fmt: skip
 
 #: What happened to the object after the decision (:func:`pick_outcome`).
 PICK_OUTCOMES = ("placed", "rejected", "not_placed", "approach", "not_picked", "not_sorted")
@@ -300,6 +302,26 @@ def inspection_public(row: Inspection, n_images: int | None = None) -> dict[str,
         "recipe": row.recipe_name,
         "images": [f"/api/inspections/{row.id}/images/{k}.jpg" for k in range(n)],
     }
+
+
+#: The JSON columns of an inspection row (their stored form: tuples become lists).
+_JSON_COLUMNS = ("viewpoints_visited", "durations", "scores", "pose", "pick", "truth")
+
+
+def stored_public(
+    iid: int, cell_id: int, rec: InspectionRecord, *, retention: str
+) -> dict[str, Any]:
+    """The API's form of ``rec`` as :func:`store` wrote it with id ``iid`` under
+    ``retention``: what :func:`inspection_public` gives for the row read back, built from
+    the same column values without reading it."""
+    from backend.reports.retention import keeps_images
+
+    values = _columns(cell_id, rec)
+    for key in _JSON_COLUMNS:
+        if values[key] is not None:
+            values[key] = json.loads(json.dumps(values[key]))
+    n = len(rec.views) if keeps_images(retention, rec.decision) else 0
+    return inspection_public(Inspection(id=iid, **values), n_images=n)
 
 
 async def list_inspections(

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from backend.inspection.service import InspectionRun
+    from backend.inspection.runner import InspectionRun
     from vision.segmentation.belt import BeltBackground
 
 __all__ = ["InspectionState"]

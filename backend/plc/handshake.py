@@ -34,7 +34,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from backend.cell.events import CellStopped, JobState
+from backend.cell.events import CellStopped, InspectionDone, JobState
 from backend.db.models import Role
 from backend.inspection import service
 from backend.plc import recipes
@@ -113,7 +113,7 @@ class Handshake:
         """Follow the cell's E-STOP, runs and active recipe."""
         bus = self.rt.bus
         self._removers.append(bus.add_listener(self._on_stop, CellStopped))
-        self._removers.append(bus.add_listener(self._on_done, service.InspectionDone))
+        self._removers.append(bus.add_listener(self._on_done, InspectionDone))
         self._removers.append(bus.add_listener(self._on_job, JobState))
         self._estop = bool(self.rt.cell.estopped)
         with contextlib.suppress(Exception):

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from backend.inspection.service import InspectOptions
+from backend.inspection.options import InspectOptions
 from backend.recipes import service as svc
 from vision.errors import InvalidInput
 

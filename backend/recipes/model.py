@@ -4,21 +4,19 @@ A :class:`Recipe` holds the options a run takes from it (:class:`RecipeOptions`:
 views at most, sorting, a fixed threshold or the cell's automatic ones, the belt's mode,
 the arm's speed, light balance), the models in play and the bin of each.
 :func:`options_for` turns one, with the explicit options of a request over it, into the
-:class:`~backend.inspection.service.InspectOptions` an inspection or a run takes.
+:class:`~backend.inspection.options.InspectOptions` an inspection or a run takes.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from datetime import datetime
 from typing import Any
 
-from backend.inspection.service import BELT_MODES, MAX_RECIPE_MODELS, InspectOptions
+from backend.inspection.options import MAX_RECIPE_MODELS, InspectOptions, check_option
 from backend.recognition.models import NAME_PATTERN
 from vision.errors import InvalidInput
-from vision.recognition import POLICIES
 
 __all__ = ["MAX_NUMBER", "MAX_RECIPES", "OPTION_KEYS", "Recipe", "RecipeOptions",
            "check_bins", "check_models", "check_name", "check_number", "options_for"]  # fmt: skip
@@ -51,30 +49,8 @@ class RecipeOptions:
     balance_light: bool = True
 
     def __post_init__(self) -> None:
-        if self.policy not in POLICIES:
-            raise InvalidInput(f"policy must be one of {', '.join(POLICIES)}, got {self.policy!r}")
-        mv = self.max_views
-        if isinstance(mv, bool) or not isinstance(mv, int) or not 1 <= mv <= 3:
-            raise InvalidInput(f"max_views must be an integer in 1..3, got {mv!r}")
-        for key in ("sort", "balance_light"):
-            if not isinstance(getattr(self, key), bool):
-                raise InvalidInput(f"{key} must be true or false, got {getattr(self, key)!r}")
-        t = self.threshold
-        if t is not None and (
-            isinstance(t, bool) or not isinstance(t, int | float) or not 0.0 <= t <= 1.0
-        ):
-            raise InvalidInput(f"threshold must be in [0, 1] or null (automatic), got {t!r}")
-        if self.belt_mode not in (None, *BELT_MODES):
-            raise InvalidInput(
-                f"belt_mode must be one of {', '.join(BELT_MODES)} or null, got {self.belt_mode!r}"
-            )
-        sp = self.speed
-        if sp is not None and (
-            isinstance(sp, bool)
-            or not isinstance(sp, int | float)
-            or not (math.isfinite(sp) and 0.0 < sp <= 1.0)
-        ):
-            raise InvalidInput(f"speed must be in (0, 1] or null, got {sp!r}")
+        for f in fields(self):  # the inspection options' own rules
+            check_option(f.name, getattr(self, f.name))
 
     def as_dict(self) -> dict[str, Any]:
         """The stored (JSON) form."""

@@ -21,7 +21,7 @@ from backend import audit
 from backend.db.models import ObjectModel, RecipeSelection
 from backend.db.models import Recipe as RecipeRow
 from backend.db.types import utcnow
-from backend.inspection.service import InspectOptions, Resolve
+from backend.inspection.options import InspectOptions, Resolve
 from backend.recipes.model import (
     MAX_DESCRIPTION,
     MAX_RECIPES,

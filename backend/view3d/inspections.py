@@ -1,7 +1,7 @@
 """The latest inspection in the 3D view: the sorting bins, the recognised
 object at its estimated pose with its label and decision, and the viewpoints visited as frusta.
 
-Follows the cell's event bus (:class:`backend.inspection.service.InspectionDone`); each
+Follows the cell's event bus (:class:`backend.cell.events.InspectionDone`); each
 inspection replaces the previous one's drawing.  Everything lives under ``/inspection``.
 """
 
@@ -17,7 +17,7 @@ import viser
 import viser.transforms as vtf
 from numpy.typing import NDArray
 
-from backend.inspection.service import InspectionDone
+from backend.cell.events import InspectionDone
 
 __all__ = ["InspectionScene", "LabelCamera", "bin_label", "label_heights"]
 

@@ -12,7 +12,7 @@ from sqlalchemy import func, select, text
 
 from backend.db.models import Recipe as RecipeRow
 from backend.db.session import Database
-from backend.inspection.service import InspectOptions
+from backend.inspection.options import InspectOptions
 from backend.recipes import model as recipe_model
 from backend.recipes import service
 from vision.errors import InvalidInput, NotFound

@@ -25,9 +25,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from backend.inspection import service
+from backend.inspection import errors, find, look
+from backend.inspection.context import Context
+from backend.inspection.options import InspectOptions
 from backend.inspection.state import InspectionState
-from backend.recognition.teach import BackgroundStore
+from backend.inspection.stopwatch import Stopwatch
+from backend.planning import BackgroundStore
 from robot.drivers.conveyor import BeltStatus
 from robot.kinematics import T_base_ee
 from vision.camera import PinholeCamera
@@ -107,7 +110,7 @@ def belt():
                                  T_base_cam=_T_cam(), geometry=GEO)  # fmt: skip
 
 
-def _ctx(belt, cell: _Cell) -> service._Ctx:
+def _ctx(belt, cell: _Cell) -> Context:
     class _Belt:
         controllable = True
 
@@ -123,16 +126,16 @@ def _ctx(belt, cell: _Cell) -> service._Ctx:
         teach_backgrounds=BackgroundStore(),
         inspection=InspectionState(belt_background=belt),
     )
-    return service._Ctx(rt, CAM, T_EE_CAM, "test", STATION.copy(), GEO.surface_z_m)
+    return Context(rt, CAM, T_EE_CAM, "test", STATION.copy(), GEO.surface_z_m)
 
 
 def _find(belt, cell: _Cell):
     ctx = _ctx(belt, cell)
-    opts = service.InspectOptions(wait_s=2.0)
+    opts = InspectOptions(wait_s=2.0)
     still = _render(0.0)
     # The wait is measured on the synthetic cell's own clock (0.1 s a frame), not the
     # wall clock: a loaded machine segments each frame slower, the belt moves no faster.
-    found = asyncio.run(service._find(ctx, opts, Q, still, {}, clock=lambda: cell.t))
+    found = asyncio.run(find.find_part(ctx, opts, Q, still, Stopwatch(), clock=lambda: cell.t))
     return found.frame, found.travel_m, found.bg
 
 
@@ -166,32 +169,32 @@ def test_an_object_leaving_the_station_is_not_taken_again(belt):
     # Past the station when the search begins (the object inspected before, carried on):
     # not a new object; with nothing else coming, the wait ends "no object".
     cell = _Cell((0.8, 0.02, 0.04, 0.03), step_m=0.01)
-    with pytest.raises(service.NoObject):
+    with pytest.raises(errors.NoObject):
         _find(belt, cell)
 
 
 def test_along_belt_counts_only_the_borders_the_belt_crosses():
     mask = np.zeros((240, 320), bool)
     mask[100:140, 250:320] = True  # touches the right edge: across the belt (x)
-    whole, offset = service.along_belt(mask, CAM, _T_cam(), STATION, GEO.surface_z_m)
+    whole, offset = find.along_belt(mask, CAM, _T_cam(), STATION, GEO.surface_z_m)
     assert whole
     assert offset == pytest.approx(0.0, abs=0.002)  # rows 100..139 centre on the station
     mask[:] = False
     mask[0:40, 100:200] = True  # touches the top edge: where the belt leaves the view
-    whole, offset = service.along_belt(mask, CAM, _T_cam(), STATION, GEO.surface_z_m)
+    whole, offset = find.along_belt(mask, CAM, _T_cam(), STATION, GEO.surface_z_m)
     assert not whole
     assert offset == pytest.approx((120 - 19.5) / 500 * 0.4, abs=0.002)
 
 
 def test_approach_holds_a_frame_until_the_next_is_farther():
-    a = service.Approach(start_m=0.0)
+    a = find.Approach(start_m=0.0)
     assert a.take("f1", (False, -0.12), 0.01) is None  # entering the view
     assert a.take("f2", (True, -0.05), 0.08) is None  # step known, next predicted at +0.02
     assert a.take("f3", (True, 0.02), 0.15) == "f3"  # nearer than the held one
-    b = service.Approach(start_m=0.0)
+    b = find.Approach(start_m=0.0)
     assert b.take("f1", (True, -0.03), 0.01) is None  # no step yet: held
     assert b.take("f2", (True, 0.09), 0.13) == "f1"  # the next was farther: the held one
-    c = service.Approach(start_m=0.0)
+    c = find.Approach(start_m=0.0)
     assert c.take("f1", (True, -0.04), 0.01) is None
     assert c.take("f2", None, 0.05) == "f1"  # gone (segmentation failed): the held one
 
@@ -201,7 +204,7 @@ def test_a_side_view_of_an_object_carried_past_the_belt_end_fails_saying_so():
     # belt ran 8.3 m on meanwhile, and the side view's point went to the viewpoint planner
     # as y = 8.27 m ("outside the arm's workspace").  Now the reason says what happened.
     found = np.array([0.803, 0.0, 0.45])
-    p = service.carried_point(found, 0.12, 1.3, 2)
+    p = look.carried_point(found, 0.12, 1.3, 2)
     assert p.tolist() == pytest.approx([0.803, 0.12, 0.45])
-    with pytest.raises(service.CarriedAway, match=r"viewpoint 3: .* 8\.27 m on .* belt's end"):
-        service.carried_point(found, 8.27, 1.3, 3)
+    with pytest.raises(errors.CarriedAway, match=r"viewpoint 3: .* 8\.27 m on .* belt's end"):
+        look.carried_point(found, 8.27, 1.3, 3)

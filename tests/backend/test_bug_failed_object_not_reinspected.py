@@ -11,7 +11,7 @@ import asyncio
 from types import SimpleNamespace
 
 from backend.cell.events import CameraStatus
-from backend.inspection import service
+from backend.inspection import runner, service
 from backend.inspection.state import InspectionState
 from backend.jobs import JobManager
 from robot.drivers.conveyor import BeltStatus
@@ -96,8 +96,8 @@ async def test_the_run_looks_again_after_a_failure_and_holds_while_not_ready(mon
             asyncio.get_running_loop().call_later(0.3, setattr, cell, "camera_ok", True)
         return {"id": len(seen), "decision": d, "model": None}
 
-    monkeypatch.setattr(service, "context", fake_context)
-    monkeypatch.setattr(service, "inspect_object", fake_inspect)
+    monkeypatch.setattr(runner, "context", fake_context)
+    monkeypatch.setattr(runner, "inspect_object", fake_inspect)
     messages: list[str] = []
     run = service.start_run(rt, service.InspectOptions(), 5)
     run.job.on_report = lambda j: messages.append(j.message)

@@ -18,7 +18,9 @@ from backend.cell import EventBus
 from backend.db.models import Inspection, InspectionInProgress
 from backend.db.session import Database
 from backend.db.types import utcnow
-from backend.inspection import recovery, service
+from backend.inspection import record, recovery
+from backend.inspection.draft import InspectionDraft
+from backend.inspection.options import InspectOptions
 from backend.runtime import ensure_cell_row
 from tests.utils.factories import make_settings, migrate
 
@@ -57,11 +59,9 @@ async def test_a_result_waits_out_a_locked_database(url):
                 settings=SimpleNamespace(image_retention="all"),
             )
         )
-        state = {"decision": "unknown", "reason": "no model passed its threshold",
-                 "truth": None, "scores": {}, "model": None, "model_id": None, "score": 0.1,
-                 "pose": None, "viewpoints": (), "pick": None}  # fmt: skip
-        out = await service._store(ctx, service.InspectOptions(), utcnow(), {}, [], [], state,
-                                   marker)  # fmt: skip
+        draft = InspectionDraft(decision="unknown", reason="no model passed its threshold",
+                                score=0.1)  # fmt: skip
+        out = await record.store(ctx, InspectOptions(), draft, utcnow(), marker=marker)
         t.join()
         assert out["decision"] == "unknown" and out["finished_at"] is not None
         async with db.session() as s:

@@ -25,20 +25,25 @@ import pytest
 
 from backend.calibration import NOMINAL_T_EE_CAM
 from backend.calibration.auto import nominal_camera
-from backend.inspection import service
-from backend.recognition.teach import plan_shots
+from backend.inspection import look, secondtop
+from backend.inspection import pose as pose_stage
+from backend.inspection.context import Context, cam_pose
+from backend.inspection.options import InspectOptions
+from backend.inspection.stopwatch import Stopwatch
+from backend.planning import AIM_HEIGHT_M, plan_shots
 from robot.drivers.conveyor import BeltStatus, FixedStation
+from robot.errors import Unreachable
 from robot.sim.world import ConveyorSpec
-from vision.pose import ObjectPose, PoseFailed
+from vision.pose import ObjectPose, PoseFailed, rests_on_too_little
 
 SPEC = ConveyorSpec()
 CAMERA = nominal_camera(640, 480)
 T_EE_CAM = np.asarray(NOMINAL_T_EE_CAM, dtype=np.float64)
 TOP_SHOT = plan_shots(
-    SPEC.station_point, (1,), T_ee_cam=T_EE_CAM, object_height_m=service.AIM_HEIGHT_M,
+    SPEC.station_point, (1,), T_ee_cam=T_EE_CAM, object_height_m=AIM_HEIGHT_M,
     top_rolls_rad=(0.0,),
 )[0]  # fmt: skip
-T_CAM_TOP = service._T_cam(TOP_SHOT.q, T_EE_CAM)
+T_CAM_TOP = cam_pose(TOP_SHOT.q, T_EE_CAM)
 
 
 def _top_mask() -> np.ndarray:
@@ -95,7 +100,7 @@ def _run(monkeypatch: pytest.MonkeyPatch, first: ObjectPose | None, second: Any,
         conveyor = SimpleNamespace(controllable=True, status=lambda: status,
                                    travel_at=lambda t_s=None: belt[0])  # fmt: skip
     rt = SimpleNamespace(cell=cell, live_index=live, conveyor=conveyor)
-    ctx = service._Ctx(rt, CAMERA, T_EE_CAM, "test", SPEC.station_point, SPEC.surface_z_m,
+    ctx = Context(rt, CAMERA, T_EE_CAM, "test", SPEC.station_point, SPEC.surface_z_m,
                        belt_end_y_m=SPEC.station_point[1] + 1.0)  # fmt: skip
     calls: list[tuple[Any, ...]] = []
 
@@ -106,10 +111,11 @@ def _run(monkeypatch: pytest.MonkeyPatch, first: ObjectPose | None, second: Any,
             raise second
         return second
 
-    monkeypatch.setattr(service, "_pose", fake_pose)
-    opts = service.InspectOptions()
-    got = asyncio.run(service._second_top_view(
-        ctx, opts, "pipe-flange", SPEC.station_point.copy(), first=first, first_err=first_err,
+    monkeypatch.setattr(pose_stage, "estimate", fake_pose)
+    opts = InspectOptions()
+    got = asyncio.run(secondtop.second_top_view(
+        ctx, opts, "pipe-flange", SPEC.station_point.copy(), watch=Stopwatch(), first=first,
+        first_err=first_err,
         T_plan=T_EE_CAM, top_mask=_top_mask(), T_cam_top=T_CAM_TOP, height=0.05, travel0=0.0,
         gain=None, mode="index" if belt is None else "continuous",
         speed_m_s=0.0 if belt is None else 0.05,
@@ -124,14 +130,14 @@ def test_the_second_view_is_turned_and_its_region_is_the_objects(monkeypatch) ->
     # one look, turned about the camera's axis by the roll (the flange joint q5)
     assert len(cell.looked) == 1
     dq = cell.looked[0] - TOP_SHOT.q
-    assert abs(abs(math.remainder(dq[4], 2 * math.pi)) - service.SECOND_TOP_ROLL_RAD) < 0.05
+    assert abs(abs(math.remainder(dq[4], 2 * math.pi)) - secondtop.SECOND_TOP_ROLL_RAD) < 0.05
     assert np.allclose(dq[:4], 0.0, atol=0.05)
     # the pose fit is led by the best verified view (no candidate), on the new view's
     # features and region; that region is the object's, not the frame
     cand, model, T_cam, query, mask = calls[0]
     assert cand is None and model == "pipe-flange"
     assert query == "features of the second top view"
-    assert np.allclose(T_cam, service._T_cam(cell.looked[0], T_EE_CAM))
+    assert np.allclose(T_cam, cam_pose(cell.looked[0], T_EE_CAM))
     top_area = _top_mask().sum()
     assert mask is live.masks[0] and 0.8 * top_area < mask.sum() < 2.0 * top_area
     # the joint fit of the second view is taken, of its exposure, with its image stored
@@ -179,20 +185,20 @@ def test_no_first_pose_and_a_second_joint_fit(monkeypatch) -> None:
 
 def test_an_unreachable_second_view_leaves_no_pose(monkeypatch) -> None:
     def unreachable(*a: Any, **k: Any) -> Any:
-        raise service.Unreachable("outside the workspace")
+        raise Unreachable("outside the workspace")
 
-    monkeypatch.setattr(service, "plan_viewpoints", unreachable)
+    monkeypatch.setattr(look, "plan_viewpoints", unreachable)
     got, cell, _live, calls = _run(monkeypatch, _pose(0.5, 0.2, "plane"), _pose(0, 0, "parallax"))
     assert got.pose is None and got.shot is None and not cell.looked and not calls
     assert "cannot be reached: outside the workspace" in got.error
 
 
 def test_what_rests_on_too_little() -> None:
-    assert service.rests_on_too_little(None)
-    assert service.rests_on_too_little(_pose(0, 0, "plane"))
+    assert rests_on_too_little(None)
+    assert rests_on_too_little(_pose(0, 0, "plane"))
     # one trained view's own joint fit: 3.0 mm off on 12 correspondences in a fresh run
-    assert service.rests_on_too_little(_pose(0, 0, "parallax", 12, views=1))
-    assert not service.rests_on_too_little(_pose(0, 0, "parallax", 12, views=2))
+    assert rests_on_too_little(_pose(0, 0, "parallax", 12, views=1))
+    assert not rests_on_too_little(_pose(0, 0, "parallax", 12, views=2))
 
 
 def test_a_first_view_of_one_trained_view_alone_is_checked_too(monkeypatch) -> None:

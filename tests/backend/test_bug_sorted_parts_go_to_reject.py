@@ -27,7 +27,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.inspection.service import MEASURED_MARGIN_M
+from backend.inspection.sort import MEASURED_MARGIN_M
 from robot.sim import CATALOGUE
 from tests.utils.factories import TEST_SECRET, make_settings, migrate
 

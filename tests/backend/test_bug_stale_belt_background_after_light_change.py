@@ -17,9 +17,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from backend.inspection import service
+from backend.inspection.context import Context
+from backend.inspection.find import background_for
 from backend.inspection.state import InspectionState
-from backend.recognition.teach import BackgroundStore, Shot
+from backend.planning import BackgroundStore, Shot
 from robot.drivers.conveyor import FixedStation
 from tests.backend.test_bug_constant_speed_object_never_found import (
     CAM,
@@ -39,7 +40,7 @@ def _ctx(bb, store):
         teach_backgrounds=store,
         conveyor=FixedStation(),
     )
-    return service._Ctx(rt, CAM, T_EE_CAM, "test", STATION.copy(), GEO.surface_z_m)
+    return Context(rt, CAM, T_EE_CAM, "test", STATION.copy(), GEO.surface_z_m)
 
 
 def test_a_still_background_grabbed_later_wins_over_the_belt_background(belt):  # noqa: F811
@@ -50,13 +51,13 @@ def test_a_still_background_grabbed_later_wins_over_the_belt_background(belt):  
     store = BackgroundStore()
     # Belt background newer than the still one (the teach's): it is the one for the frame.
     store.taken_at = belt.taken_at - 10.0
-    got = service._background_for(_ctx(belt, store), frame, dim)
+    got = background_for(_ctx(belt, store), frame, dim)
     assert np.array_equal(got, belt.at(travel))
     # The lights changed and the still background was grabbed again: that one now.
     store.put(Shot(1, "top", 0.0, Q, np.eye(4)), dim)
     assert store.taken_at >= belt.taken_at
-    got = service._background_for(_ctx(belt, store), frame, dim)
+    got = background_for(_ctx(belt, store), frame, dim)
     assert got is dim
     # A belt background grabbed after that is used again.
     fresh = dataclasses.replace(belt, taken_at=store.taken_at + 1.0)
-    assert np.array_equal(service._background_for(_ctx(fresh, store), frame, dim), fresh.at(travel))
+    assert np.array_equal(background_for(_ctx(fresh, store), frame, dim), fresh.at(travel))

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from backend.calibration.autoplan import NOMINAL_T_EE_CAM
-from backend.inspection import service
-from backend.recognition.teach import plan_shots
+from backend.inspection.context import Context
+from backend.inspection.look import side_view
+from backend.inspection.stopwatch import Stopwatch
+from backend.planning import plan_shots
 from robot.drivers.conveyor import FixedStation
 from robot.kinematics import T_base_ee
 from robot.sim.camera import CameraSpec
@@ -43,9 +45,9 @@ async def test_the_services_side_view_passes_the_region_as_the_query_mask(vp):
     base = np.array([station[0], station[1], belt.surface_z_m])
     box = _box(base, (0.06, 0.05), 0.09)
     rt = SimpleNamespace(cell=_Cell(), conveyor=FixedStation())
-    ctx = service._Ctx(rt, cam, T_ee_cam, "test", station, float(belt.surface_z_m))
-    side = await service._side_view(
-        ctx, vp, station, T_plan=np.asarray(NOMINAL_T_EE_CAM), top_mask=_silhouette(cam, T_top, box),
+    ctx = Context(rt, cam, T_ee_cam, "test", station, float(belt.surface_z_m))
+    side = await side_view(
+        ctx, vp, station, watch=Stopwatch(), T_plan=np.asarray(NOMINAL_T_EE_CAM), top_mask=_silhouette(cam, T_top, box),
         T_cam_top=T_top, height_m=0.1, travel0=None, speed=None,
     )  # fmt: skip
     assert len(rt.cell.looked) == 1

@@ -180,21 +180,21 @@ def test_a_pose_on_too_little_is_looked_at_again_from_the_top(cell, monkeypatch)
     a second top view, turned about the camera's axis, and its pose is the one stored."""
     import dataclasses
 
-    from backend.inspection import service
+    from backend.inspection import pose as pose_stage
 
     client, h = cell
     eng, op = h["engineer"], h["operator"]
     engine = client.app.state.runtime.sim
     if client.get("/api/models", headers=op).json()["count"] == 0:  # run alone
         _teach(client, eng, engine, engine.config.layout.conveyor.station_s_m)
-    real, methods = service._pose, []
+    real, methods = pose_stage.estimate, []
 
     async def first_on_too_little(*a, **k):
         p = await real(*a, **k)
         methods.append(p.method)
         return dataclasses.replace(p, method="plane") if len(methods) == 1 else p
 
-    monkeypatch.setattr(service, "_pose", first_on_too_little)
+    monkeypatch.setattr(pose_stage, "estimate", first_on_too_little)
     engine.clear_objects()
     engine.configure_conveyor(running=False, mode="index", dwell_s=None)
     station = engine.config.layout.conveyor.station_s_m

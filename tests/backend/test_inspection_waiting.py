@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from backend.cell.events import CameraStatus
-from backend.inspection import service, waiting
+from backend.inspection import runner, service, waiting
+from backend.inspection.errors import NotReady
 from backend.inspection.state import InspectionState
 from backend.jobs import JobManager
 from backend.recognition.segment import SegmentationFailed, foreground_mask
@@ -106,8 +107,8 @@ async def test_a_run_looks_again_when_looking_for_a_part_fails_and_ends_when_set
             raise out
         return {"id": 1, "decision": out, "model": None}
 
-    monkeypatch.setattr(service, "context", fake_context)
-    monkeypatch.setattr(service, "inspect_object", fake_inspect)
+    monkeypatch.setattr(runner, "context", fake_context)
+    monkeypatch.setattr(runner, "inspect_object", fake_inspect)
     messages: list[str] = []
     run = service.start_run(rt, service.InspectOptions(), 2)
     run.job.on_report = lambda j: messages.append(j.message)
@@ -117,9 +118,9 @@ async def test_a_run_looks_again_when_looking_for_a_part_fails_and_ends_when_set
     assert any("looking for a part failed (camera_error" in m for m in messages), messages
 
     async def not_ready(*a, **k):
-        raise service.NotReady("no trained views: teach a model first")
+        raise NotReady("no trained views: teach a model first")
 
-    monkeypatch.setattr(service, "inspect_object", not_ready)
+    monkeypatch.setattr(runner, "inspect_object", not_ready)
     run = service.start_run(rt, service.InspectOptions(), None)
     await asyncio.wait_for(rt.jobs.wait(run.job), 120)
     assert run.job.state.value == "failed" and "teach a model" in run.job.error["detail"]

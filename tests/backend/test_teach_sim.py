@@ -148,7 +148,8 @@ def test_teach_two_models_and_recognise_them(cell):
 def _shots(rt):
     """The shots of a default 3d teach at the station (as the teach job plans them)."""
     from backend.calibration import NOMINAL_T_EE_CAM
-    from backend.recognition.teach import TOP_ROLLS_RAD, plan_shots
+    from backend.planning import plan_shots
+    from backend.recognition.teach import TOP_ROLLS_RAD
     from robot.sim.world import ConveyorSpec
 
     return plan_shots(

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from backend.cell.events import EventBus
-from backend.inspection.service import InspectionDone
+from backend.cell.events import EventBus, InspectionDone
 from backend.view3d.inspections import InspectionScene
 from robot.sim.bins import default_bins
 

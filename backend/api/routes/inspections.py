@@ -45,7 +45,7 @@ Policy = Literal["naive", "top-only", "two-views", "best-next"]
 
 
 class InspectIn(BaseModel):
-    """Options of one inspection (see ``backend.inspection.service.InspectOptions``): the
+    """Options of one inspection (see ``backend.inspection.options.InspectOptions``): the
     active recipe's (or ``recipe``'s), with the options given here over them; without a
     recipe, the defaults below."""
 

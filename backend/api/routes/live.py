@@ -42,6 +42,7 @@ import contextlib
 import json
 import logging
 import time
+from collections.abc import Callable
 from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
@@ -49,10 +50,17 @@ from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from backend.api.deps import client_address, get_runtime, get_settings, signed_in
 from backend.api.errors import ApiError
 from backend.auth import hash_token, token_is_live, well_formed
-from backend.cell.events import ArmState, CameraStatus, CellStopped, JobProgress, JobState
+from backend.cell.events import (
+    ArmState,
+    CameraStatus,
+    CellEvent,
+    CellStopped,
+    InspectionDone,
+    JobProgress,
+    JobState,
+)
 from backend.db.models import Role, User
 from backend.inspection.recovery import is_database_error
-from backend.inspection.service import InspectionDone
 from backend.throttle import TooManyAttempts
 
 router = APIRouter(tags=["live"])
@@ -87,19 +95,25 @@ def _message(event: Any) -> dict[str, Any] | None:
     return msg
 
 
+def _cell_stopped(event: CellStopped) -> dict[str, Any]:
+    return {"type": "estop", "active": event.active, "conveyors": list(event.conveyors),
+            "arm_latched": event.arm_latched, "by": event.by, "source": event.source}  # fmt: skip
+
+
+#: The message of each event type a client is sent (others are not sent).
+MESSAGES: dict[type[CellEvent], Callable[[Any], dict[str, Any]]] = {
+    ArmState: lambda e: {"type": "state", "state": e.state.as_dict(), "speed": e.speed},
+    JobState: lambda e: {"type": "job", "job": e.job},
+    JobProgress: lambda e: {"type": "job", "job": e.job},
+    CameraStatus: lambda e: {"type": "camera", "camera": e.as_dict()},
+    CellStopped: _cell_stopped,
+    InspectionDone: lambda e: {"type": "inspection", "inspection": e.as_dict()},
+}
+
+
 def _body(event: Any) -> dict[str, Any] | None:
-    if isinstance(event, ArmState):
-        return {"type": "state", "state": event.state.as_dict(), "speed": event.speed}
-    if isinstance(event, JobState | JobProgress):
-        return {"type": "job", "job": event.job}
-    if isinstance(event, CameraStatus):
-        return {"type": "camera", "camera": event.as_dict()}
-    if isinstance(event, CellStopped):
-        return {"type": "estop", "active": event.active, "conveyors": list(event.conveyors),
-                "arm_latched": event.arm_latched, "by": event.by, "source": event.source}  # fmt: skip
-    if isinstance(event, InspectionDone):
-        return {"type": "inspection", "inspection": event.as_dict()}
-    return None
+    make = MESSAGES.get(type(event))
+    return None if make is None else make(event)
 
 
 @router.websocket("/ws")

@@ -15,7 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from backend import audit
 from backend.api.deps import EngineerUser, OperatorUser, RuntimeDep, ViewerUser
-from backend.inspection.service import MAX_RECIPE_MODELS
+from backend.inspection.options import MAX_RECIPE_MODELS
 from backend.recipes import service as svc
 from backend.recipes.model import MAX_DESCRIPTION, MAX_NUMBER
 from backend.recognition.models import NAME_PATTERN
