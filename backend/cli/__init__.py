@@ -1,7 +1,8 @@
 """The ``visioncell`` command line, one module per command group: ``serve``
 (:mod:`backend.cli.serve`), ``db`` (:mod:`backend.cli.db`), ``user``
-(:mod:`backend.cli.users`), ``calibrate`` (:mod:`backend.cli.calibrate`, with ``export``
-and ``import`` in :mod:`backend.cli.calibration_io`), ``train-pca``
+(:mod:`backend.cli.users`), ``calibrate`` (:mod:`backend.cli.calibrate`, with ``auto``
+in :mod:`backend.cli.calibration_auto`, ``export`` and ``import`` in
+:mod:`backend.cli.calibration_io`), ``train-pca``
 (:mod:`backend.cli.features`), ``emulator`` (:mod:`backend.cli.emulator`), ``estop``
 (:mod:`backend.cli.estop`), ``models`` (:mod:`backend.cli.models`), ``inspect``
 (:mod:`backend.cli.inspect`), ``recipes`` (:mod:`backend.cli.recipes`), ``report``
@@ -13,6 +14,7 @@ import typer
 
 from backend import __version__
 from backend.cli.calibrate import calibrate_app
+from backend.cli.calibration_auto import register as register_calibration_auto
 from backend.cli.calibration_io import register as register_calibration_io
 from backend.cli.common import err, load_settings, out
 from backend.cli.db import db_app
@@ -39,6 +41,7 @@ app = typer.Typer(
 app.add_typer(db_app, name="db")
 app.add_typer(user_app, name="user")
 app.add_typer(calibrate_app, name="calibrate")
+register_calibration_auto(calibrate_app)
 register_calibration_io(calibrate_app)
 app.command("train-pca")(train_pca)
 register_models(app)

@@ -1,24 +1,32 @@
 """``visioncell calibrate ...``: offline intrinsic and hand-eye calibration from image folders.
 
 ``--board COLSxROWS`` counts inner corners; ``--square`` takes a length with a unit
-(``25mm``, ``2.5cm``, ``0.025m``); a plain number is millimetres.
+(``25mm``, ``2.5cm``, ``0.025m``); a plain number is millimetres.  What the commands share
+is in :mod:`backend.cli.calibration_common`; ``auto`` (in the simulated cell) in
+:mod:`backend.cli.calibration_auto`, ``export`` and ``import`` in
+:mod:`backend.cli.calibration_io`.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import sys
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
+
+from backend.cli.calibration_common import (
+    JsonOpt,
+    SaveOpt,
+    _fail,
+    _finish,
+    _progress,
+    err,
+    out,
+)
 
 __all__ = ["calibrate_app"]
 
@@ -27,9 +35,6 @@ calibrate_app = typer.Typer(
     "eye-in-hand transform T_ee_cam (chapter 3.3).",
     no_args_is_help=True,
 )
-
-out = Console(soft_wrap=True)
-err = Console(stderr=True, soft_wrap=True)
 
 ImagesOpt = Annotated[Path, typer.Option("--images", help="Folder of board images")]
 BoardOpt = Annotated[
@@ -45,20 +50,9 @@ RadialOpt = Annotated[
 K3Opt = Annotated[bool, typer.Option("--k3", help="Also estimate the third radial term k3")]
 FixAspectOpt = Annotated[bool, typer.Option("--fix-aspect", help="One focal length (fx = fy)")]
 NoRejectOpt = Annotated[bool, typer.Option("--keep-outliers", help="Do not drop outlier images")]
-JsonOpt = Annotated[
-    bool, typer.Option("--json", help="Print one JSON object (the full result) on the last line")
-]
-SaveOpt = Annotated[
-    Path | None, typer.Option("--save", help="Write the result as JSON to this file")
-]
 ReportOpt = Annotated[
     Path | None, typer.Option("--report", help="Write a PNG report (residuals, coverage, ...)")
 ]
-
-
-def _fail(message: str) -> typer.Exit:
-    err.print(f"[red]error:[/red] {message}")
-    return typer.Exit(2)
 
 
 def _board(board: str, square: str) -> Any:
@@ -81,27 +75,6 @@ def _images(folder: Path) -> list[Path]:
     if not files:
         raise _fail(f"images: the folder {str(folder)!r} holds no PNG/JPEG/BMP/TIFF images")
     return files
-
-
-@contextmanager
-def _progress(enabled: bool) -> Iterator[Callable[[float, str], None]]:
-    if not enabled:
-        yield lambda f, m: None
-        return
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TextColumn("{task.percentage:>3.0f}%"),
-        TimeElapsedColumn(),
-        console=err,
-        transient=True,
-    ) as bar:
-        task = bar.add_task("calibrating", total=1.0)
-
-        def update(f: float, msg: str) -> None:
-            bar.update(task, completed=f, description=msg[:60])
-
-        yield update
 
 
 def _detect(
@@ -212,15 +185,6 @@ def _print_hand_eye(h: Any) -> None:
     )
     for w in h.warnings:
         out.print(f"[yellow]warning:[/yellow] {w}")
-
-
-def _finish(result: dict[str, Any], as_json: bool, save: Path | None) -> None:
-    if save is not None:
-        save.write_text(json.dumps(result, indent=1))
-        err.print(f"saved {save}")
-    if as_json:
-        sys.stdout.write(json.dumps(result) + "\n")
-        sys.stdout.flush()
 
 
 @calibrate_app.command("intrinsics")
@@ -371,65 +335,3 @@ def calibrate_hand_eye_cmd(
         err.print(f"report written to {report}")
     result = {"hand_eye": h.as_dict(), "intrinsics": intr.as_dict() if intr is not None else None}
     _finish(result, as_json, save)
-
-
-@calibrate_app.command("auto")
-def calibrate_auto_cmd(
-    board: Annotated[
-        str, typer.Option("--board", help="Board of the simulated cell: chessboard or charuco")
-    ] = "chessboard",
-    poses: Annotated[int, typer.Option("--poses", help="Views to plan (3..60)")] = 25,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the view planner")] = 0,
-    time_scale: Annotated[
-        float, typer.Option("--time-scale", help="Simulated seconds per wall second (0.1..100)")
-    ] = 8.0,
-    as_json: JsonOpt = False,
-    save: SaveOpt = None,
-) -> None:
-    """Automatic calibration in the simulated cell, in this process: plan reachable,
-    collision-free views of the board on the table, move, grab, detect, solve intrinsics and
-    hand-eye, and compare with the simulator's ground truth.  (On a running server, start
-    it with POST /api/calibration/auto or the console's Calibration tab.)"""
-    from backend.hardware import headless_mujoco
-
-    headless_mujoco()
-    from backend.calibration.simrun import run_sim_auto
-
-    if board not in ("chessboard", "charuco"):
-        raise _fail(f"board must be chessboard or charuco, got {board!r}")
-    if not 3 <= poses <= 60:
-        raise _fail(f"poses must be in [3, 60], got {poses}")
-    if not 0.1 <= time_scale <= 100.0:
-        raise _fail(f"time-scale must be in [0.1, 100], got {time_scale}")
-    with _progress(True) as update:
-        try:
-            rep = run_sim_auto(
-                board=board, n_poses=poses, seed=seed, time_scale=time_scale, progress=update
-            )
-        except RuntimeError as exc:
-            raise _fail(str(exc)) from None
-    if not as_json:
-        r = rep.result
-        out.print(
-            f"[bold]automatic calibration[/bold] ({board}): {r['views']} views, "
-            f"{r['accepted']} with the board, corners cover {r['coverage']:.0%} of the image "
-            f"({r['corner_cells']} of 4 corners), rotations up to "
-            f"{r['diversity']['max_angle_deg']:.0f} deg about axes "
-            f"{r['diversity']['axis_spread_deg']:.0f} deg apart"
-        )
-        t = Table(title="against the simulator's ground truth")
-        t.add_column("quantity")
-        t.add_column("error", justify="right")
-        t.add_column("target", justify="right")
-        t.add_row("fx", f"{rep.fx_error_pct:+.3f} %", "<= 0.2 %")
-        t.add_row("fy", f"{rep.fy_error_pct:+.3f} %", "<= 0.2 %")
-        t.add_row("principal point", f"{rep.principal_point_error_px:.3f} px", "<= 1 px")
-        t.add_row("undistortion map (max)", f"{rep.map_error_px:.3f} px", "<= 0.3 px")
-        t.add_row("T_ee_cam translation", f"{rep.hand_eye_mm:.3f} mm", "<= 1 mm")
-        t.add_row("T_ee_cam rotation", f"{rep.hand_eye_deg:.4f} deg", "<= 0.1 deg")
-        out.print(t)
-        out.print(
-            f"reprojection RMS {r['rms_px']:.3f} px; run took {rep.wall_s:.1f} s wall time "
-            f"(driver at {time_scale:g}x real time)"
-        )
-    _finish(rep.as_dict(), as_json, save)

@@ -1,6 +1,11 @@
-"""Calibration: sessions and their samples (uploads), solve jobs, reports, activation, history.
+"""Calibration: sessions and their samples (uploads), with the pieces the other calibration
+routes share (the board, the answers' shapes, the lookups).  Solving a session:
+:mod:`backend.api.routes.calibration_solve`; the stored calibrations (history, reports,
+activation): :mod:`backend.api.routes.calibration_history`; automatic calibration:
+:mod:`backend.api.routes.calibration_auto`; calibration documents:
+:mod:`backend.api.routes.calibration_io`.
 
-Reading needs the viewer role; uploading, solving and activating need the engineer role.
+Reading needs the viewer role; uploading needs the engineer role.
 The work itself is in :mod:`backend.calibration`.
 """
 
@@ -11,25 +16,20 @@ from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
-from fastapi import APIRouter, Depends, File, Form, Path, Query, UploadFile, status
-from fastapi.responses import JSONResponse, Response
+from fastapi import APIRouter, Depends, File, Form, UploadFile, status
+from fastapi.responses import Response
 from pydantic import BaseModel, Field, model_validator
 
-from backend import audit
 from backend import calibration as svc
-from backend.api.deps import CellDep, DatabaseDep, EngineerUser, SessionDep, SimDep, ViewerUser
-from backend.api.errors import ApiError, error_body, status_of
-from backend.api.schemas import JobOut, Page
+from backend.api.deps import CellDep, EngineerUser, SessionDep, ViewerUser
+from backend.api.errors import ApiError, status_of
+from backend.api.schemas import Page
 from backend.api.types import (
     MAX_ABS_JOINT_API_RAD,
-    MAX_DB_ID,
     DbId,
-    DbIdQuery,
     DbIndex,
     Limit,
-    Matrix4,
     Offset,
-    Speed,
     StrictBool,
     bounded_float,
     bounded_int,
@@ -38,11 +38,8 @@ from backend.api.uploads import check_image_size, read_capped
 from backend.api.work import HeavyWorkDep
 from backend.db.models import CalibrationKind
 from backend.heavy import HeavyJob
-from backend.jobs import Job, JobState
 from backend.recognition.images import MAX_IMAGE_BYTES
-from robot.collision import CollisionWorld
 from vision.calibration import (
-    ALL_METHODS,
     ARUCO_DICTIONARIES,
     MAX_BOARD_SIDE,
     MAX_SQUARE_M,
@@ -50,8 +47,6 @@ from vision.calibration import (
     Board,
     CharucoBoard,
     Chessboard,
-    HandEyeOptions,
-    IntrinsicsOptions,
 )
 from vision.calibration.io import parse_poses
 from vision.errors import InvalidInput, NotFound
@@ -63,7 +58,6 @@ IMAGE_TYPES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 MAX_IMAGES_PER_UPLOAD = 200
 #: Largest poses file, bytes (200 poses of 16 numbers take about 80 KB).
 MAX_POSES_BYTES = 1 << 20
-PlotName = Annotated[str, Path(max_length=64, description="residuals, coverage or consistency")]
 
 
 Side = Annotated[int, bounded_int(3, MAX_BOARD_SIDE, "Count along one side of the board")]
@@ -144,56 +138,6 @@ class SamplesOut(Page[Open]):
 
 class CalibrationOut(BaseModel):
     calibration: Open
-
-
-class SolveIn(BaseModel):
-    """Options of a solve (see ``IntrinsicsOptions`` and ``HandEyeOptions``)."""
-
-    radial_only: StrictBool = Field(False, description="Hold p1 = p2 = 0 (chapter: radial only)")
-    k3: StrictBool = Field(False, description="Also estimate k3")
-    fix_aspect_ratio: StrictBool = Field(False, description="fx = fy")
-    reject_outliers: StrictBool = True
-    min_views: Annotated[int, bounded_int(3, 1000, "Fewest accepted views to solve")] = 4
-    methods: list[str] = Field(
-        list(ALL_METHODS),
-        max_length=len(ALL_METHODS),
-        description=f"Hand-eye solvers, of {ALL_METHODS}",
-    )
-    refine: StrictBool = Field(True, description="Hand-eye: refine by reprojection error")
-    loss: Literal["linear", "huber", "soft_l1", "cauchy"] = "linear"
-    intrinsics: (
-        Literal["session", "active"]
-        | Annotated[int, bounded_int(1, MAX_DB_ID, "Id of an intrinsic calibration")]
-    ) = Field(
-        "session",
-        description="Hand-eye: intrinsics from this session's images, the active ones, or a calibration id",
-    )
-    activate: StrictBool = Field(False, description="Activate the result at once")
-
-    @model_validator(mode="after")
-    def _known_methods(self) -> SolveIn:
-        bad = [m for m in self.methods if m not in ALL_METHODS]
-        if bad or not self.methods:
-            raise ValueError(
-                f"methods must be a non-empty subset of {list(ALL_METHODS)}, got {self.methods}"
-            )
-        return self
-
-    def to_options(self) -> svc.SolveOptions:
-        return svc.SolveOptions(
-            intrinsics=IntrinsicsOptions(
-                radial_only=self.radial_only,
-                k3=self.k3,
-                fix_aspect_ratio=self.fix_aspect_ratio,
-                reject_outliers=self.reject_outliers,
-                min_views=self.min_views,
-            ),
-            hand_eye=HandEyeOptions(
-                methods=tuple(self.methods), refine=self.refine, loss=self.loss
-            ),
-            intrinsics_source=self.intrinsics,
-            activate=self.activate,
-        )
 
 
 def _check_upload(name: str, data: bytes) -> tuple[int, int]:
@@ -449,234 +393,3 @@ async def read_calibration_sample_image(
         if s.index == index:
             return Response(s.image_png, media_type="image/png")
     raise NotFound(f"session {row.id} has no sample {index}")
-
-
-@router.post(
-    "/sessions/{session_id}/solve",
-    summary="Solve the session as a job (202 with the job, or 200/422 with ?wait=true)",
-    status_code=status.HTTP_202_ACCEPTED,
-    response_class=JSONResponse,
-    responses={
-        200: {"model": JobOut, "description": "With ?wait=true: the finished job"},
-        202: {"model": JobOut, "description": "The job, started"},
-    },
-)
-async def create_calibration_solve(
-    _: EngineerUser,
-    session: SessionDep,
-    db: DatabaseDep,
-    cell: CellDep,
-    session_id: DbId,
-    body: SolveIn | None = None,
-    wait: Annotated[bool, Query(description="Answer when the solve has ended")] = False,
-) -> JSONResponse:
-    req = body or SolveIn()
-    options = req.to_options()
-    cal = await svc.get_session(session, session_id)
-    svc.check_own("session", cal.id, cal.cell_id, await svc.cell_id_of(session, cell.name))
-    warnings = svc.check_solvable(cal, options)  # CalibrationError -> 422 at once
-
-    async def solve(job: Job) -> dict[str, Any]:
-        job.report(0.0, f"solving session {session_id}")
-        async with db.session() as s:
-            out = await svc.solve_session(s, session_id, options, progress=job.report)
-            result: dict[str, Any] = {
-                "calibration_id": out.calibration.id,
-                "kind": out.calibration.kind.value,
-                "rms_px": out.calibration.rms_px,
-                "active": out.calibration.active,
-                "warnings": warnings,
-            }
-            if out.intrinsic is not None:
-                result["intrinsic_calibration_id"] = out.intrinsic.id
-        job.report(1.0, f"calibration {result['calibration_id']}: RMS {result['rms_px']:.3f} px")
-        return result
-
-    job = cell.jobs.start(
-        "calibrate", solve, params={"session_id": session_id, "options": req.model_dump()}
-    )
-    if not wait:
-        return JSONResponse({"job": job.public()}, status_code=status.HTTP_202_ACCEPTED)
-    await cell.jobs.wait(job)
-    if job.state is JobState.failed and job.error is not None:
-        code = 422 if job.error["error"] == "calibration_failed" else 500
-        return JSONResponse(
-            {**error_body(job.error["error"], job.error["detail"]), "job": job.public()},
-            status_code=code,
-        )
-    return JSONResponse({"job": job.public()}, status_code=status.HTTP_200_OK)
-
-
-# -- calibrations -------------------------------------------------------------------------
-
-
-@router.get(
-    "/calibrations",
-    summary="This cell's calibration history, newest first",
-    response_model=Page[Open],
-)
-async def read_calibrations(
-    _: ViewerUser,
-    session: SessionDep,
-    cell: CellDep,
-    kind: CalibrationKind | None = None,
-    session_id: DbIdQuery = None,
-    limit: Limit = 100,
-    offset: Offset = 0,
-) -> dict[str, Any]:
-    cell_id = await svc.cell_id_of(session, cell.name)
-    rows = await svc.history(
-        session, cell_id=cell_id, kind=kind, session_id=session_id, limit=limit, offset=offset
-    )
-    data = [svc.calibration_public(r) for r in rows]
-    total = await svc.count_history(session, cell_id=cell_id, kind=kind, session_id=session_id)
-    return {"data": data, "count": total}
-
-
-@router.get(
-    "/active",
-    summary="The active calibration of each kind in this cell",
-    response_model=dict[str, Open | None],
-)
-async def read_active_calibrations(
-    _: ViewerUser, session: SessionDep, cell: CellDep
-) -> dict[str, Any]:
-    cell_id = await svc.cell_id_of(session, cell.name)
-    act = await svc.active_calibrations(session, cell_id)
-    return {k.value: (svc.calibration_public(v) if v else None) for k, v in act.items()}
-
-
-@router.get(
-    "/calibrations/{calibration_id}", summary="One calibration", response_model=CalibrationOut
-)
-async def read_calibration(_: ViewerUser, cal: CalibrationDep) -> dict[str, Any]:
-    return {"calibration": svc.calibration_public(cal)}
-
-
-@router.get(
-    "/calibrations/{calibration_id}/report",
-    summary="Report: summary and plot links",
-    response_model=Open,
-)
-async def read_calibration_report(_: ViewerUser, cal: CalibrationDep) -> dict[str, Any]:
-    return svc.calibration_report(cal)
-
-
-@router.get(
-    "/calibrations/{calibration_id}/report/{plot}.png",
-    summary="Report plot: residuals, coverage or consistency (hand-eye)",
-    response_class=Response,
-    responses={200: {"content": {"image/png": {}}, "description": "The plot"}},
-)
-async def read_calibration_plot(
-    _: ViewerUser, cal: CalibrationDep, work: HeavyWorkDep, plot: PlotName
-) -> Response:
-    async with work.job() as job:  # rendered in the heavy-work pool
-        png = await job.run(svc.report_png, cal, plot)
-    return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
-
-
-@router.post(
-    "/calibrations/{calibration_id}/activate",
-    summary="Make this calibration active",
-    response_model=CalibrationOut,
-)
-async def update_calibration_activate(
-    user: EngineerUser,
-    session: SessionDep,
-    cell: CellDep,
-    calibration_id: DbId,
-    reason: Annotated[
-        str | None, Query(max_length=audit.MAX_REASON_LENGTH, description="Why (audit trail)")
-    ] = None,
-) -> dict[str, Any]:
-    row = await svc.get_calibration(session, calibration_id)
-    svc.check_own("calibration", row.id, row.cell_id, await svc.cell_id_of(session, cell.name))
-    cal = await svc.activate(session, calibration_id, by=audit.By(audit.Actor.of(user), reason))
-    return {"calibration": svc.calibration_public(cal)}
-
-
-# -- automatic calibration -----------------------------------------------------------------
-
-
-class AutoIn(BaseModel):
-    """An automatic calibration run (see ``backend.calibration.auto``)."""
-
-    board: Literal["chessboard", "charuco"] = Field(
-        "chessboard", description="Which board of the cell to use (simulated cell: the placed one)"
-    )
-    pattern: BoardIn | None = Field(
-        None, description="The board's pattern; default: the simulated cell's board of that kind"
-    )
-    T_base_board: Matrix4 | None = Field(
-        None,
-        description="Where the board roughly is (4x4, metres); default: where the simulated "
-        "cell's board was placed.  The first view measures it again.",
-    )
-    n_poses: Annotated[int, bounded_int(3, 60, "Views to plan")] = 25
-    n_reserve: Annotated[int, bounded_int(0, 60, "Reserve views while criteria are unmet")] = 10
-    activate: StrictBool = Field(False, description="Activate the solution")
-    seed: Annotated[int, bounded_int(0, 2**32 - 1, "Seed of the view planner")] = 0
-    speed: Speed = 0.6
-
-
-@router.post(
-    "/auto",
-    status_code=status.HTTP_202_ACCEPTED,
-    summary="Start an automatic calibration run (a motion job; 409 while the arm is busy)",
-    response_model=JobOut,
-)
-async def create_calibration_auto(
-    _: EngineerUser, db: DatabaseDep, cell: CellDep, sim: SimDep, body: AutoIn
-) -> dict[str, Any]:
-    from backend.calibration import auto
-
-    cell.check_can_move()  # refuse before the planning work
-    board, T = _auto_board(body, sim)
-    world = cell.world if cell.world is not None else CollisionWorld()
-    options = auto.AutoOptions(
-        n_poses=body.n_poses,
-        n_reserve=body.n_reserve,
-        activate=body.activate,
-        seed=body.seed,
-        speed=body.speed,
-    )
-    run = await auto.prepare_auto_calibration(
-        cell, board=board, T_base_board=T, options=options, world=world
-    )
-
-    async def body_(job: Job) -> dict[str, Any]:
-        return await auto.run_auto_calibration(job, cell, db, run)
-
-    job = cell.jobs.start(
-        "auto_calibrate",
-        body_,
-        motion=True,
-        params={**body.model_dump(), "plan": run.plan.as_dict()},
-    )
-    return {"job": job.public()}
-
-
-def _auto_board(body: AutoIn, sim: Any) -> tuple[Board, np.ndarray]:
-    """The board and its rough pose for ``body`` (from the simulated cell where not given)."""
-    placed = None
-    if sim is not None:
-        placed = next((b for b in sim.boards() if b.kind == body.board), None)
-    if body.pattern is not None:
-        board = body.pattern.to_board()
-    elif sim is not None:
-        spec = next((s for s in sim.config.boards if s.kind == body.board), None)
-        if spec is None:
-            raise NotFound(f"this cell has no {body.board} board")
-        from backend.calibration.auto import pattern_of_sim_board
-
-        board = pattern_of_sim_board(spec)
-    else:
-        raise InvalidInput("pattern: give the board's pattern (no simulator)")
-    if body.T_base_board is not None:
-        return board, np.asarray(body.T_base_board, dtype=np.float64)
-    if placed is None:
-        raise InvalidInput(
-            f"T_base_board: give where the board is; no {body.board} board is placed in the cell"
-        )
-    return board, np.asarray(placed.T_base_board, dtype=np.float64)
