@@ -31,8 +31,9 @@ from backend.cli.calibration_common import (
 __all__ = ["calibrate_app"]
 
 calibrate_app = typer.Typer(
-    help="Offline calibration from a folder of images: intrinsics (chapter 3.1) and the "
-    "eye-in-hand transform T_ee_cam (chapter 3.3).",
+    help="Calibration: intrinsics (chapter 3.1) and the eye-in-hand transform T_ee_cam "
+    "(chapter 3.3) from a folder of images, the automatic calibration of a running cell, "
+    "and calibrations exported from or imported into a cell.",
     no_args_is_help=True,
 )
 
