@@ -21,9 +21,9 @@ their own CPU time is not the server's:
 unlike latencies, hardly moves with the machine's load.
 
 The CPU of each phase is accounted per thread of the server and for the client process
-(:mod:`benchmarks.cpu_account`).  ``--event-loop``, ``--ws-compression``,
-``--read-cache-ttl``, ``--fast-reads`` and ``--refresh-ahead`` set the server as the matching ``VISIONCELL_*``
-settings do, so each step can be measured against the configuration before it.
+(:mod:`benchmarks.cpu_account`).  ``--event-loop``, ``--ws-compression`` and
+``--read-cache-ttl`` set the server as the matching ``VISIONCELL_*`` settings do, so each
+step can be measured against the configuration before it.
 
 Phases, in one run: ``--cycles`` inspections without load, the same with the clients
 running, and again without load; the baseline is the median over both unloaded phases and
@@ -290,8 +290,6 @@ def _settings(tmp: Path, args: argparse.Namespace) -> Any:
         event_loop=getattr(args, "event_loop", "auto"),
         ws_compression=getattr(args, "ws_compression", False),
         read_cache_ttl_s=getattr(args, "read_cache_ttl", 1.0),
-        fast_reads=getattr(args, "fast_reads", True),
-        refresh_ahead=getattr(args, "refresh_ahead", True),
     )
 
 
@@ -371,7 +369,6 @@ async def _cycles(rt: Any, ctx: Any, n: int, phase: str, rng: Any, model: str) -
 async def _run(args: argparse.Namespace) -> dict[str, Any]:
     import uvicorn
 
-    from backend.api.fastpath import fast_reads_of
     from backend.api.limits import uvicorn_options
     from backend.app import create_app
     from backend.db.migrate import upgrade
@@ -401,10 +398,6 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
         finally:
             server.should_exit = True
             await serving
-        layer = fast_reads_of(app)
-        res["fast_path"] = (
-            None if layer is None else {"answered": layer.answered, "passed": layer.passed}
-        )
     return res
 
 
@@ -454,21 +447,8 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         "event_loop": loop_name(asyncio.get_running_loop()),
         "ws_compression": settings.ws_compression,
         "read_cache_ttl_s": settings.read_cache_ttl_s,
-        "fast_reads": settings.fast_reads,
-        "refresh_ahead": settings.refresh_ahead,
-        "read_cache": {
-            "hits": rt.read_cache.hits,
-            "misses": rt.read_cache.misses,
-            "shared": rt.read_cache.shared,
-            "refreshes": rt.read_cache.refreshes,
-            "refresh_failures": rt.read_cache.refresh_failures,
-        },
-        "auth_cache": {
-            "lookups": rt.auth_cache.lookups,
-            "shared": rt.auth_cache.shared,
-            "refreshes": rt.auth_cache.refreshes,
-            "refresh_failures": rt.auth_cache.refresh_failures,
-        },
+        "read_cache": {"hits": rt.read_cache.hits, "misses": rt.read_cache.misses},
+        "auth_cache": {"lookups": rt.auth_cache.lookups},
         "cycles": args.cycles,
         "cycle_s_no_load": base_s,
         "cycle_s_no_load_before": statistics.median(before),
@@ -502,7 +482,6 @@ def _proc_cpu_s(pid: int) -> float:
 
 def route_cpu(
     requests: int = 40, *, event_loop: str = "auto", read_cache_ttl_s: float = 1.0,
-    fast_reads: bool = True, refresh_ahead: bool = True,
 ) -> dict[str, Any]:  # fmt: skip
     """Server CPU per request of each route: ``visioncell serve`` (ideal arm, folder camera)
     in a child process, one client asking each route ``requests`` times in a row; the
@@ -520,10 +499,6 @@ def route_cpu(
         raise ValueError(f"requests must be within 5..10000, got {requests!r}")
     if event_loop not in ("auto", "uvloop", "asyncio"):
         raise ValueError(f"event_loop must be auto, uvloop or asyncio, got {event_loop!r}")
-    if not isinstance(fast_reads, bool):
-        raise TypeError(f"fast_reads must be a bool, got {fast_reads!r}")
-    if not isinstance(refresh_ahead, bool):
-        raise TypeError(f"refresh_ahead must be a bool, got {refresh_ahead!r}")
     tmp = Path(tempfile.mkdtemp(prefix="bench-route-cpu-"))
     images = tmp / "images"
     images.mkdir()
@@ -542,8 +517,6 @@ def route_cpu(
         "VISIONCELL_DRIVER": "ideal", "VISIONCELL_CAMERA": "folder",
         "VISIONCELL_EVENT_LOOP": event_loop,
         "VISIONCELL_READ_CACHE_TTL_S": str(read_cache_ttl_s),
-        "VISIONCELL_FAST_READS": "true" if fast_reads else "false",
-        "VISIONCELL_REFRESH_AHEAD": "true" if refresh_ahead else "false",
         "VISIONCELL_CAMERA_FOLDER": str(images), "VISIONCELL_BOOTSTRAP_OPERATOR": "false",
     }  # fmt: skip
     log = (tmp / "serve.log").open("w")
@@ -589,15 +562,12 @@ def route_cpu(
             proc.wait()
         log.close()
     return {"requests_per_route": requests, "idle_cpu_pct": idle * 100, "event_loop": event_loop,
-            "read_cache_ttl_s": read_cache_ttl_s, "fast_reads": fast_reads,
-            "refresh_ahead": refresh_ahead,
-            "routes": out_rows}  # fmt: skip
+            "read_cache_ttl_s": read_cache_ttl_s, "routes": out_rows}  # fmt: skip
 
 
 def _print_route_cpu(res: dict[str, Any]) -> None:
     t = Table(title=f"Server CPU per request, one client ({res['requests_per_route']} requests "
-                    f"per route; idle server {res['idle_cpu_pct']:.1f} % of a core subtracted; "
-                    f"fast reads {'on' if res['fast_reads'] else 'off'})")  # fmt: skip
+                    f"per route; idle server {res['idle_cpu_pct']:.1f} % of a core subtracted)")  # fmt: skip
     for col in ("route", "CPU ms / request", "wall ms / request", "all 200"):
         t.add_column(col)
     for name, r in res["routes"].items():
@@ -643,14 +613,9 @@ def _print(res: dict[str, Any]) -> None:
     c.add_row("cycle slowdown (ratio of medians)", f"{res['cycle_slowdown']:.3f}",
               f"<= {TARGET_CYCLE_SLOWDOWN:.2f}")  # fmt: skip
     c.add_row("WebSocket messages", str(load["ws_messages"]), "")
-    fp = res.get("fast_path")
     rc, ac = res["read_cache"], res["auth_cache"]
-    c.add_row("read cache: hits / reads / shared / refreshed ahead",
-              f"{rc['hits']} / {rc['misses']} / {rc['shared']} / {rc['refreshes']}", "")  # fmt: skip
-    c.add_row("sign-in: database lookups / shared / refreshed ahead",
-              f"{ac['lookups']} / {ac['shared']} / {ac['refreshes']}", "")  # fmt: skip
-    c.add_row("fast path: answered / handed to FastAPI",
-              "off" if fp is None else f"{fp['answered']} / {fp['passed']}", "")  # fmt: skip
+    c.add_row("read cache: hits / reads", f"{rc['hits']} / {rc['misses']}", "")
+    c.add_row("sign-in: database lookups", str(ac["lookups"]), "")
     c.add_row("WebSocket lag ms p50 / p99 / max",
               f"{_f(load['ws_lag_p50_ms'])} / {_f(load['ws_lag_p99_ms'])} / {_f(load['ws_lag_max_ms'])}", "")  # fmt: skip
     if load["ws_errors"]:
@@ -678,11 +643,6 @@ def main(argv: list[str] | None = None) -> None:
                     help="per-message deflate on the console WebSocket (as VISIONCELL_WS_COMPRESSION)")  # fmt: skip
     ap.add_argument("--read-cache-ttl", type=float, default=1.0,
                     help="s the hot reads are reused, 0..10, 0 off (as VISIONCELL_READ_CACHE_TTL_S)")  # fmt: skip
-    ap.add_argument("--fast-reads", action=argparse.BooleanOptionalAction, default=True,
-                    help="answer the hot reads from memory in front of FastAPI (as VISIONCELL_FAST_READS)")  # fmt: skip
-    ap.add_argument("--refresh-ahead", action=argparse.BooleanOptionalAction, default=True,
-                    help="refresh cache entries before they expire and share sign-ins in "
-                         "flight (as VISIONCELL_REFRESH_AHEAD)")  # fmt: skip
     ap.add_argument("--cycles", type=int, default=12, help="inspections per phase")
     ap.add_argument("--time-scale", type=float, default=5.0)
     ap.add_argument("--seed", type=int, default=7)
@@ -716,9 +676,9 @@ def main(argv: list[str] | None = None) -> None:
     if args.route_cpu is not None:
         if not 5 <= args.route_cpu <= 10_000:
             ap.error(f"--route-cpu must be in 5..10000, got {args.route_cpu}")
-        cpu = route_cpu(args.route_cpu, event_loop=args.event_loop,
-                        read_cache_ttl_s=args.read_cache_ttl, fast_reads=args.fast_reads,
-                        refresh_ahead=args.refresh_ahead)  # fmt: skip
+        cpu = route_cpu(
+            args.route_cpu, event_loop=args.event_loop, read_cache_ttl_s=args.read_cache_ttl
+        )
         _print_route_cpu(cpu)
         if args.json:
             print(json.dumps(cpu))

@@ -8,9 +8,7 @@ handlers, the WebSocket and services get what they need from these dependencies.
 The dependencies that only fetch an object are ``async def`` although they never wait:
 FastAPI runs a plain ``def`` dependency in a worker thread, a thread hop per dependency
 and request (a quarter of a cached read's busy time on the event loop, and GIL hand-overs
-with the simulator's threads).  The sign-in rule is one class, :class:`RoleCheck`; the
-fast path of the hot reads (:mod:`backend.api.fastpath`) reads a route's
-:class:`RoleCheck` and asks the same sign-in cache through :func:`cached_role`.
+with the simulator's threads).  The sign-in rule is one class, :class:`RoleCheck`.
 """
 
 from __future__ import annotations
@@ -25,11 +23,10 @@ from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.api.errors import ApiError
 from backend.auth import authenticate_with_expiry, hash_token, well_formed
-from backend.authcache import Lookup, SignIn
+from backend.caches import Lookup, ReadCache, SignIn
 from backend.cell import Cell
 from backend.db.models import Role, User
 from backend.db.session import Database
-from backend.readcache import ReadCache
 from backend.runtime import CellRuntime
 from backend.settings import Settings
 from backend.throttle import SignInThrottle, TooManyAttempts
@@ -39,7 +36,6 @@ if TYPE_CHECKING:
     from robot.sim import SimEngine
 
 __all__ = [
-    "PURE_DEPENDENCIES",
     "SIGNED_IN_BEFORE_BODY",
     "CellDep",
     "DatabaseDep",
@@ -53,7 +49,6 @@ __all__ = [
     "SimDep",
     "View3DDep",
     "ViewerUser",
-    "cached_role",
     "client_address",
     "estop_user",
     "get_cell",
@@ -177,17 +172,17 @@ async def read_through(
     cache: ReadCache, db: Database, user: User, key: Hashable, *, tables: Iterable[str],
     read: Callable[[AsyncSession], Awaitable[_T]],
 ) -> _T:  # fmt: skip
-    """``read(session)`` through the runtime's read cache (:mod:`backend.readcache`): the
+    """``read(session)`` through the runtime's read cache (:mod:`backend.caches`): the
     answer of ``key`` if fresh and read for a role no stronger than ``user``'s, else read
-    in a session of its own (an API connection slot only on a miss).  The caller's role
-    dependency has already accepted ``user``; the value returned is shared, not to be
-    mutated."""
+    in a session of its own (an API connection slot only on a miss); dropped when one of
+    ``tables`` is written.  The caller's role dependency has already accepted ``user``;
+    the value returned is shared, not to be mutated."""
 
     async def fresh() -> _T:
         async with db.api_slot(), db.session() as session:
             return await read(session)
 
-    return await cache.get_or_read(key, role=Role[user.role], tables=tables, read=fresh)
+    return await cache.get_or_read(key, role=Role[user.role], topics=tables, read=fresh)
 
 
 # The simulator and the 3D view would load MuJoCo and viser at start-up: written as Any here
@@ -201,25 +196,10 @@ SessionDep = Annotated[AsyncSession, Depends(get_session, scope="function")]
 CellDep = Annotated[Cell, Depends(get_cell)]
 ReadCacheDep = Annotated[ReadCache, Depends(get_read_cache)]
 
-#: Dependencies that only fetch an object of the running system (and answer 503 while the
-#: cell is not running, which the fast path checks itself): what a route the fast path
-#: answers may depend on besides its :class:`RoleCheck` (``backend.api.fastpath``).
-PURE_DEPENDENCIES: frozenset[Callable[..., Any]] = frozenset(
-    {
-        _runtime_dependency,
-        _settings_dependency,
-        get_database,
-        get_cell,
-        get_sim_or_none,
-        get_view3d,
-        get_read_cache,
-    }
-)
-
 
 def _lookup(db: Database, token: str, secret: str) -> Lookup:
-    """The database sign-in of ``token`` (what the sign-in cache runs on a miss and to
-    refresh an entry ahead of its expiry): its user and expiry, or None when refused."""
+    """The database sign-in of ``token`` (what the sign-in cache runs on a miss): its user
+    and expiry, or None when refused."""
 
     async def lookup() -> SignIn | None:
         async with db.api_slot(), db.session() as session:
@@ -232,8 +212,7 @@ async def _signed_in(
     conn: HTTPConnection, db: Database, token: str, settings: Settings
 ) -> User | None:
     """The user of ``token``: from the runtime's short-lived sign-in cache
-    (:mod:`backend.authcache`: refreshed ahead of its expiry, one database lookup per
-    token at a time), else from the database (then cached)."""
+    (:mod:`backend.caches`), else from the database (then cached)."""
     secret = settings.secret_key.get_secret_value()
     cache = get_runtime(conn).auth_cache
     if not well_formed(token):
@@ -254,8 +233,7 @@ class RoleCheck:
     Refusals, in order: 429 for a client address the sign-in throttle blocks (even with a
     correct token), 401 without a bearer token or with a bad, expired or revoked one (a
     failure for the throttle), 403 for a weaker role.  With ``auth_enabled`` off every
-    caller is an anonymous engineer.  The fast path (``backend.api.fastpath``) takes a
-    route's minimum role from its :class:`RoleCheck` and asks :meth:`allows`."""
+    caller is an anonymous engineer."""
 
     def __init__(self, role: Role) -> None:
         if not isinstance(role, Role):
@@ -342,37 +320,9 @@ def require_role(role: Role) -> RoleCheck:
     return RoleCheck(role)
 
 
-async def cached_role(conn: HTTPConnection) -> Role | None:
-    """The role a :class:`RoleCheck` would find for this request from memory alone: the
-    anonymous engineer when ``auth_enabled`` is off; else the role of a well-formed bearer
-    token the sign-in cache holds valid (TTL and the token's expiry checked on this hit;
-    refreshed ahead as :class:`RoleCheck`'s sign-in is), from an address the throttle does
-    not block.  None in every other case (a token the
-    cache does not hold, none, a blocked address, the cell not running): the dependency
-    itself must decide, from the database, and answer any refusal."""
-    settings = get_settings(conn)
-    if not settings.auth_enabled:
-        return Role.engineer
-    rt = runtime_of(conn.app)
-    if rt is None or not rt.running:
-        return None
-    try:
-        rt.signin_throttle.check(client_address(conn))
-    except TooManyAttempts:
-        return None
-    creds = await _bearer(conn)
-    if creds is None or creds.scheme.lower() != "bearer" or not well_formed(creds.credentials):
-        return None
-    secret = settings.secret_key.get_secret_value()
-    key = hash_token(creds.credentials, secret)
-    # A hit late in the entry's TTL looks the token up again in the background.
-    role = rt.auth_cache.role_of(key, refresh=_lookup(rt.database, creds.credentials, secret))
-    return None if role is None else Role[role]
-
-
 def known_user(conn: HTTPConnection, token: str | None) -> User | None:
     """The user of a bearer ``token`` known from memory alone: the sign-in cache's entry
-    (not refreshed: no database work), else a token this process saw valid within the hour
+    (no database work), else a token this process saw valid within the hour
     (:mod:`backend.knowntokens`); the anonymous engineer with ``auth_enabled`` off.  None
     for anything else (no token, a malformed or unknown one, the cell not running)."""
     settings = get_settings(conn)

@@ -38,7 +38,7 @@ from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend import audit
 from backend.db.models import ObjectModel, RecognitionSettings, TrainedView
-from backend.db.session import Database
+from backend.db.session import Database, changed
 from backend.heavy import HeavyPool
 from backend.recognition.index import LiveIndex
 from vision.recognition import ThresholdChoice, ViewIndex, choose_threshold
@@ -196,6 +196,7 @@ async def back_to_automatic(session: AsyncSession) -> tuple[RecognitionSettings 
         row = RecognitionSettings(global_threshold=auto.global_threshold, chosen_by="auto",
                                   detail=dict(auto.detail))  # fmt: skip
     session.add(row)
+    changed(session, "recognition_settings")
     await session.flush()
     return before, row
 
@@ -539,6 +540,7 @@ async def recompute(
             )
         detail = _detail(choice, n_views, n_negatives=len(negatives), signature=signature)
         detail.update(advice=list(tips), floor=floor, rounds=rounds)
+        changed(session, "recognition_settings")
         session.add(
             RecognitionSettings(
                 global_threshold=float(choice.threshold),

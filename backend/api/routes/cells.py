@@ -11,7 +11,6 @@ from sqlalchemy import func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.api.deps import DatabaseDep, ReadCacheDep, ViewerUser, read_through
-from backend.api.fastpath import FastRequest, Fresh
 from backend.api.schemas import Page
 from backend.api.types import Limit, Offset
 from backend.db.models import Cell
@@ -56,15 +55,3 @@ async def read_cells(
 
     key = cells_key(limit, offset)
     return await read_through(cache, db, user, key, tables=CELL_TABLES, read=read)
-
-
-async def fast_read_cells(req: FastRequest) -> Fresh | None:
-    """:func:`read_cells` from its read-cache entry, if it has a fresh one for the role."""
-    if req.role is None:
-        return None
-    key = cells_key(req.params["limit"], req.params["offset"])
-    entry = req.runtime.read_cache.peek(key, role=req.role, tables=CELL_TABLES)
-    if entry is None:
-        return None
-    value: dict[str, Any] = entry.value
-    return Fresh((entry,), lambda: value)

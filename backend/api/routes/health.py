@@ -17,7 +17,6 @@ from backend.api.deps import (
     View3DDep,
     ViewerUser,
 )
-from backend.api.fastpath import FastRequest, Fresh
 from backend.cell import Cell
 from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Role
@@ -56,11 +55,6 @@ def health_answer(view: Any) -> dict[str, Any]:
 @router.get("/health", summary="Liveness; needs no token", response_model=HealthOut)
 async def read_health(view: View3DDep) -> dict[str, Any]:
     return health_answer(view)
-
-
-async def fast_read_health(req: FastRequest) -> Fresh | None:
-    """:func:`read_health` of the running cell."""
-    return Fresh.of_content(health_answer(req.runtime.view3d))
 
 
 def _versions() -> dict[str, str]:
@@ -133,19 +127,6 @@ async def read_status(
     # Two round trips to the database, reused for the read cache's TTL (a database that
     # goes away shows within it); the cell's own state is read on every request.
     db_ok, revision = await cache.get_or_read(
-        STATUS_DB_KEY, role=Role[user.role], tables=STATUS_DB_TABLES, read=probe
+        STATUS_DB_KEY, role=Role[user.role], topics=STATUS_DB_TABLES, read=probe
     )
     return status_answer(settings, cell, view, db_ok, revision)
-
-
-async def fast_read_status(req: FastRequest) -> Fresh | None:
-    """:func:`read_status` when the database probe's read-cache entry is fresh for the
-    role (the cell's state changes all the time: its answer is kept while equal)."""
-    if req.role is None:
-        return None
-    rt = req.runtime
-    entry = rt.read_cache.peek(STATUS_DB_KEY, role=req.role, tables=STATUS_DB_TABLES)
-    if entry is None:
-        return None
-    db_ok, revision = entry.value
-    return Fresh.of_content(status_answer(req.settings, rt.cell, rt.view3d, db_ok, revision))

@@ -25,7 +25,6 @@ from backend.api.deps import (
     ViewerUser,
     read_through,
 )
-from backend.api.fastpath import FastRequest, Fresh
 from backend.api.types import DbId, Limit, Offset, instant_query
 from backend.inspection import results, service
 from backend.recipes import follower, resolve_options
@@ -177,18 +176,6 @@ async def read_inspections(
     key = inspections_key(rt.cell_id, params)
     value = await read_through(cache, db, user, key, tables=INSPECTION_TABLES, read=read)
     return inspections_answer(value)
-
-
-async def fast_read_inspections(req: FastRequest) -> Fresh | None:
-    """:func:`read_inspections` from its read-cache entry, if it has a fresh one for the
-    role."""
-    if req.role is None:
-        return None
-    key = inspections_key(req.runtime.cell_id, req.params)
-    entry = req.runtime.read_cache.peek(key, role=req.role, tables=INSPECTION_TABLES)
-    if entry is None:
-        return None
-    return Fresh((entry,), lambda: inspections_answer(entry.value))
 
 
 @router.get("/inspections/{inspection_id}", summary="One inspection")

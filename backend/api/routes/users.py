@@ -21,6 +21,7 @@ from backend.auth import (
     parse_role,
     token_expiry,
 )
+from backend.caches import users_changed
 from backend.db.models import ApiToken, User
 from backend.db.types import utcnow
 from vision.errors import Conflict, NotFound
@@ -181,6 +182,7 @@ async def delete_user(
     if user.name == me.name:
         raise Conflict("you cannot disable yourself")
     user.disabled = True
+    await users_changed(session, {user.id})
     n = await session.scalar(
         select(func.count()).select_from(ApiToken).where(ApiToken.user_id == user.id)
     )
@@ -211,6 +213,7 @@ async def update_user_role(
     old_role = user.role
     user.role = parse_role(body.role).name
     if old_role != user.role:
+        await users_changed(session, {user.id})
         audit.record(
             session,
             actor=audit.Actor.of(me),
@@ -312,6 +315,7 @@ async def revoke_token(
         raise NotFound(f"user {name!r} has no token {token_id}")
     if not row.revoked:
         row.revoked = True
+        await users_changed(session, {user.id})
         audit.record(
             session,
             actor=audit.Actor.of(me),
