@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 from collections.abc import Hashable
-from typing import Any
 
 from fastapi import APIRouter
-from pydantic import BaseModel
+from pydantic import BaseModel, ConfigDict
 from sqlalchemy import func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.api.deps import DatabaseDep, ReadCacheDep, ViewerUser, read_through
-from backend.api.schemas import Page
+from backend.api.schemas import IsoTime, Page
 from backend.api.types import Limit, Offset
 from backend.db.models import Cell
 
@@ -19,10 +18,14 @@ router = APIRouter(prefix="/cells", tags=["cells"])
 
 
 class CellPublic(BaseModel):
+    """A cell as the API shows it (read from its row)."""
+
+    model_config = ConfigDict(from_attributes=True)
+
     id: int
     name: str
     description: str
-    created_at: str
+    created_at: IsoTime
 
 
 #: What the cell list reads (its read-cache entries go when one of them is written).
@@ -37,21 +40,13 @@ def cells_key(limit: int, offset: int) -> tuple[Hashable, ...]:
 @router.get("", summary="All cells", response_model=Page[CellPublic])
 async def read_cells(
     user: ViewerUser, db: DatabaseDep, cache: ReadCacheDep, limit: Limit = 100, offset: Offset = 0
-) -> dict[str, Any]:
-    async def read(session: AsyncSession) -> dict[str, Any]:
+) -> Page[CellPublic]:
+    async def read(session: AsyncSession) -> Page[CellPublic]:
         total = await session.scalar(select(func.count()).select_from(Cell))
         q = select(Cell).order_by(Cell.id).limit(limit).offset(offset)
         rows = (await session.scalars(q)).all()
-        data = [
-            {
-                "id": c.id,
-                "name": c.name,
-                "description": c.description,
-                "created_at": c.created_at.isoformat(),
-            }
-            for c in rows
-        ]
-        return {"data": data, "count": int(total or 0)}
+        data = [CellPublic.model_validate(c) for c in rows]
+        return Page[CellPublic](data=data, count=int(total or 0))
 
     key = cells_key(limit, offset)
     return await read_through(cache, db, user, key, tables=CELL_TABLES, read=read)
