@@ -33,7 +33,7 @@ import time
 from collections.abc import Awaitable, Callable, Hashable, Iterable
 from dataclasses import dataclass
 from datetime import datetime
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 from cachetools import TTLCache
 from sqlalchemy import text
@@ -117,12 +117,53 @@ class _Answer:
 
 @dataclass(frozen=True)
 class _Flight:
-    """A read in progress, shared by the callers that miss meanwhile."""
-
     loop: asyncio.AbstractEventLoop
-    role: Role
-    gen: tuple[int, ...]
+    tag: Any
     future: asyncio.Future[Any]
+
+
+class _Flights:
+    """One read per key at a time: callers that miss while a read of their key is in
+    flight share its answer (or its error), when ``may_share`` accepts its ``tag``; a
+    caller whose reader went away (cancelled) reads itself."""
+
+    def __init__(self) -> None:
+        self._flights: dict[Hashable, _Flight] = {}
+        #: Callers that shared a read in flight.
+        self.shared = 0
+
+    async def read(
+        self, key: Hashable, tag: Any, may_share: Callable[[Any], bool],
+        read: Callable[[], Awaitable[T]],
+    ) -> T:  # fmt: skip
+        loop = asyncio.get_running_loop()
+        flight = self._flights.get(key)
+        if flight is not None and flight.loop is loop and may_share(flight.tag):
+            self.shared += 1
+            try:
+                return cast(T, await asyncio.shield(flight.future))
+            except asyncio.CancelledError:
+                if not flight.future.cancelled():
+                    raise  # this caller was cancelled, not the read it waited for
+        mine = _Flight(loop, tag, loop.create_future())
+        self._flights[key] = mine
+        try:
+            value = await read()
+        except asyncio.CancelledError:
+            mine.future.cancel()
+            raise
+        except BaseException as exc:
+            mine.future.set_exception(exc)
+            mine.future.exception()  # marked retrieved: its waiters, if any, get it too
+            raise
+        finally:
+            if self._flights.get(key) is mine:
+                del self._flights[key]
+        mine.future.set_result(value)
+        return value
+
+    def clear(self) -> None:
+        self._flights.clear()
 
 
 class ReadCache:
@@ -147,8 +188,8 @@ class ReadCache:
         self._answers: TTLCache[Hashable, _Answer] = TTLCache(max_entries, self.ttl_s, timer=clock)
         self._generation: dict[str, int] = {}
         self._epoch = 0  # grows with every clear()
-        self._inflight: dict[Hashable, _Flight] = {}
-        #: Answers served from memory, and reads made.
+        self._flights = _Flights()
+        #: Answers served from memory, and reads made (and :attr:`shared`).
         self.hits = 0
         self.misses = 0
 
@@ -176,38 +217,23 @@ class ReadCache:
             self.hits += 1
             return found.value
         gen = self._gen(deps)
-        loop = asyncio.get_running_loop()
-        flight = self._inflight.get(key)
-        if (
-            flight is not None and flight.loop is loop and role >= flight.role
-            and flight.gen == gen
-        ):  # fmt: skip
-            self.hits += 1
-            try:
-                return await asyncio.shield(flight.future)
-            except asyncio.CancelledError:
-                if not flight.future.cancelled():
-                    raise  # this caller was cancelled, not the read it waited for
-            # the caller that read went away: read here
-        self.misses += 1
-        mine = _Flight(loop, role, gen, loop.create_future())
-        self._inflight[key] = mine
-        try:
+
+        async def read_and_keep() -> T:
+            self.misses += 1
             value = await read()
-        except asyncio.CancelledError:
-            mine.future.cancel()
-            raise
-        except BaseException as exc:
-            mine.future.set_exception(exc)
-            mine.future.exception()  # marked retrieved: its waiters, if any, get it too
-            raise
-        finally:
-            if self._inflight.get(key) is mine:
-                del self._inflight[key]
-        mine.future.set_result(value)
-        if self._gen(deps) == gen:  # nothing it read was written meanwhile
-            self._answers[key] = _Answer(role, deps, value)
-        return value
+            if self._gen(deps) == gen:  # nothing it read was written meanwhile
+                self._answers[key] = _Answer(role, deps, value)
+            return value
+
+        def may_share(tag: tuple[Role, tuple[int, ...]]) -> bool:
+            return role >= tag[0] and tag[1] == gen
+
+        return await self._flights.read(key, (role, gen), may_share, read_and_keep)
+
+    @property
+    def shared(self) -> int:
+        """Callers that shared a read in flight instead of reading."""
+        return self._flights.shared
 
     def invalidate(self, topics: Iterable[str]) -> int:
         """Drop the answers that read one of ``topics``; a read in progress is not kept
@@ -223,6 +249,7 @@ class ReadCache:
     def clear(self) -> None:
         """Drop every answer (a read in progress is not kept)."""
         self._epoch += 1
+        self._flights.clear()
         self._answers.clear()
 
     def on_change(self, changes: Changes) -> None:
@@ -237,6 +264,18 @@ class ReadCache:
 class _SignedIn:
     user: tuple[int, str, str, datetime]  # id, name, role, created_at
     expires_at: datetime | None
+
+
+def _row(user: User) -> tuple[int, str, str, datetime]:
+    return (int(user.id), str(user.name), str(user.role), user.created_at)
+
+
+def _user_of(e: _SignedIn) -> User | None:
+    """A detached user of ``e`` for one request (None: the token expired since)."""
+    if e.expires_at is not None and e.expires_at <= utcnow():
+        return None
+    uid, name, role, created = e.user
+    return User(id=uid, name=name, role=role, disabled=False, created_at=created)
 
 
 def _aware(at: datetime | None) -> datetime | None:
@@ -272,6 +311,7 @@ class AuthCache:
         self.generation = 0
         #: Sign-ins read from the database.
         self.lookups = 0
+        self._flights = _Flights()
 
     def get(self, token_hash: str) -> User | None:
         """A detached copy of the user ``token_hash`` signs in, if cached and the token
@@ -281,24 +321,34 @@ class AuthCache:
             if e is not None and e.expires_at is not None and e.expires_at <= utcnow():
                 self._entries.pop(token_hash, None)
                 e = None
-        if e is None:
-            return None
-        uid, name, role, created = e.user
-        return User(id=uid, name=name, role=role, disabled=False, created_at=created)
+        return None if e is None else _user_of(e)
 
     async def sign_in(self, token_hash: str, lookup: Lookup) -> User | None:
         """The user ``token_hash`` signs in: cached, else ``lookup()`` (kept when it
-        succeeds and no sign-in changed meanwhile).  None: refused (never kept)."""
+        succeeds and no sign-in changed meanwhile), shared by the requests of the same
+        token that miss while it runs.  None: refused (never kept)."""
         user = self.get(token_hash)
         if user is not None:
             return user
         generation = self.generation
-        self.lookups += 1
-        found = await lookup()
-        if found is None:
-            return None
-        self.put(token_hash, found[0], found[1], generation=generation)
-        return found[0]
+
+        async def look_up() -> _SignedIn | None:
+            self.lookups += 1
+            found = await lookup()
+            if found is None:
+                return None
+            self.put(token_hash, found[0], found[1], generation=generation)
+            return _SignedIn(_row(found[0]), _aware(found[1]))
+
+        got = await self._flights.read(
+            token_hash, generation, lambda g: g == self.generation, look_up
+        )
+        return None if got is None else _user_of(got)
+
+    @property
+    def shared(self) -> int:
+        """Sign-ins that shared a lookup in flight instead of looking up."""
+        return self._flights.shared
 
     def put(
         self, token_hash: str, user: User, expires_at: datetime | None, *, generation: int
@@ -311,9 +361,8 @@ class AuthCache:
             self.known.note(token_hash, user_id=int(user.id), user=user.name, role=user.role)
         if self.ttl_s <= 0:
             return
-        row = (int(user.id), str(user.name), str(user.role), user.created_at)
         with self._lock:
-            self._entries[token_hash] = _SignedIn(row, _aware(expires_at))
+            self._entries[token_hash] = _SignedIn(_row(user), _aware(expires_at))
 
     def forget_users(self, user_ids: Iterable[int] | None) -> int:
         """Drop the sign-ins of ``user_ids`` (None: all) here and in :attr:`known`; a

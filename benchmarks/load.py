@@ -447,8 +447,12 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         "event_loop": loop_name(asyncio.get_running_loop()),
         "ws_compression": settings.ws_compression,
         "read_cache_ttl_s": settings.read_cache_ttl_s,
-        "read_cache": {"hits": rt.read_cache.hits, "misses": rt.read_cache.misses},
-        "auth_cache": {"lookups": rt.auth_cache.lookups},
+        "read_cache": {
+            "hits": rt.read_cache.hits,
+            "misses": rt.read_cache.misses,
+            "shared": rt.read_cache.shared,
+        },
+        "auth_cache": {"lookups": rt.auth_cache.lookups, "shared": rt.auth_cache.shared},
         "cycles": args.cycles,
         "cycle_s_no_load": base_s,
         "cycle_s_no_load_before": statistics.median(before),
@@ -614,8 +618,9 @@ def _print(res: dict[str, Any]) -> None:
               f"<= {TARGET_CYCLE_SLOWDOWN:.2f}")  # fmt: skip
     c.add_row("WebSocket messages", str(load["ws_messages"]), "")
     rc, ac = res["read_cache"], res["auth_cache"]
-    c.add_row("read cache: hits / reads", f"{rc['hits']} / {rc['misses']}", "")
-    c.add_row("sign-in: database lookups", str(ac["lookups"]), "")
+    c.add_row("read cache: hits / reads / shared",
+              f"{rc['hits']} / {rc['misses']} / {rc['shared']}", "")  # fmt: skip
+    c.add_row("sign-in: database lookups / shared", f"{ac['lookups']} / {ac['shared']}", "")
     c.add_row("WebSocket lag ms p50 / p99 / max",
               f"{_f(load['ws_lag_p50_ms'])} / {_f(load['ws_lag_p99_ms'])} / {_f(load['ws_lag_max_ms'])}", "")  # fmt: skip
     if load["ws_errors"]:

@@ -352,6 +352,67 @@ def test_a_lookup_that_started_before_a_change_is_not_kept() -> None:
     assert cache.get("h") is None and cache.known is not None and len(cache.known) == 0
 
 
+def test_concurrent_sign_ins_of_one_token_share_one_lookup() -> None:
+    cache = AuthCache(clock=SteppedClock())
+    gate, calls = asyncio.Event(), []
+
+    async def slow():
+        calls.append(1)
+        await gate.wait()
+        return _user(), None
+
+    async def run() -> list:
+        tasks = [asyncio.create_task(cache.sign_in("h", slow)) for _ in range(5)]
+        await asyncio.sleep(0)
+        gate.set()
+        return [await t for t in tasks]
+
+    users = asyncio.run(run())
+    assert len(calls) == 1 and cache.shared == 4 and cache.lookups == 1
+    assert all(u is not None and u.name == "u7" for u in users)
+    assert len({id(u) for u in users}) == 5  # each request gets its own copy
+
+
+def test_a_lookup_in_flight_before_a_change_is_not_shared_after_it() -> None:
+    cache = AuthCache(clock=SteppedClock())
+    gate, calls = asyncio.Event(), []
+
+    async def slow():
+        calls.append(1)
+        await gate.wait()
+        return _user(), None
+
+    async def run() -> None:
+        first = asyncio.create_task(cache.sign_in("h", slow))
+        await asyncio.sleep(0)
+        cache.forget_users({7})  # the user changed while the first lookup ran
+        second = asyncio.create_task(cache.sign_in("h", slow))
+        await asyncio.sleep(0)
+        gate.set()
+        await asyncio.gather(first, second)
+
+    asyncio.run(run())
+    assert len(calls) == 2 and cache.shared == 0
+
+
+def test_a_refused_lookup_is_shared_but_never_cached() -> None:
+    cache = AuthCache(clock=SteppedClock())
+    gate, calls = asyncio.Event(), []
+
+    async def refused():
+        calls.append(1)
+        await gate.wait()
+        return None
+
+    async def run() -> list:
+        tasks = [asyncio.create_task(cache.sign_in("h", refused)) for _ in range(3)]
+        await asyncio.sleep(0)
+        gate.set()
+        return [await t for t in tasks]
+
+    assert asyncio.run(run()) == [None, None, None] and len(calls) == 1 and len(cache) == 0
+
+
 def test_the_sign_in_cache_is_bounded() -> None:
     cache = AuthCache(max_entries=2, clock=SteppedClock())
     for h in ("a", "b", "c"):
