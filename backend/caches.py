@@ -184,14 +184,18 @@ class ReadCache:
         clock: Callable[[], float] = time.monotonic,
     ) -> None:  # fmt: skip
         _check(ttl_s, max_entries, 10.0)
-        self.ttl_s = float(ttl_s)
-        self._answers: TTLCache[Hashable, _Answer] = TTLCache(max_entries, self.ttl_s, timer=clock)
+        self._answers: TTLCache[Hashable, _Answer] = TTLCache(max_entries, ttl_s, timer=clock)
         self._generation: dict[str, int] = {}
         self._epoch = 0  # grows with every clear()
         self._flights = _Flights()
         #: Answers served from memory, and reads made (and :attr:`shared`).
         self.hits = 0
         self.misses = 0
+
+    @property
+    def ttl_s(self) -> float:
+        """Reuse time, seconds (fixed when the cache is made)."""
+        return float(self._answers.ttl)
 
     def _gen(self, topics: frozenset[str]) -> tuple[int, ...]:
         return (self._epoch, *(self._generation.get(t, 0) for t in sorted(topics)))
@@ -303,15 +307,19 @@ class AuthCache:
         clock: Callable[[], float] = time.monotonic, known: KnownTokens | None = None,
     ) -> None:  # fmt: skip
         _check(ttl_s, max_entries, 60.0)
-        self.ttl_s = float(ttl_s)
         self.known = known
-        self._entries: TTLCache[str, _SignedIn] = TTLCache(max_entries, self.ttl_s, timer=clock)
+        self._entries: TTLCache[str, _SignedIn] = TTLCache(max_entries, ttl_s, timer=clock)
         self._lock = threading.Lock()  # the 3D view signs in from viser's threads
         #: Grows with every change of sign-ins: a lookup started before one is not kept.
         self.generation = 0
         #: Sign-ins read from the database.
         self.lookups = 0
         self._flights = _Flights()
+
+    @property
+    def ttl_s(self) -> float:
+        """Reuse time, seconds (fixed when the cache is made)."""
+        return float(self._entries.ttl)
 
     def get(self, token_hash: str) -> User | None:
         """A detached copy of the user ``token_hash`` signs in, if cached and the token

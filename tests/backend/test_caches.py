@@ -231,9 +231,7 @@ def test_a_session_s_noted_changes_reach_the_hooks_when_it_ends(settings) -> Non
                 changed(s, USERS, [1])
                 changed(s, "object_models", [5])
                 changed(s, "object_models")  # any row beats some rows
-            assert seen == [
-                {"cells": None, USERS: frozenset({1, 3}), "object_models": None}
-            ]
+            assert seen == [{"cells": None, USERS: frozenset({1, 3}), "object_models": None}]
             with pytest.raises(RuntimeError):
                 async with db.session() as s:  # rolled back: dropping too much is harmless
                     changed(s, "cells")
