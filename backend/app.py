@@ -11,12 +11,13 @@ from fastapi.responses import FileResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
 from backend import __version__
-from backend.api import api_router
+from backend.api import FAST_READS, api_router
 from backend.api.deps import install_runtime
 from backend.api.docs import install_docs
 from backend.api.edge import BodyGuard, document_body_limits
 from backend.api.errors import install_error_handlers
 from backend.api.estopfast import EStopFastPath
+from backend.api.fastpath import FastReads
 from backend.api.headers import SecurityHeaders, install_cors
 from backend.api.limits import UrlLengthLimit
 from backend.api.proxies import TrustedProxies
@@ -70,7 +71,10 @@ def create_app(settings: Settings | None = None, *, runtime: CellRuntime | None 
     install_runtime(app, None, settings=settings)
     install_error_handlers(app)
     install_docs(app)
-    # Every request's body is guarded (and its sign-in checked before it is read).
+    if settings.fast_reads:  # innermost: the layers below apply to its answers too
+        app.add_middleware(FastReads, routes=app.routes, reads=FAST_READS)
+    # Outside the fast path: every request's body is guarded (and its sign-in checked
+    # before it is read), the hot reads included.
     app.add_middleware(
         BodyGuard,
         routes=app.routes,

@@ -46,6 +46,7 @@ from backend.knowntokens import KnownTokens
 __all__ = [
     "AUTH_CHANNEL",
     "USERS",
+    "Answer",
     "AuthCache",
     "Lookup",
     "ReadCache",
@@ -108,10 +109,16 @@ def _check(ttl_s: float, max_entries: int, max_ttl_s: float) -> None:
         raise ValueError(f"max_entries must be within 1..1000000, got {max_entries!r}")
 
 
-@dataclass(frozen=True)
-class _Answer:
+@dataclass(frozen=True, eq=False)
+class Answer:
+    """One kept answer.  Equal only to itself: a new read makes a new one (the fast path
+    of :mod:`backend.api.fastpath` keeps its rendered bytes per answer)."""
+
+    #: The role it was read for (served to that role and stronger ones only).
     role: Role
+    #: The topics it read.
     topics: frozenset[str]
+    #: The answer, shared: not to be mutated.
     value: Any
 
 
@@ -184,7 +191,7 @@ class ReadCache:
         clock: Callable[[], float] = time.monotonic,
     ) -> None:  # fmt: skip
         _check(ttl_s, max_entries, 10.0)
-        self._answers: TTLCache[Hashable, _Answer] = TTLCache(max_entries, ttl_s, timer=clock)
+        self._answers: TTLCache[Hashable, Answer] = TTLCache(max_entries, ttl_s, timer=clock)
         self._generation: dict[str, int] = {}
         self._epoch = 0  # grows with every clear()
         self._flights = _Flights()
@@ -226,13 +233,25 @@ class ReadCache:
             self.misses += 1
             value = await read()
             if self._gen(deps) == gen:  # nothing it read was written meanwhile
-                self._answers[key] = _Answer(role, deps, value)
+                self._answers[key] = Answer(role, deps, value)
             return value
 
         def may_share(tag: tuple[Role, tuple[int, ...]]) -> bool:
             return role >= tag[0] and tag[1] == gen
 
         return await self._flights.read(key, (role, gen), may_share, read_and_keep)
+
+    def peek(self, key: Hashable, *, role: Role, topics: Iterable[str]) -> Answer | None:
+        """The answer :meth:`get_or_read` would give ``key`` now for ``role`` without
+        reading (the same TTL, topics and role rule; counted as a hit), or None."""
+        found = self._answers.get(key)
+        if (
+            found is None or self.ttl_s <= 0 or role < found.role
+            or found.topics != frozenset(topics)
+        ):  # fmt: skip
+            return None
+        self.hits += 1
+        return found
 
     @property
     def shared(self) -> int:

@@ -231,6 +231,12 @@ class Settings(BaseSettings):
         description="How long the hot list and status reads are reused, seconds (0: off); "
         "a write by this process is seen at once, another process's within this time.",
     )
+    fast_reads: bool = Field(
+        True,
+        description="Answer the console's hot reads (status, state, lists) from memory in "
+        "front of FastAPI when the sign-in and the answer are known (backend/api/fastpath.py); "
+        "false: every request through FastAPI.",
+    )
     ws_compression: bool = Field(
         False,
         description="Offer per-message deflate on the console WebSocket (its messages are "

@@ -21,9 +21,9 @@ their own CPU time is not the server's:
 unlike latencies, hardly moves with the machine's load.
 
 The CPU of each phase is accounted per thread of the server and for the client process
-(:mod:`benchmarks.cpu_account`).  ``--event-loop``, ``--ws-compression`` and
-``--read-cache-ttl`` set the server as the matching ``VISIONCELL_*`` settings do, so each
-step can be measured against the configuration before it.
+(:mod:`benchmarks.cpu_account`).  ``--event-loop``, ``--ws-compression``,
+``--read-cache-ttl`` and ``--fast-reads`` set the server as the matching ``VISIONCELL_*``
+settings do, so each step can be measured against the configuration before it.
 
 Phases, in one run: ``--cycles`` inspections without load, the same with the clients
 running, and again without load; the baseline is the median over both unloaded phases and
@@ -290,6 +290,7 @@ def _settings(tmp: Path, args: argparse.Namespace) -> Any:
         event_loop=getattr(args, "event_loop", "auto"),
         ws_compression=getattr(args, "ws_compression", False),
         read_cache_ttl_s=getattr(args, "read_cache_ttl", 1.0),
+        fast_reads=getattr(args, "fast_reads", True),
     )
 
 
@@ -369,6 +370,7 @@ async def _cycles(rt: Any, ctx: Any, n: int, phase: str, rng: Any, model: str) -
 async def _run(args: argparse.Namespace) -> dict[str, Any]:
     import uvicorn
 
+    from backend.api.fastpath import fast_reads_of
     from backend.api.limits import uvicorn_options
     from backend.app import create_app
     from backend.db.migrate import upgrade
@@ -398,6 +400,10 @@ async def _run(args: argparse.Namespace) -> dict[str, Any]:
         finally:
             server.should_exit = True
             await serving
+        layer = fast_reads_of(app)
+        res["fast_path"] = (
+            None if layer is None else {"answered": layer.answered, "passed": layer.passed}
+        )
     return res
 
 
@@ -447,6 +453,7 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         "event_loop": loop_name(asyncio.get_running_loop()),
         "ws_compression": settings.ws_compression,
         "read_cache_ttl_s": settings.read_cache_ttl_s,
+        "fast_reads": settings.fast_reads,
         "read_cache": {
             "hits": rt.read_cache.hits,
             "misses": rt.read_cache.misses,
@@ -486,6 +493,7 @@ def _proc_cpu_s(pid: int) -> float:
 
 def route_cpu(
     requests: int = 40, *, event_loop: str = "auto", read_cache_ttl_s: float = 1.0,
+    fast_reads: bool = True,
 ) -> dict[str, Any]:  # fmt: skip
     """Server CPU per request of each route: ``visioncell serve`` (ideal arm, folder camera)
     in a child process, one client asking each route ``requests`` times in a row; the
@@ -503,6 +511,8 @@ def route_cpu(
         raise ValueError(f"requests must be within 5..10000, got {requests!r}")
     if event_loop not in ("auto", "uvloop", "asyncio"):
         raise ValueError(f"event_loop must be auto, uvloop or asyncio, got {event_loop!r}")
+    if not isinstance(fast_reads, bool):
+        raise TypeError(f"fast_reads must be a bool, got {fast_reads!r}")
     tmp = Path(tempfile.mkdtemp(prefix="bench-route-cpu-"))
     images = tmp / "images"
     images.mkdir()
@@ -521,6 +531,7 @@ def route_cpu(
         "VISIONCELL_DRIVER": "ideal", "VISIONCELL_CAMERA": "folder",
         "VISIONCELL_EVENT_LOOP": event_loop,
         "VISIONCELL_READ_CACHE_TTL_S": str(read_cache_ttl_s),
+        "VISIONCELL_FAST_READS": "true" if fast_reads else "false",
         "VISIONCELL_CAMERA_FOLDER": str(images), "VISIONCELL_BOOTSTRAP_OPERATOR": "false",
     }  # fmt: skip
     log = (tmp / "serve.log").open("w")
@@ -566,12 +577,14 @@ def route_cpu(
             proc.wait()
         log.close()
     return {"requests_per_route": requests, "idle_cpu_pct": idle * 100, "event_loop": event_loop,
-            "read_cache_ttl_s": read_cache_ttl_s, "routes": out_rows}  # fmt: skip
+            "read_cache_ttl_s": read_cache_ttl_s, "fast_reads": fast_reads,
+            "routes": out_rows}  # fmt: skip
 
 
 def _print_route_cpu(res: dict[str, Any]) -> None:
     t = Table(title=f"Server CPU per request, one client ({res['requests_per_route']} requests "
-                    f"per route; idle server {res['idle_cpu_pct']:.1f} % of a core subtracted)")  # fmt: skip
+                    f"per route; idle server {res['idle_cpu_pct']:.1f} % of a core subtracted; "
+                    f"fast reads {'on' if res['fast_reads'] else 'off'})")  # fmt: skip
     for col in ("route", "CPU ms / request", "wall ms / request", "all 200"):
         t.add_column(col)
     for name, r in res["routes"].items():
@@ -621,6 +634,9 @@ def _print(res: dict[str, Any]) -> None:
     c.add_row("read cache: hits / reads / shared",
               f"{rc['hits']} / {rc['misses']} / {rc['shared']}", "")  # fmt: skip
     c.add_row("sign-in: database lookups / shared", f"{ac['lookups']} / {ac['shared']}", "")
+    fp = res.get("fast_path")
+    c.add_row("fast path: answered / handed to FastAPI",
+              "off" if fp is None else f"{fp['answered']} / {fp['passed']}", "")  # fmt: skip
     c.add_row("WebSocket lag ms p50 / p99 / max",
               f"{_f(load['ws_lag_p50_ms'])} / {_f(load['ws_lag_p99_ms'])} / {_f(load['ws_lag_max_ms'])}", "")  # fmt: skip
     if load["ws_errors"]:
@@ -648,6 +664,8 @@ def main(argv: list[str] | None = None) -> None:
                     help="per-message deflate on the console WebSocket (as VISIONCELL_WS_COMPRESSION)")  # fmt: skip
     ap.add_argument("--read-cache-ttl", type=float, default=1.0,
                     help="s the hot reads are reused, 0..10, 0 off (as VISIONCELL_READ_CACHE_TTL_S)")  # fmt: skip
+    ap.add_argument("--fast-reads", action=argparse.BooleanOptionalAction, default=True,
+                    help="answer the hot reads from memory in front of FastAPI (as VISIONCELL_FAST_READS)")  # fmt: skip
     ap.add_argument("--cycles", type=int, default=12, help="inspections per phase")
     ap.add_argument("--time-scale", type=float, default=5.0)
     ap.add_argument("--seed", type=int, default=7)
@@ -681,9 +699,9 @@ def main(argv: list[str] | None = None) -> None:
     if args.route_cpu is not None:
         if not 5 <= args.route_cpu <= 10_000:
             ap.error(f"--route-cpu must be in 5..10000, got {args.route_cpu}")
-        cpu = route_cpu(
-            args.route_cpu, event_loop=args.event_loop, read_cache_ttl_s=args.read_cache_ttl
-        )
+        cpu = route_cpu(args.route_cpu, event_loop=args.event_loop,
+                        read_cache_ttl_s=args.read_cache_ttl,
+                        fast_reads=args.fast_reads)  # fmt: skip
         _print_route_cpu(cpu)
         if args.json:
             print(json.dumps(cpu))

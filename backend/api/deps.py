@@ -8,7 +8,9 @@ handlers, the WebSocket and services get what they need from these dependencies.
 The dependencies that only fetch an object are ``async def`` although they never wait:
 FastAPI runs a plain ``def`` dependency in a worker thread, a thread hop per dependency
 and request (a quarter of a cached read's busy time on the event loop, and GIL hand-overs
-with the simulator's threads).  The sign-in rule is one class, :class:`RoleCheck`.
+with the simulator's threads).  The sign-in rule is one class, :class:`RoleCheck`; the
+fast path of the hot reads (:mod:`backend.api.fastpath`) reads a route's
+:class:`RoleCheck` and asks the same sign-in cache through :func:`cached_role`.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ if TYPE_CHECKING:
     from robot.sim import SimEngine
 
 __all__ = [
+    "PURE_DEPENDENCIES",
     "SIGNED_IN_BEFORE_BODY",
     "CellDep",
     "DatabaseDep",
@@ -49,6 +52,7 @@ __all__ = [
     "SimDep",
     "View3DDep",
     "ViewerUser",
+    "cached_role",
     "client_address",
     "estop_user",
     "get_cell",
@@ -197,6 +201,22 @@ CellDep = Annotated[Cell, Depends(get_cell)]
 ReadCacheDep = Annotated[ReadCache, Depends(get_read_cache)]
 
 
+#: Dependencies that only fetch an object of the running system (and answer 503 while the
+#: cell is not running, which the fast path checks itself): what a route the fast path
+#: answers may depend on besides its :class:`RoleCheck` (``backend.api.fastpath``).
+PURE_DEPENDENCIES: frozenset[Callable[..., Any]] = frozenset(
+    {
+        _runtime_dependency,
+        _settings_dependency,
+        get_database,
+        get_cell,
+        get_sim_or_none,
+        get_view3d,
+        get_read_cache,
+    }
+)
+
+
 def _lookup(db: Database, token: str, secret: str) -> Lookup:
     """The database sign-in of ``token`` (what the sign-in cache runs on a miss): its user
     and expiry, or None when refused."""
@@ -233,7 +253,8 @@ class RoleCheck:
     Refusals, in order: 429 for a client address the sign-in throttle blocks (even with a
     correct token), 401 without a bearer token or with a bad, expired or revoked one (a
     failure for the throttle), 403 for a weaker role.  With ``auth_enabled`` off every
-    caller is an anonymous engineer."""
+    caller is an anonymous engineer.  The fast path (``backend.api.fastpath``) takes a
+    route's minimum role from its :class:`RoleCheck` and asks :meth:`allows`."""
 
     def __init__(self, role: Role) -> None:
         if not isinstance(role, Role):
@@ -318,6 +339,30 @@ class RoleCheck:
 def require_role(role: Role) -> RoleCheck:
     """Dependency: the token's user, who must hold at least ``role`` (:class:`RoleCheck`)."""
     return RoleCheck(role)
+
+
+async def cached_role(conn: HTTPConnection) -> Role | None:
+    """The role a :class:`RoleCheck` would find for this request from memory alone: the
+    anonymous engineer when ``auth_enabled`` is off; else the role of a well-formed bearer
+    token the sign-in cache holds valid (the token's expiry checked on this hit), from an
+    address the throttle does not block.  None in every other case (a token the cache does
+    not hold, none, a blocked address, the cell not running): the dependency itself must
+    decide, from the database, and answer any refusal."""
+    settings = get_settings(conn)
+    if not settings.auth_enabled:
+        return Role.engineer
+    rt = runtime_of(conn.app)
+    if rt is None or not rt.running:
+        return None
+    try:
+        rt.signin_throttle.check(client_address(conn))
+    except TooManyAttempts:
+        return None
+    creds = await _bearer(conn)
+    if creds is None or creds.scheme.lower() != "bearer" or not well_formed(creds.credentials):
+        return None
+    user = rt.auth_cache.get(hash_token(creds.credentials, settings.secret_key.get_secret_value()))
+    return None if user is None else Role[user.role]
 
 
 def known_user(conn: HTTPConnection, token: str | None) -> User | None:

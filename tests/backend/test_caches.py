@@ -18,6 +18,7 @@ from backend.db.models import Role, User
 from backend.db.session import Database, changed
 from backend.db.types import utcnow
 from backend.knowntokens import KnownTokens
+from tests.utils.caches import clocked_caches
 from tests.utils.clock import SteppedClock
 
 SECRET = "caches-secret-0123456789abcdef"
@@ -41,16 +42,6 @@ def _get(cache: ReadCache, key, reads, *, role=Role.viewer, topics=("object_mode
 
 def _db_file(settings) -> str:
     return settings.database_url.split("///", 1)[1]
-
-
-def _clocked(rt, clock: SteppedClock, *, read_ttl_s: float = 1.0, auth_ttl_s: float = 2.0):
-    """Give the running ``rt`` caches counted on ``clock`` (hooked to its database)."""
-    db = rt.database
-    db.on_change.remove(rt.read_cache.on_change)
-    db.on_change.remove(rt.auth_cache.on_change)
-    rt.read_cache = ReadCache(ttl_s=read_ttl_s, clock=clock)
-    rt.auth_cache = AuthCache(ttl_s=auth_ttl_s, clock=clock, known=rt.known_tokens)
-    db.on_change += [rt.read_cache.on_change, rt.auth_cache.on_change]
 
 
 # -- the read cache on its own ----------------------------------------------------------------
@@ -448,7 +439,7 @@ def test_revoking_through_the_service_forgets_the_user(settings) -> None:
 def test_a_write_through_the_api_is_visible_to_the_next_read(client, headers) -> None:
     names = lambda r: {m["name"] for m in r.json()["data"]}  # noqa: E731
     rt = client.app.state.runtime
-    _clocked(rt, SteppedClock(), read_ttl_s=10.0)  # only the write can make it fresh
+    clocked_caches(rt, SteppedClock(), read_ttl_s=10.0)  # only the write can make it fresh
     r = client.get("/api/models", headers=headers["viewer"])
     assert r.status_code == 200 and "fresh-one" not in names(r)
     hits = rt.read_cache.hits
@@ -467,7 +458,7 @@ def test_a_write_through_the_api_is_visible_to_the_next_read(client, headers) ->
 
 def test_another_process_write_is_seen_within_the_ttl(client, headers, settings) -> None:
     clock = SteppedClock()
-    _clocked(client.app.state.runtime, clock, read_ttl_s=1.0)
+    clocked_caches(client.app.state.runtime, clock, read_ttl_s=1.0)
     hdr = headers["viewer"]
     r = client.get("/api/cells", headers=hdr)
     assert r.status_code == 200 and r.json()["count"] >= 1
@@ -492,7 +483,7 @@ def test_roles_are_checked_per_request_with_a_warm_cache(client, headers) -> Non
 
 def test_revocation_here_applies_at_once(client, headers) -> None:
     rt = client.app.state.runtime
-    _clocked(rt, SteppedClock(), auth_ttl_s=60.0)  # only the change can drop the entry
+    clocked_caches(rt, SteppedClock(), auth_ttl_s=60.0)  # only the change can drop the entry
     hdr = headers["viewer"]
     assert client.get("/api/cells", headers=hdr).status_code == 200
     assert len(rt.auth_cache) >= 1  # the sign-in is cached
@@ -504,7 +495,7 @@ def test_revocation_here_applies_at_once(client, headers) -> None:
 
 def test_a_revoked_token_and_a_role_change_apply_at_once(client, headers) -> None:
     rt = client.app.state.runtime
-    _clocked(rt, SteppedClock(), auth_ttl_s=60.0)
+    clocked_caches(rt, SteppedClock(), auth_ttl_s=60.0)
     eng, op = headers["engineer"], headers["operator"]
     assert client.get("/api/users/me", headers=op).json()["role"] == "operator"
     r = client.patch("/api/users/test-operator", headers=eng, json={"role": "viewer"})
@@ -519,7 +510,7 @@ def test_a_revoked_token_and_a_role_change_apply_at_once(client, headers) -> Non
 
 def test_revocation_elsewhere_applies_within_the_ttl(client, headers, settings) -> None:
     clock = SteppedClock()
-    _clocked(client.app.state.runtime, clock, auth_ttl_s=2.0)
+    clocked_caches(client.app.state.runtime, clock, auth_ttl_s=2.0)
     hdr = headers["operator"]
     assert client.get("/api/robot/state", headers=hdr).status_code == 200
     with sqlite3.connect(_db_file(settings)) as conn:  # another process revokes every token

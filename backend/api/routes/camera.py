@@ -10,6 +10,7 @@ from pydantic import BaseModel
 
 from backend.api.deps import CellDep, ViewerUser
 from backend.api.errors import ApiError
+from backend.api.fastpath import FastRequest, Fresh
 
 router = APIRouter(prefix="/camera", tags=["camera"])
 
@@ -41,6 +42,15 @@ async def read_frame(_: ViewerUser, cell: CellDep) -> Response:
     return frame_response(jpeg)
 
 
+async def fast_read_frame(req: FastRequest) -> Fresh | None:
+    """:func:`read_frame` when there is a frame (else FastAPI answers the 503); kept per
+    frame."""
+    jpeg = await req.runtime.cell.latest_jpeg_async()
+    if jpeg is None:
+        return None
+    return Fresh((jpeg,), lambda: frame_response(jpeg))
+
+
 def camera_status_answer(cell: Any) -> dict[str, Any]:
     """The camera's status answer now."""
     result: dict[str, Any] = cell.camera_status().as_dict()
@@ -50,3 +60,8 @@ def camera_status_answer(cell: Any) -> dict[str, Any]:
 @router.get("/status", summary="Camera health and rate", response_model=CameraStatusOut)
 async def read_camera_status(_: ViewerUser, cell: CellDep) -> dict[str, Any]:
     return camera_status_answer(cell)
+
+
+async def fast_read_camera_status(req: FastRequest) -> Fresh | None:
+    """:func:`read_camera_status` (kept while the status is equal)."""
+    return Fresh.of_content(camera_status_answer(req.runtime.cell))

@@ -17,6 +17,7 @@ from backend.api.deps import (
     View3DDep,
     ViewerUser,
 )
+from backend.api.fastpath import FastRequest, Fresh
 from backend.cell import Cell
 from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Role
@@ -55,6 +56,11 @@ def health_answer(view: Any) -> dict[str, Any]:
 @router.get("/health", summary="Liveness; needs no token", response_model=HealthOut)
 async def read_health(view: View3DDep) -> dict[str, Any]:
     return health_answer(view)
+
+
+async def fast_read_health(req: FastRequest) -> Fresh | None:
+    """:func:`read_health` of the running cell."""
+    return Fresh.of_content(health_answer(req.runtime.view3d))
 
 
 def _versions() -> dict[str, str]:
@@ -130,3 +136,16 @@ async def read_status(
         STATUS_DB_KEY, role=Role[user.role], topics=STATUS_DB_TABLES, read=probe
     )
     return status_answer(settings, cell, view, db_ok, revision)
+
+
+async def fast_read_status(req: FastRequest) -> Fresh | None:
+    """:func:`read_status` when the database probe's read-cache entry is fresh for the
+    role (the cell's state changes all the time: its answer is kept while equal)."""
+    if req.role is None:
+        return None
+    rt = req.runtime
+    entry = rt.read_cache.peek(STATUS_DB_KEY, role=req.role, topics=STATUS_DB_TABLES)
+    if entry is None:
+        return None
+    db_ok, revision = entry.value
+    return Fresh.of_content(status_answer(req.settings, rt.cell, rt.view3d, db_ok, revision))

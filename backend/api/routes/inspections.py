@@ -25,6 +25,7 @@ from backend.api.deps import (
     ViewerUser,
     read_through,
 )
+from backend.api.fastpath import FastRequest, Fresh
 from backend.api.schemas import IsoTime, Page
 from backend.api.types import DbId, Limit, Offset, instant_query
 from backend.inspection import results, service
@@ -213,6 +214,19 @@ async def read_inspections(
               "policy": policy, "since": since, "until": until}  # fmt: skip
     key = inspections_key(rt.cell_id, params)
     return await read_through(cache, db, user, key, tables=INSPECTION_TABLES, read=read)
+
+
+async def fast_read_inspections(req: FastRequest) -> Fresh | None:
+    """:func:`read_inspections` from its read-cache answer, if it has a fresh one for the
+    role."""
+    if req.role is None:
+        return None
+    key = inspections_key(req.runtime.cell_id, req.params)
+    entry = req.runtime.read_cache.peek(key, role=req.role, topics=INSPECTION_TABLES)
+    if entry is None:
+        return None
+    value: Page[InspectionPublic] = entry.value
+    return Fresh((entry,), lambda: value)
 
 
 @router.get(

@@ -7,6 +7,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, Path
 
 from backend.api.deps import CellDep, OperatorUser, ViewerUser
+from backend.api.fastpath import FastRequest, Fresh
 from backend.api.schemas import JobOut, JobPublic, Page, page
 from backend.api.types import Limit, Offset
 from backend.jobs import Job
@@ -42,6 +43,13 @@ async def read_jobs(
     _: ViewerUser, cell: CellDep, limit: Limit = 100, offset: Offset = 0
 ) -> dict[str, Any]:
     return jobs_answer(cell, limit, offset)
+
+
+async def fast_read_jobs(req: FastRequest) -> Fresh | None:
+    """:func:`read_jobs` (kept while the page is equal)."""
+    return Fresh.of_content(
+        jobs_answer(req.runtime.cell, req.params["limit"], req.params["offset"])
+    )
 
 
 @router.get("/{job_id}", summary="One job", response_model=JobOut)

@@ -30,6 +30,7 @@ from backend.api.deps import (
     ViewerUser,
     read_through,
 )
+from backend.api.fastpath import FastRequest, Fresh
 from backend.api.uploads import read_capped
 from backend.api.work import HeavyWorkDep
 from backend.recognition import images as im
@@ -265,6 +266,25 @@ async def read_models(
         cache, db, user, models_key(limit, offset, part), tables=MODEL_TABLES, read=read
     )
     return models_answer(value, live)
+
+
+async def fast_read_models(req: FastRequest) -> Fresh | None:
+    """:func:`read_models` from its read-cache entry, if it has a fresh one for the role;
+    its answer is kept while the live index has not changed (its generation)."""
+    if req.role is None:
+        return None
+    p = req.params
+    key = models_key(p["limit"], p["offset"], p["part"])
+    entry = req.runtime.read_cache.peek(key, role=req.role, topics=MODEL_TABLES)
+    if entry is None:
+        return None
+    live = req.runtime.live_index
+    generation = live.generation
+    return Fresh(
+        (entry, generation),
+        lambda: models_answer(entry.value, live),
+        still=lambda: live.generation == generation,
+    )
 
 
 @router.post(

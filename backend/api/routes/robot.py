@@ -9,6 +9,7 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field, model_validator
 
 from backend.api.deps import CellDep, EStopUser, OperatorUser, ViewerUser
+from backend.api.fastpath import FastRequest, Fresh
 from backend.api.schemas import JobOut, PoseIn, RobotStateOut
 from backend.api.types import JointList, RollRad, Speed
 from backend.jobs import Job
@@ -79,6 +80,11 @@ def state_answer(cell: Any) -> dict[str, Any]:
 @router.get("/state", summary="Latest joint state", response_model=StateOut)
 async def read_state(_: ViewerUser, cell: CellDep) -> dict[str, Any]:
     return state_answer(cell)
+
+
+async def fast_read_state(req: FastRequest) -> Fresh | None:
+    """:func:`read_state` (kept while the state is equal: at rest)."""
+    return Fresh.of_content(state_answer(req.runtime.cell))
 
 
 @router.post(
