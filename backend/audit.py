@@ -32,7 +32,6 @@ __all__ = [
     "SYSTEM",
     "Actor",
     "By",
-    "entry_public",
     "query",
     "record",
 ]
@@ -174,22 +173,6 @@ def record(
     )
     session.add(row)
     return row
-
-
-def entry_public(row: AuditEntry) -> dict[str, Any]:
-    """JSON form of an audit row."""
-    return {
-        "id": row.id,
-        "at": row.at.isoformat(),
-        "actor": row.actor,
-        "actor_role": row.actor_role,
-        "kind": row.kind,
-        "entity_id": row.entity_id,
-        "action": row.action,
-        "old": row.old,
-        "new": row.new,
-        "reason": row.reason,
-    }
 
 
 async def query(

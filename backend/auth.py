@@ -19,7 +19,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import selectinload
 
-from backend.authcache import AUTH_USERS_OPTION
+from backend.caches import users_changed
 from backend.db.models import ApiToken, Role, User
 from backend.db.types import utcnow
 from backend.knowntokens import KnownTokens
@@ -165,13 +165,14 @@ async def create_user(
 
 
 async def revoke_tokens(session: AsyncSession, user: User, *, label: str | None = None) -> int:
-    """Revoke the user's tokens (only those with ``label`` if given); returns how many."""
+    """Revoke the user's tokens (only those with ``label`` if given); returns how many.
+    The sign-in caches of the plant forget the user (:func:`backend.caches.users_changed`)."""
     stmt = update(ApiToken).where(ApiToken.user_id == user.id, ApiToken.revoked.is_(False))
     if label is not None:
         stmt = stmt.where(ApiToken.label == label)
-    # names the user to the plant's sign-in caches (``backend.authcache``)
-    stmt = stmt.values(revoked=True).execution_options(**{AUTH_USERS_OPTION: (int(user.id),)})
-    result = await session.execute(stmt)
+    result = await session.execute(stmt.values(revoked=True))
+    if result.rowcount:  # type: ignore[attr-defined]
+        await users_changed(session, {int(user.id)})
     return int(result.rowcount or 0)  # type: ignore[attr-defined]
 
 
@@ -193,7 +194,7 @@ async def authenticate(session: AsyncSession, token: str, secret: str) -> User |
 async def authenticate_with_expiry(
     session: AsyncSession, token: str, secret: str
 ) -> tuple[User, datetime | None] | None:
-    """:func:`authenticate` with the token's expiry (for :class:`backend.authcache.AuthCache`)."""
+    """:func:`authenticate` with the token's expiry (for :class:`backend.caches.AuthCache`)."""
     if not well_formed(token):
         return None
     row = await session.scalar(

@@ -1,10 +1,11 @@
 """Drop the sign-ins another process of the plant revoked, as soon as it commits.
 
-Each process keeps successful sign-ins for :data:`backend.authcache.TTL_S` seconds
-(:class:`~backend.authcache.AuthCache`).  On PostgreSQL every commit that revokes, changes
-or deletes a token or a user notifies :data:`~backend.authcache.AUTH_CHANNEL` with the
-user ids (:mod:`backend.authcache`); :class:`AuthSync` LISTENs on it over its own asyncpg
-connection and drops those users' entries from this process's cache on each notification.
+Each process keeps successful sign-ins for a few seconds
+(:class:`~backend.caches.AuthCache`).  On PostgreSQL every transaction that revokes,
+changes or deletes a token or a user notifies :data:`~backend.caches.AUTH_CHANNEL` with the
+user ids (:func:`backend.caches.users_changed`); :class:`AuthSync` LISTENs on it over its
+own asyncpg connection and drops those users' entries from this process's cache on each
+notification.
 
 While the listening connection is down (the database away, a network cut) the cache's TTL
 is the fallback, as on SQLite; the task reconnects with :class:`robot.backoff.Backoff` and,
@@ -22,7 +23,7 @@ from typing import Any
 
 from sqlalchemy.engine import make_url
 
-from backend.authcache import AUTH_CHANNEL, AuthCache, parse_payload
+from backend.caches import AUTH_CHANNEL, AuthCache, parse_payload
 from backend.taskutil import cancel_and_wait
 from robot.backoff import Backoff
 

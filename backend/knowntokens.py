@@ -1,7 +1,7 @@
 """Tokens this process has seen valid recently, for the emergency stop.
 
 E-STOP must answer whatever the database is doing, so its sign-in never reads the
-database: it accepts a token that the sign-in cache holds (:mod:`backend.authcache`) or
+database: it accepts a token that the sign-in cache holds (:mod:`backend.caches`) or
 one kept here.  :class:`KnownTokens` remembers, by the token's HMAC (never the token),
 every token a sign-in of this process found valid (REST, the console's WebSocket, the 3D
 view's panel, the live tokens read once at start-up) with its user and role, for
@@ -12,8 +12,9 @@ What keeps it safe:
 - only the emergency stop reads it: at worst a token revoked elsewhere may still stop the
   cell for the rest of its hour, never move it;
 - a change of this process to a user or a token (revocation, role change, disabling,
-  deletion) drops that user's entries when it commits (``backend.authcache``'s session
-  events), and on PostgreSQL so does another process's (its notification);
+  deletion) drops that user's entries when its session ends
+  (:func:`backend.caches.users_changed`), and on PostgreSQL so does another process's
+  (its notification);
 - memory is bounded: at most ``max_entries`` tokens, the least recently seen go first.
 """
 

@@ -33,11 +33,11 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 
 from backend.auth import load_known_tokens
-from backend.authcache import AuthCache
+from backend.caches import AuthCache, ReadCache
 from backend.cell import Cell, EventBus
 from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Cell as CellRow
-from backend.db.session import Database
+from backend.db.session import Database, changed
 from backend.estoplog import EStopLog
 from backend.hardware import CellWorld, Hardware, NominalCamera, make_hardware
 from backend.heavy import HeavyPool
@@ -46,7 +46,6 @@ from backend.inspection.state import InspectionState
 from backend.jobs import JobManager
 from backend.knowntokens import KnownTokens
 from backend.planning import BackgroundStore
-from backend.readcache import ReadCache
 from backend.recognition.index import LiveIndex, load_live_index
 from backend.settings import Settings
 from backend.taskutil import cancel_and_wait
@@ -102,6 +101,7 @@ async def ensure_cell_row(db: Database, name: str, *, description: str = "") -> 
             async with db.session() as session:
                 row = CellRow(name=name, description=description or f"Cell {name}")
                 session.add(row)
+                changed(session, "cells")
                 await session.flush()
                 return int(row.id)
         except IntegrityError:  # another process created it meanwhile: read it again
@@ -173,18 +173,15 @@ class CellRuntime:
         #: The inspection service's belt background and continuous run.
         self.inspection = InspectionState()
         #: Failed sign-ins per client address (REST, WebSocket and the 3D view share it).
-        #: Successful sign-ins reused for 2 s (``backend.authcache``).
-        self.auth_cache = AuthCache(refresh_ahead=settings.refresh_ahead)
         #: Tokens seen valid in the last hour: the emergency stop's sign-in, from memory
         #: (``backend.knowntokens``); every successful sign-in of the cache feeds it.
         self.known_tokens = KnownTokens()
-        self.auth_cache.known = self.known_tokens
+        #: Successful sign-ins reused for 2 s (``backend.caches``).
+        self.auth_cache = AuthCache(known=self.known_tokens)
         #: Writes every E-STOP press and reset to the audit trail (after entering).
         self.estop_log: EStopLog | None = None
-        #: Hot list and status reads reused for ``read_cache_ttl_s`` (``backend.readcache``).
-        self.read_cache = ReadCache(
-            ttl_s=settings.read_cache_ttl_s, refresh_ahead=settings.refresh_ahead
-        )
+        #: Hot list and status reads reused for ``read_cache_ttl_s`` (``backend.caches``).
+        self.read_cache = ReadCache(ttl_s=settings.read_cache_ttl_s)
         #: On PostgreSQL: drops the sign-ins other processes revoke (``backend.authsync``).
         self.auth_sync: AuthSync | None = None
         self.signin_throttle = SignInThrottle(
@@ -327,12 +324,11 @@ class CellRuntime:
         stack.push_async_callback(db.dispose)
         self.heavy = self._new_heavy_pool()
         stack.callback(self.heavy.close)
-        # The caches' background reads use the database: cancelled and awaited just before
-        # it is disposed (the exit stack runs last in, first out).
-        self.read_cache.open()
-        self.auth_cache.open()
-        stack.push_async_callback(self.read_cache.close)
-        stack.push_async_callback(self.auth_cache.close)
+        # What the services write drops what the caches read of it (``backend.caches``);
+        # a runtime entered again starts with empty caches.
+        db.on_change += [self.read_cache.on_change, self.auth_cache.on_change]
+        stack.callback(self.read_cache.clear)
+        stack.callback(self.auth_cache.clear)
         await check_database(db)
         self._database = db
         self._cell_id = await ensure_cell_row(db, s.cell_name)

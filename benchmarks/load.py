@@ -22,7 +22,7 @@ unlike latencies, hardly moves with the machine's load.
 
 The CPU of each phase is accounted per thread of the server and for the client process
 (:mod:`benchmarks.cpu_account`).  ``--event-loop``, ``--ws-compression``,
-``--read-cache-ttl``, ``--fast-reads`` and ``--refresh-ahead`` set the server as the matching ``VISIONCELL_*``
+``--read-cache-ttl`` and ``--fast-reads`` set the server as the matching ``VISIONCELL_*``
 settings do, so each step can be measured against the configuration before it.
 
 Phases, in one run: ``--cycles`` inspections without load, the same with the clients
@@ -291,7 +291,6 @@ def _settings(tmp: Path, args: argparse.Namespace) -> Any:
         ws_compression=getattr(args, "ws_compression", False),
         read_cache_ttl_s=getattr(args, "read_cache_ttl", 1.0),
         fast_reads=getattr(args, "fast_reads", True),
-        refresh_ahead=getattr(args, "refresh_ahead", True),
     )
 
 
@@ -455,20 +454,12 @@ async def _phases(args: argparse.Namespace, rt: Any, settings: Any, token: str) 
         "ws_compression": settings.ws_compression,
         "read_cache_ttl_s": settings.read_cache_ttl_s,
         "fast_reads": settings.fast_reads,
-        "refresh_ahead": settings.refresh_ahead,
         "read_cache": {
             "hits": rt.read_cache.hits,
             "misses": rt.read_cache.misses,
             "shared": rt.read_cache.shared,
-            "refreshes": rt.read_cache.refreshes,
-            "refresh_failures": rt.read_cache.refresh_failures,
         },
-        "auth_cache": {
-            "lookups": rt.auth_cache.lookups,
-            "shared": rt.auth_cache.shared,
-            "refreshes": rt.auth_cache.refreshes,
-            "refresh_failures": rt.auth_cache.refresh_failures,
-        },
+        "auth_cache": {"lookups": rt.auth_cache.lookups, "shared": rt.auth_cache.shared},
         "cycles": args.cycles,
         "cycle_s_no_load": base_s,
         "cycle_s_no_load_before": statistics.median(before),
@@ -502,7 +493,7 @@ def _proc_cpu_s(pid: int) -> float:
 
 def route_cpu(
     requests: int = 40, *, event_loop: str = "auto", read_cache_ttl_s: float = 1.0,
-    fast_reads: bool = True, refresh_ahead: bool = True,
+    fast_reads: bool = True,
 ) -> dict[str, Any]:  # fmt: skip
     """Server CPU per request of each route: ``visioncell serve`` (ideal arm, folder camera)
     in a child process, one client asking each route ``requests`` times in a row; the
@@ -522,8 +513,6 @@ def route_cpu(
         raise ValueError(f"event_loop must be auto, uvloop or asyncio, got {event_loop!r}")
     if not isinstance(fast_reads, bool):
         raise TypeError(f"fast_reads must be a bool, got {fast_reads!r}")
-    if not isinstance(refresh_ahead, bool):
-        raise TypeError(f"refresh_ahead must be a bool, got {refresh_ahead!r}")
     tmp = Path(tempfile.mkdtemp(prefix="bench-route-cpu-"))
     images = tmp / "images"
     images.mkdir()
@@ -543,7 +532,6 @@ def route_cpu(
         "VISIONCELL_EVENT_LOOP": event_loop,
         "VISIONCELL_READ_CACHE_TTL_S": str(read_cache_ttl_s),
         "VISIONCELL_FAST_READS": "true" if fast_reads else "false",
-        "VISIONCELL_REFRESH_AHEAD": "true" if refresh_ahead else "false",
         "VISIONCELL_CAMERA_FOLDER": str(images), "VISIONCELL_BOOTSTRAP_OPERATOR": "false",
     }  # fmt: skip
     log = (tmp / "serve.log").open("w")
@@ -590,7 +578,6 @@ def route_cpu(
         log.close()
     return {"requests_per_route": requests, "idle_cpu_pct": idle * 100, "event_loop": event_loop,
             "read_cache_ttl_s": read_cache_ttl_s, "fast_reads": fast_reads,
-            "refresh_ahead": refresh_ahead,
             "routes": out_rows}  # fmt: skip
 
 
@@ -643,12 +630,11 @@ def _print(res: dict[str, Any]) -> None:
     c.add_row("cycle slowdown (ratio of medians)", f"{res['cycle_slowdown']:.3f}",
               f"<= {TARGET_CYCLE_SLOWDOWN:.2f}")  # fmt: skip
     c.add_row("WebSocket messages", str(load["ws_messages"]), "")
-    fp = res.get("fast_path")
     rc, ac = res["read_cache"], res["auth_cache"]
-    c.add_row("read cache: hits / reads / shared / refreshed ahead",
-              f"{rc['hits']} / {rc['misses']} / {rc['shared']} / {rc['refreshes']}", "")  # fmt: skip
-    c.add_row("sign-in: database lookups / shared / refreshed ahead",
-              f"{ac['lookups']} / {ac['shared']} / {ac['refreshes']}", "")  # fmt: skip
+    c.add_row("read cache: hits / reads / shared",
+              f"{rc['hits']} / {rc['misses']} / {rc['shared']}", "")  # fmt: skip
+    c.add_row("sign-in: database lookups / shared", f"{ac['lookups']} / {ac['shared']}", "")
+    fp = res.get("fast_path")
     c.add_row("fast path: answered / handed to FastAPI",
               "off" if fp is None else f"{fp['answered']} / {fp['passed']}", "")  # fmt: skip
     c.add_row("WebSocket lag ms p50 / p99 / max",
@@ -680,9 +666,6 @@ def main(argv: list[str] | None = None) -> None:
                     help="s the hot reads are reused, 0..10, 0 off (as VISIONCELL_READ_CACHE_TTL_S)")  # fmt: skip
     ap.add_argument("--fast-reads", action=argparse.BooleanOptionalAction, default=True,
                     help="answer the hot reads from memory in front of FastAPI (as VISIONCELL_FAST_READS)")  # fmt: skip
-    ap.add_argument("--refresh-ahead", action=argparse.BooleanOptionalAction, default=True,
-                    help="refresh cache entries before they expire and share sign-ins in "
-                         "flight (as VISIONCELL_REFRESH_AHEAD)")  # fmt: skip
     ap.add_argument("--cycles", type=int, default=12, help="inspections per phase")
     ap.add_argument("--time-scale", type=float, default=5.0)
     ap.add_argument("--seed", type=int, default=7)
@@ -717,8 +700,8 @@ def main(argv: list[str] | None = None) -> None:
         if not 5 <= args.route_cpu <= 10_000:
             ap.error(f"--route-cpu must be in 5..10000, got {args.route_cpu}")
         cpu = route_cpu(args.route_cpu, event_loop=args.event_loop,
-                        read_cache_ttl_s=args.read_cache_ttl, fast_reads=args.fast_reads,
-                        refresh_ahead=args.refresh_ahead)  # fmt: skip
+                        read_cache_ttl_s=args.read_cache_ttl,
+                        fast_reads=args.fast_reads)  # fmt: skip
         _print_route_cpu(cpu)
         if args.json:
             print(json.dumps(cpu))

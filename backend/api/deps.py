@@ -25,11 +25,10 @@ from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.api.errors import ApiError
 from backend.auth import authenticate_with_expiry, hash_token, well_formed
-from backend.authcache import Lookup, SignIn
+from backend.caches import Lookup, ReadCache, SignIn
 from backend.cell import Cell
 from backend.db.models import Role, User
 from backend.db.session import Database
-from backend.readcache import ReadCache
 from backend.runtime import CellRuntime
 from backend.settings import Settings
 from backend.throttle import SignInThrottle, TooManyAttempts
@@ -177,17 +176,17 @@ async def read_through(
     cache: ReadCache, db: Database, user: User, key: Hashable, *, tables: Iterable[str],
     read: Callable[[AsyncSession], Awaitable[_T]],
 ) -> _T:  # fmt: skip
-    """``read(session)`` through the runtime's read cache (:mod:`backend.readcache`): the
+    """``read(session)`` through the runtime's read cache (:mod:`backend.caches`): the
     answer of ``key`` if fresh and read for a role no stronger than ``user``'s, else read
-    in a session of its own (an API connection slot only on a miss).  The caller's role
-    dependency has already accepted ``user``; the value returned is shared, not to be
-    mutated."""
+    in a session of its own (an API connection slot only on a miss); dropped when one of
+    ``tables`` is written.  The caller's role dependency has already accepted ``user``;
+    the value returned is shared, not to be mutated."""
 
     async def fresh() -> _T:
         async with db.api_slot(), db.session() as session:
             return await read(session)
 
-    return await cache.get_or_read(key, role=Role[user.role], tables=tables, read=fresh)
+    return await cache.get_or_read(key, role=Role[user.role], topics=tables, read=fresh)
 
 
 # The simulator and the 3D view would load MuJoCo and viser at start-up: written as Any here
@@ -200,6 +199,7 @@ View3DDep = Annotated[Any, Depends(get_view3d)]
 SessionDep = Annotated[AsyncSession, Depends(get_session, scope="function")]
 CellDep = Annotated[Cell, Depends(get_cell)]
 ReadCacheDep = Annotated[ReadCache, Depends(get_read_cache)]
+
 
 #: Dependencies that only fetch an object of the running system (and answer 503 while the
 #: cell is not running, which the fast path checks itself): what a route the fast path
@@ -218,8 +218,8 @@ PURE_DEPENDENCIES: frozenset[Callable[..., Any]] = frozenset(
 
 
 def _lookup(db: Database, token: str, secret: str) -> Lookup:
-    """The database sign-in of ``token`` (what the sign-in cache runs on a miss and to
-    refresh an entry ahead of its expiry): its user and expiry, or None when refused."""
+    """The database sign-in of ``token`` (what the sign-in cache runs on a miss): its user
+    and expiry, or None when refused."""
 
     async def lookup() -> SignIn | None:
         async with db.api_slot(), db.session() as session:
@@ -232,8 +232,7 @@ async def _signed_in(
     conn: HTTPConnection, db: Database, token: str, settings: Settings
 ) -> User | None:
     """The user of ``token``: from the runtime's short-lived sign-in cache
-    (:mod:`backend.authcache`: refreshed ahead of its expiry, one database lookup per
-    token at a time), else from the database (then cached)."""
+    (:mod:`backend.caches`), else from the database (then cached)."""
     secret = settings.secret_key.get_secret_value()
     cache = get_runtime(conn).auth_cache
     if not well_formed(token):
@@ -345,11 +344,10 @@ def require_role(role: Role) -> RoleCheck:
 async def cached_role(conn: HTTPConnection) -> Role | None:
     """The role a :class:`RoleCheck` would find for this request from memory alone: the
     anonymous engineer when ``auth_enabled`` is off; else the role of a well-formed bearer
-    token the sign-in cache holds valid (TTL and the token's expiry checked on this hit;
-    refreshed ahead as :class:`RoleCheck`'s sign-in is), from an address the throttle does
-    not block.  None in every other case (a token the
-    cache does not hold, none, a blocked address, the cell not running): the dependency
-    itself must decide, from the database, and answer any refusal."""
+    token the sign-in cache holds valid (the token's expiry checked on this hit), from an
+    address the throttle does not block.  None in every other case (a token the cache does
+    not hold, none, a blocked address, the cell not running): the dependency itself must
+    decide, from the database, and answer any refusal."""
     settings = get_settings(conn)
     if not settings.auth_enabled:
         return Role.engineer
@@ -363,16 +361,13 @@ async def cached_role(conn: HTTPConnection) -> Role | None:
     creds = await _bearer(conn)
     if creds is None or creds.scheme.lower() != "bearer" or not well_formed(creds.credentials):
         return None
-    secret = settings.secret_key.get_secret_value()
-    key = hash_token(creds.credentials, secret)
-    # A hit late in the entry's TTL looks the token up again in the background.
-    role = rt.auth_cache.role_of(key, refresh=_lookup(rt.database, creds.credentials, secret))
-    return None if role is None else Role[role]
+    user = rt.auth_cache.get(hash_token(creds.credentials, settings.secret_key.get_secret_value()))
+    return None if user is None else Role[user.role]
 
 
 def known_user(conn: HTTPConnection, token: str | None) -> User | None:
     """The user of a bearer ``token`` known from memory alone: the sign-in cache's entry
-    (not refreshed: no database work), else a token this process saw valid within the hour
+    (no database work), else a token this process saw valid within the hour
     (:mod:`backend.knowntokens`); the anonymous engineer with ``auth_enabled`` off.  None
     for anything else (no token, a malformed or unknown one, the cell not running)."""
     settings = get_settings(conn)

@@ -1,8 +1,8 @@
 """The edge refuses before it reads: a request's sign-in and size are checked before its
 body is read, and the body is counted as it streams in.
 
-:class:`BodyGuard` is a pure ASGI layer in front of FastAPI and of the hot-read fast path
-(:mod:`backend.api.fastpath`), so it sees every HTTP request.  For a request that carries a
+:class:`BodyGuard` is a pure ASGI layer in front of FastAPI, so it sees every HTTP
+request.  For a request that carries a
 body (a ``Content-Length`` above 0, or ``Transfer-Encoding``) it finds the route the
 router would pick, and when that route takes a body:
 

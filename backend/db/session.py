@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
+import logging
+from collections.abc import AsyncIterator, Callable, Iterable, Mapping
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -21,9 +22,13 @@ __all__ = [
     "POOL_OVERFLOW",
     "POOL_SIZE",
     "POOL_TIMEOUT_S",
+    "Changes",
     "Database",
     "DatabaseBusy",
+    "changed",
 ]
+
+log = logging.getLogger(__name__)
 
 #: Pooled connections kept open, and how many more may be opened at busy times.
 POOL_SIZE = 5
@@ -37,6 +42,26 @@ API_SLOTS = 10
 #: :data:`API_SLOTS`) before giving up: the API then answers 503 with ``Retry-After``
 #: (``backend.api.errors``) instead of holding the client for SQLAlchemy's default 30 s.
 POOL_TIMEOUT_S = 10.0
+
+
+#: What a transaction changed, by topic (a table name, or ``"users"`` for sign-ins): the
+#: ids it touched, or None for "any row".
+Changes = Mapping[str, frozenset[int] | None]
+_CHANGES = "visioncell_changes"
+
+
+def changed(session: Any, topic: str, ids: Iterable[int] | None = None) -> None:
+    """Note that ``session``'s transaction writes ``topic`` (the rows ``ids``; None: any
+    row).  The services that write call it; when the session of :meth:`Database.session`
+    ends, the database's :attr:`~Database.on_change` hooks get every change noted (the
+    runtime's caches drop what they read of it)."""
+    if not isinstance(topic, str) or not topic:
+        raise ValueError(f"topic must be a non-empty string, got {topic!r}")
+    noted: dict[str, set[int] | None] = session.info.setdefault(_CHANGES, {})
+    if ids is None or (topic in noted and noted[topic] is None):
+        noted[topic] = None
+    else:
+        noted[topic] = set(noted.get(topic) or ()) | {int(i) for i in ids}
 
 
 class DatabaseBusy(Exception):
@@ -93,6 +118,10 @@ class Database:
             self.sessionmaker = async_sessionmaker(self.engine, expire_on_commit=False)
         #: Taken by every REST request's database session (see :data:`API_SLOTS`).
         self.api_slots = asyncio.Semaphore(API_SLOTS)
+        #: Called with the :data:`Changes` a session of :meth:`session` noted
+        #: (:func:`changed`), once it ended: after its commit, and after a rollback too
+        #: (dropping a cached answer for nothing only costs a read).
+        self.on_change: list[Callable[[Changes], None]] = []
 
     @asynccontextmanager
     async def api_slot(self) -> AsyncIterator[None]:
@@ -120,6 +149,18 @@ class Database:
             except BaseException:
                 await s.rollback()
                 raise
+            finally:
+                self._changed(s.info.pop(_CHANGES, None))
+
+    def _changed(self, noted: dict[str, set[int] | None] | None) -> None:
+        if not noted:
+            return
+        changes = {k: None if v is None else frozenset(v) for k, v in noted.items()}
+        for hook in list(self.on_change):
+            try:
+                hook(changes)
+            except Exception:  # a cache's failure must not fail the committed write
+                log.exception("change hook %r failed", hook)
 
     async def ping(self) -> bool:
         """True if the database answers a trivial query."""

@@ -31,7 +31,7 @@ from sqlalchemy.exc import DBAPIError, InterfaceError, OperationalError
 from sqlalchemy.exc import TimeoutError as PoolTimeout
 
 from backend.db.models import Decision, Inspection, InspectionInProgress, StationBackground, utcnow
-from backend.db.session import Database
+from backend.db.session import Database, changed
 from robot.backoff import Backoff
 
 __all__ = ["alive_elsewhere", "begin", "is_database_error", "load_backgrounds", "mark_interrupted", "owner_tag",
@@ -171,6 +171,7 @@ async def mark_interrupted(
             session.add(row)
             rows.append(row)
         if markers:
+            changed(session, "inspections")
             await session.execute(
                 delete(InspectionInProgress).where(
                     InspectionInProgress.id.in_([m.id for m in markers])

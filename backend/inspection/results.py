@@ -23,7 +23,7 @@ from backend.db.models import (
     InspectionScene,
     InspectionStage,
 )
-from backend.db.session import Database
+from backend.db.session import Database, changed
 from backend.db.types import utcnow
 from vision.errors import InvalidInput, NotFound
 
@@ -207,6 +207,7 @@ async def _write(
     back: storing a result costs a few statements however many records there are.
     ``scene`` (a 3D recording) belongs to a single record.
     """
+    changed(session, "inspections")
     from backend.reports.blocks import append as append_records
     from backend.reports.retention import keeps_images
     from backend.reports.stages import stage_rows

@@ -20,7 +20,7 @@ from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend import audit
 from backend.db.models import ObjectModel, TrainedView
-from backend.db.session import Database
+from backend.db.session import Database, changed
 from backend.recognition.modelfields import (
     NAME_PATTERN,
     ModelFields,
@@ -72,7 +72,9 @@ def _record(
     old: ObjectModel | None,
     new: ObjectModel | None,
 ) -> None:
-    """The audit row of a model change, and a threshold row if its threshold changed."""
+    """The audit row of a model change, and a threshold row if its threshold changed; the
+    change is noted for the caches (:func:`backend.db.session.changed`)."""
+    changed(session, "object_models", [row.id])
     by = by or audit.By()
     before = None if old is None else _audit_value(old)
     after = None if new is None else _audit_value(new)

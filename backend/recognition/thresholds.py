@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from backend import audit
 from backend.db.models import RecognitionSettings
-from backend.db.session import Database
+from backend.db.session import Database, changed
 from backend.heavy import HeavyPool
 from backend.recognition.index import LiveIndex
 from backend.recognition.thresholdadvice import (
@@ -178,6 +178,7 @@ async def recompute(
             )
         detail = _detail(choice, n_views, n_negatives=len(negatives), signature=signature)
         detail.update(advice=list(tips), floor=floor, rounds=rounds)
+        changed(session, "recognition_settings")
         session.add(
             RecognitionSettings(
                 global_threshold=float(choice.threshold),

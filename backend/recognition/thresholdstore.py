@@ -14,6 +14,7 @@ from sqlalchemy import select
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.db.models import ObjectModel, RecognitionSettings
+from backend.db.session import changed
 from backend.recognition.thresholdadvice import unsupported_floored
 from vision.recognition import ThresholdChoice
 
@@ -123,6 +124,7 @@ async def back_to_automatic(session: AsyncSession) -> tuple[RecognitionSettings 
         row = RecognitionSettings(global_threshold=auto.global_threshold, chosen_by="auto",
                                   detail=dict(auto.detail))  # fmt: skip
     session.add(row)
+    changed(session, "recognition_settings")
     await session.flush()
     return before, row
 

@@ -19,7 +19,7 @@ from sqlalchemy import delete, select
 
 from backend import audit
 from backend.db.models import ObjectModel, TrainedView
-from backend.db.session import Database
+from backend.db.session import Database, changed
 from backend.recognition import images as im
 from backend.recognition.index import IndexedModel, LiveIndex
 from backend.recognition.models import get_model
@@ -224,6 +224,7 @@ async def add_views(
                 session.add(row)
                 rows.append(row)
             await session.flush()
+            changed(session, "trained_views")
             for row in rows:
                 audit.record(
                     session,
@@ -266,6 +267,7 @@ async def delete_view(
             reason=by.reason,
         )
         await session.delete(row)
+        changed(session, "trained_views")
     live.remove_view(view_id)
 
 
@@ -306,6 +308,7 @@ async def reextract_views(
             row.descriptor_version = live.version
             row.keypoint_count = len(feats)
             await session.flush()
+            changed(session, "trained_views")
             audit.record(
                 session,
                 actor=by.actor,

@@ -25,7 +25,7 @@ from sqlalchemy import delete, func, literal, select, union_all
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.db.models import Decision, Inspection, InspectionImage, InspectionScene
-from backend.db.session import Database
+from backend.db.session import Database, changed
 from backend.db.types import utcnow
 from backend.settings import Settings
 from vision.errors import InvalidInput
@@ -127,6 +127,7 @@ async def _delete(session: AsyncSession, ids: list[int]) -> PruneResult:
         )
     ).one()
     await session.execute(delete(InspectionImage).where(InspectionImage.inspection_id.in_(ids)))
+    changed(session, "inspection_images")
     await session.execute(delete(InspectionScene).where(InspectionScene.inspection_id.in_(ids)))
     freed = int(b_img or 0) + int(b_sc or 0)
     return PruneResult(int(n_img), freed, int(n_sc))

@@ -63,13 +63,6 @@ class AccessFields(BaseModel):
         description="How long the hot list and status reads are reused, seconds (0: off); "
         "a write by this process is seen at once, another process's within this time.",
     )
-    refresh_ahead: bool = Field(
-        True,
-        description="Re-read a read-cache or sign-in cache entry in the background when it "
-        "is used late in its TTL, and share a token's database sign-in in flight between "
-        "requests (backend/readcache.py, backend/authcache.py); false: entries expire under "
-        "the requests and each request that misses a sign-in looks it up itself.",
-    )
     fast_reads: bool = Field(
         True,
         description="Answer the console's hot reads (status, state, lists) from memory in "

@@ -3,9 +3,8 @@ a token revoked, or a user disabled, through one process's database is dropped f
 another process's sign-in cache within a second, long before its TTL; other users'
 entries stay; the TTL stays the fallback when nothing listens.
 
-"Another process" is a second :class:`Database` with its own :class:`AuthCache`, taken out
-of this process's commit hook (which clears every cache of one process at once), so only
-the notification can reach it."""
+"Another process" is a second :class:`Database` with its own :class:`AuthCache`, not
+hooked to the first database's sessions, so only the notification can reach it."""
 
 from __future__ import annotations
 
@@ -15,10 +14,9 @@ import time
 import pytest
 from sqlalchemy import select
 
-from backend import authcache
 from backend.auth import authenticate_with_expiry, create_user, hash_token, revoke_tokens
-from backend.authcache import AuthCache
 from backend.authsync import AuthSync
+from backend.caches import AuthCache, parse_payload, users_changed
 from backend.db.models import Role, User
 from backend.db.session import Database
 
@@ -29,10 +27,9 @@ TTL_S = 30.0  # far longer than the test waits: only a notification can drop an 
 class Plant:
     """Two processes of one plant on ``url``: A changes sign-ins, B caches them."""
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, clock=None) -> None:
         self.a, self.b = Database(url), Database(url)
-        self.cache_b = AuthCache(ttl_s=TTL_S)
-        authcache._caches.discard(self.cache_b)  # A's commits cannot clear it in-process
+        self.cache_b = AuthCache(ttl_s=TTL_S) if clock is None else AuthCache(clock=clock)
 
     async def add_user(self, name: str) -> tuple[int, str]:
         async with self.a.session() as s:
@@ -81,10 +78,11 @@ def test_revocation_and_disabling_reach_the_other_process_at_once(postgres_url):
             assert await plant.gone_from_b(k1, 2.0), "a revoked token still signs in on B"
             assert plant.cache_b.get(k2) is not None  # bob's entry is not touched
 
-            async with plant.a.session() as s:  # A disables bob (an ORM change)
+            async with plant.a.session() as s:  # A disables bob (as the users' route does)
                 bob = await s.scalar(select(User).where(User.id == uid2))
                 assert bob is not None
                 bob.disabled = True
+                await users_changed(s, {uid2})
             assert await plant.gone_from_b(k2, 2.0), "a disabled user still signs in on B"
             assert sync.stats.notifications >= 2 and sync.stats.dropped == 2, sync.stats
 
@@ -109,9 +107,12 @@ def test_revocation_and_disabling_reach_the_other_process_at_once(postgres_url):
 
 
 def test_without_a_listener_the_ttl_is_the_fallback(postgres_url):
+    from tests.utils.clock import SteppedClock
+
+    clock = SteppedClock()
+
     async def main() -> None:
-        plant = Plant(postgres_url)
-        plant.cache_b.ttl_s = 0.5
+        plant = Plant(postgres_url, clock)  # the default TTL, on the test's clock
         try:
             uid, tok = await plant.add_user("dave")
             key = await plant.sign_in_b(tok)
@@ -120,7 +121,8 @@ def test_without_a_listener_the_ttl_is_the_fallback(postgres_url):
                 assert dave is not None
                 await revoke_tokens(s, dave)
             assert plant.cache_b.get(key) is not None  # nobody told B: still cached
-            assert await plant.gone_from_b(key, 2.0)  # until the entry's TTL ran out
+            clock.advance(plant.cache_b.ttl_s)
+            assert plant.cache_b.get(key) is None  # until the entry's TTL ran out
         finally:
             await plant.close()
 
@@ -128,8 +130,34 @@ def test_without_a_listener_the_ttl_is_the_fallback(postgres_url):
 
 
 def test_payloads_name_users_or_everyone():
-    assert authcache.parse_payload(authcache.notify_payload({3, 1})) == frozenset({1, 3})
-    assert authcache.parse_payload(authcache.notify_payload(None)) is None
-    assert authcache.parse_payload(authcache.notify_payload(set(range(10_000)))) is None
-    assert authcache.parse_payload("pid=1;users=1,x") is None  # unreadable: forget all
-    assert authcache.parse_payload("garbage") is None
+    assert parse_payload("pid=1;users=3,1") == frozenset({1, 3})
+    assert parse_payload("pid=1;users=*") is None
+    assert parse_payload("pid=1;users=1,x") is None  # unreadable: forget all
+    assert parse_payload("garbage") is None
+
+
+def test_the_notification_lists_the_users_or_everyone(postgres_url):
+    """What :func:`users_changed` sends, as a listener reads it."""
+
+    async def main() -> list[frozenset[int] | None]:
+        import asyncpg
+
+        from backend.caches import AUTH_CHANNEL
+
+        heard: asyncio.Queue[str] = asyncio.Queue()
+        db = Database(postgres_url)
+        u = db.engine.url
+        conn = await asyncpg.connect(
+            host=u.host, port=u.port, user=u.username, password=u.password, database=u.database
+        )
+        await conn.add_listener(AUTH_CHANNEL, lambda *a: heard.put_nowait(a[-1]))
+        try:
+            for ids in ({3, 1}, None, set(range(10_000))):
+                async with db.session() as s:
+                    await users_changed(s, ids)
+            return [parse_payload(await asyncio.wait_for(heard.get(), 10)) for _ in range(3)]
+        finally:
+            await conn.close()
+            await db.dispose()
+
+    assert asyncio.run(main()) == [frozenset({1, 3}), None, None]

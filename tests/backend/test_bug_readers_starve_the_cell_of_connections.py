@@ -13,13 +13,14 @@ from sqlalchemy import event
 
 import backend.db.session as session_mod
 from backend.app import create_app
+from backend.caches import AuthCache
 
 
 def test_readers_hold_at_most_their_slots(settings, headers, monkeypatch):
     monkeypatch.setattr(session_mod, "API_SLOTS", 2)
     with TestClient(create_app(settings)) as client:
         rt = client.app.state.runtime
-        rt.auth_cache.ttl_s = 0.0  # every request signs in through the database too
+        rt.auth_cache = AuthCache(ttl_s=0.0)  # every request signs in through the database too
         pool = rt.database.engine.sync_engine.pool
         lock, now, peak = threading.Lock(), [0], [0]
 

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import time
 from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from typing import Any
@@ -26,6 +25,8 @@ from backend.db.models import User
 from backend.db.session import Database
 from backend.db.types import utcnow
 from backend.inspection.results import InspectionRecord, store
+from tests.utils.caches import clocked_caches
+from tests.utils.clock import SteppedClock
 from tests.utils.factories import make_settings, make_tokens, migrate
 
 #: Every route the fast path answers, as the console asks it (query strings included).
@@ -104,7 +105,7 @@ def test_both_paths_give_the_same_bytes_and_headers(tmp_path, monkeypatch, origi
         rt = runtime_of(app)
         layer = fast_reads_of(app)
         assert layer is not None and layer.paths == {r.split("?")[0] for r in ROUTES}
-        rt.read_cache.ttl_s = 10.0  # no entry expires between the two requests
+        clocked_caches(rt, SteppedClock(), read_ttl_s=10.0)  # no answer expires meanwhile
         _some_rows(c, rt, hdr)
         _freeze(monkeypatch, rt)
         h = {**hdr["viewer"], **({"Origin": origin} if origin else {})}
@@ -160,10 +161,10 @@ async def _short_lived_token(url: str, secret: str, seconds: float) -> str:
 
 def test_an_expired_token_is_refused_on_the_fast_path(client, settings, monkeypatch) -> None:
     import backend.auth
-    import backend.authcache
+    import backend.caches
 
     rt = runtime_of(client.app)
-    rt.auth_cache.ttl_s = 60.0  # only the token's own expiry can end the cached sign-in
+    clocked_caches(rt, SteppedClock(), auth_ttl_s=60.0)  # only the token's expiry ends it
     layer = fast_reads_of(client.app)
     secret = settings.secret_key.get_secret_value()
     token = asyncio.run(_short_lived_token(settings.database_url, secret, 1.5))
@@ -172,7 +173,7 @@ def test_an_expired_token_is_refused_on_the_fast_path(client, settings, monkeypa
     # the test moves it past the expiry: a slow machine cannot expire the token early.
     now = [utcnow()]
     monkeypatch.setattr(backend.auth, "utcnow", lambda: now[0])
-    monkeypatch.setattr(backend.authcache, "utcnow", lambda: now[0])
+    monkeypatch.setattr(backend.caches, "utcnow", lambda: now[0])
     assert client.get("/api/robot/state", headers=hdr).status_code == 200
     answered = layer.answered
     assert client.get("/api/robot/state", headers=hdr).status_code == 200
@@ -228,7 +229,7 @@ def test_the_routes_own_role_rule_applies(settings, tokens) -> None:
 
 def test_a_viewer_is_not_served_an_entry_read_for_an_engineer(client, headers) -> None:
     layer = fast_reads_of(client.app)
-    client.app.state.runtime.read_cache.ttl_s = 10.0
+    clocked_caches(client.app.state.runtime, SteppedClock(), read_ttl_s=10.0)
     assert client.get("/api/robot/state", headers=headers["viewer"]).status_code == 200
     assert client.get("/api/cells", headers=headers["engineer"]).status_code == 200
     assert client.get("/api/cells", headers=headers["engineer"]).status_code == 200
@@ -241,7 +242,7 @@ def test_a_viewer_is_not_served_an_entry_read_for_an_engineer(client, headers) -
 def test_a_write_through_the_api_is_visible_to_the_next_read(client, headers) -> None:
     names = lambda r: {m["name"] for m in r.json()["data"]}  # noqa: E731
     layer = fast_reads_of(client.app)
-    client.app.state.runtime.read_cache.ttl_s = 10.0  # only the commit can refresh it
+    clocked_caches(client.app.state.runtime, SteppedClock(), read_ttl_s=10.0)  # only the write
     hdr = headers["viewer"]
     for _ in range(2):
         r = client.get("/api/models", headers=hdr)
@@ -331,53 +332,29 @@ def test_routes_the_fast_path_cannot_answer_safely_are_refused(settings) -> None
     assert len(FastReads(inner, routes=real.routes, reads=FAST_READS).paths) == len(FAST_READS)
 
 
-class _SteppedClock:
-    """A ``time`` stand-in for the caches: ``monotonic`` moves only when the test steps it,
-    so a test process stalled by a busy machine cannot let an entry expire between polls."""
-
-    def __init__(self) -> None:
-        self.now = time.monotonic()
-
-    def monotonic(self) -> float:
-        return self.now
-
-
-def _settle(*caches: Any, limit_s: float = 30.0) -> None:
-    """Wait (in real time, bounded) until no background re-read of ``caches`` is running."""
-    t0 = time.monotonic()
-    while any(c.refreshing for c in caches):
-        assert time.monotonic() - t0 < limit_s, "a background re-read never ended"
-        time.sleep(0.005)
-
-
-def test_steady_reads_stay_on_the_fast_path_across_the_caches_ttls(
-    client, headers, monkeypatch
-) -> None:
-    """Refresh ahead through the fast path's own lookups (``ReadCache.peek``,
-    ``deps.cached_role``): a console polling every 50 ms for longer than both caches'
-    TTLs is answered from memory throughout; no request falls through at an expiry.
-
-    The caches' clock is stepped 50 ms per poll, after the re-reads a poll started have
-    ended: the behaviour is checked, not how fast this machine runs them (under a loaded
-    CI run a stall of the test longer than the refresh window let an entry expire)."""
-    import backend.authcache
-    import backend.readcache
-
-    clock = _SteppedClock()
-    monkeypatch.setattr(backend.readcache, "time", clock)
-    monkeypatch.setattr(backend.authcache, "time", clock)
-    layer = fast_reads_of(client.app)
+def test_steady_reads_stay_on_the_fast_path_within_the_ttl(client, headers) -> None:
+    """A console polling within the caches' TTLs is answered from memory throughout; once
+    they expire one request per answer goes through FastAPI (which reads again), and the
+    fast path answers from the new answer after it."""
+    clock = SteppedClock()
     rt = client.app.state.runtime
+    clocked_caches(rt, clock, read_ttl_s=1.0, auth_ttl_s=2.0)
+    layer = fast_reads_of(client.app)
     hdr = headers["viewer"]
-    for route in ("/api/cells", "/api/models"):  # warm: entries and sign-in cached
+    routes = ("/api/cells", "/api/models")
+    for route in routes:  # warm: answers and sign-in cached
         assert client.get(route, headers=hdr).status_code == 200
     passed, reads, lookups = layer.passed, rt.read_cache.misses, rt.auth_cache.lookups
-    t0 = clock.now
-    while clock.now - t0 < 2.5 * max(rt.read_cache.ttl_s, rt.auth_cache.ttl_s):
-        for route in ("/api/cells", "/api/models"):
+    for _ in range(19):  # 0.95 s of polls every 50 ms
+        for route in routes:
             assert client.get(route, headers=hdr).status_code == 200
-        _settle(rt.read_cache, rt.auth_cache)
-        clock.now += 0.05
-    assert rt.read_cache.refreshes >= 4 and rt.auth_cache.refreshes >= 2
+        clock.advance(0.05)
     assert layer.passed == passed and rt.read_cache.misses == reads
-    assert rt.auth_cache.lookups == lookups + rt.auth_cache.refreshes
+    clock.advance(0.05)  # the answers expire (the sign-in does not)
+    for route in routes:
+        assert client.get(route, headers=hdr).status_code == 200
+    assert layer.passed == passed + 2 and rt.read_cache.misses == reads + 2
+    answered = layer.answered
+    for route in routes:
+        assert client.get(route, headers=hdr).status_code == 200
+    assert layer.answered == answered + 2 and rt.auth_cache.lookups == lookups

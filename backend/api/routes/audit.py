@@ -6,7 +6,7 @@ from datetime import datetime
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from fastapi import APIRouter, Query
-from pydantic import BaseModel
+from pydantic import BaseModel, ConfigDict
 
 from backend import audit
 from backend.api.deps import EngineerUser, SessionDep
@@ -28,6 +28,10 @@ Kind = Literal[
 
 
 class AuditPublic(BaseModel):
+    """An audit row as the API shows it (read from the row)."""
+
+    model_config = ConfigDict(from_attributes=True)
+
     id: int
     at: datetime
     actor: str
@@ -57,7 +61,7 @@ async def read_audit(
     until: Until = None,
     limit: Limit = 100,
     offset: Offset = 0,
-) -> dict[str, Any]:
+) -> Page[AuditPublic]:
     rows, total = await audit.query(
         session,
         kind=kind,
@@ -68,4 +72,4 @@ async def read_audit(
         limit=limit,
         offset=offset,
     )
-    return {"data": [audit.entry_public(r) for r in rows], "count": total}
+    return Page[AuditPublic](data=[AuditPublic.model_validate(r) for r in rows], count=total)

@@ -133,7 +133,7 @@ async def read_status(
     # Two round trips to the database, reused for the read cache's TTL (a database that
     # goes away shows within it); the cell's own state is read on every request.
     db_ok, revision = await cache.get_or_read(
-        STATUS_DB_KEY, role=Role[user.role], tables=STATUS_DB_TABLES, read=probe
+        STATUS_DB_KEY, role=Role[user.role], topics=STATUS_DB_TABLES, read=probe
     )
     return status_answer(settings, cell, view, db_ok, revision)
 
@@ -144,7 +144,7 @@ async def fast_read_status(req: FastRequest) -> Fresh | None:
     if req.role is None:
         return None
     rt = req.runtime
-    entry = rt.read_cache.peek(STATUS_DB_KEY, role=req.role, tables=STATUS_DB_TABLES)
+    entry = rt.read_cache.peek(STATUS_DB_KEY, role=req.role, topics=STATUS_DB_TABLES)
     if entry is None:
         return None
     db_ok, revision = entry.value

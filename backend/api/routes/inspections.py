@@ -26,6 +26,7 @@ from backend.api.deps import (
     read_through,
 )
 from backend.api.fastpath import FastRequest, Fresh
+from backend.api.schemas import IsoTime, Page
 from backend.api.types import DbId, Limit, Offset, instant_query
 from backend.inspection import results, service
 from backend.recipes import follower, resolve_options
@@ -146,13 +147,47 @@ def inspections_key(cell_id: int | None, params: Mapping[str, Any]) -> tuple[Has
 _LIST_PARAMS = ("limit", "offset", "decision", "model", "policy", "since", "until")
 
 
-def inspections_answer(value: tuple[list[dict[str, Any]], int]) -> dict[str, Any]:
-    """The list's answer from its read (rows, total)."""
-    data, total = value
-    return {"data": data, "count": total}
+class PickOutcome(BaseModel):
+    """What happened to the object (:func:`backend.inspection.results.pick_outcome`)."""
+
+    outcome: str
+    bin: str | None
+    text: str
 
 
-@router.get("/inspections", summary="Stored inspections of this cell, newest first")
+class InspectionPublic(BaseModel):
+    """A stored inspection as the API shows it
+    (:func:`backend.inspection.results.inspection_public`)."""
+
+    id: int
+    cell_id: int
+    started_at: IsoTime
+    finished_at: IsoTime | None
+    decision: Literal["recognized", "unknown", "failed"]
+    reason: str
+    policy: str
+    model: str | None
+    model_id: int | None
+    score: float | None
+    scores: dict[str, Any]
+    viewpoints_visited: list[Any]
+    pose: dict[str, Any] | None
+    durations: dict[str, Any]
+    duration_s: float | None
+    pick: dict[str, Any] | None
+    pick_outcome: PickOutcome
+    truth: dict[str, Any] | None
+    source: str
+    recipe_id: int | None
+    recipe: str | None
+    images: list[str] = Field(description="URLs of the viewpoint images, in order")
+
+
+@router.get(
+    "/inspections",
+    summary="Stored inspections of this cell, newest first",
+    response_model=Page[InspectionPublic],
+)
 async def read_inspections(
     user: ViewerUser,
     rt: RuntimeDep,
@@ -165,38 +200,43 @@ async def read_inspections(
     policy: Policy | None = None,
     since: Since = None,
     until: Until = None,
-) -> dict[str, Any]:
-    async def read(session: AsyncSession) -> tuple[list[dict[str, Any]], int]:
-        return await results.list_inspections(
+) -> Page[InspectionPublic]:
+    async def read(session: AsyncSession) -> Page[InspectionPublic]:
+        data, total = await results.list_inspections(
             session, cell_id=rt.cell_id, limit=limit, offset=offset, decision=decision,
             model=model, policy=policy, since=since, until=until,
         )  # fmt: skip
+        return Page[InspectionPublic](
+            data=[InspectionPublic.model_validate(d) for d in data], count=total
+        )
 
     params = {"limit": limit, "offset": offset, "decision": decision, "model": model,
               "policy": policy, "since": since, "until": until}  # fmt: skip
     key = inspections_key(rt.cell_id, params)
-    value = await read_through(cache, db, user, key, tables=INSPECTION_TABLES, read=read)
-    return inspections_answer(value)
+    return await read_through(cache, db, user, key, tables=INSPECTION_TABLES, read=read)
 
 
 async def fast_read_inspections(req: FastRequest) -> Fresh | None:
-    """:func:`read_inspections` from its read-cache entry, if it has a fresh one for the
+    """:func:`read_inspections` from its read-cache answer, if it has a fresh one for the
     role."""
     if req.role is None:
         return None
     key = inspections_key(req.runtime.cell_id, req.params)
-    entry = req.runtime.read_cache.peek(key, role=req.role, tables=INSPECTION_TABLES)
+    entry = req.runtime.read_cache.peek(key, role=req.role, topics=INSPECTION_TABLES)
     if entry is None:
         return None
-    return Fresh((entry,), lambda: inspections_answer(entry.value))
+    value: Page[InspectionPublic] = entry.value
+    return Fresh((entry,), lambda: value)
 
 
-@router.get("/inspections/{inspection_id}", summary="One inspection")
+@router.get(
+    "/inspections/{inspection_id}", summary="One inspection", response_model=InspectionPublic
+)
 async def read_inspection(
     _: ViewerUser, rt: RuntimeDep, session: SessionDep, inspection_id: DbId
-) -> dict[str, Any]:
+) -> InspectionPublic:
     row = await results.get_inspection(session, inspection_id, rt.cell_id)
-    return results.inspection_public(row)
+    return InspectionPublic.model_validate(results.inspection_public(row))
 
 
 @router.get(

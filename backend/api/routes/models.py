@@ -133,7 +133,7 @@ async def fast_read_models(req: FastRequest) -> Fresh | None:
         return None
     p = req.params
     key = models_key(p["limit"], p["offset"], p["part"])
-    entry = req.runtime.read_cache.peek(key, role=req.role, tables=MODEL_TABLES)
+    entry = req.runtime.read_cache.peek(key, role=req.role, topics=MODEL_TABLES)
     if entry is None:
         return None
     live = req.runtime.live_index

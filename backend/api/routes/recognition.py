@@ -29,6 +29,7 @@ from backend.api.types import bounded_float
 from backend.api.uploads import read_capped
 from backend.api.work import HeavyWorkDep
 from backend.db.models import RecognitionSettings, Role
+from backend.db.session import changed
 from backend.db.types import utcnow
 from backend.inspection.results import store_all
 from backend.recognition import images as im
@@ -120,6 +121,7 @@ async def update_recognition_settings(
         detail={"by": user.name, "note": body.note},
     )
     session.add(row)
+    changed(session, "recognition_settings")
     await session.flush()
     _audit_threshold(session, user, body, "set", before, row)
     return _public(row)

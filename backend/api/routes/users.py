@@ -21,6 +21,7 @@ from backend.auth import (
     parse_role,
     token_expiry,
 )
+from backend.caches import users_changed
 from backend.db.models import ApiToken, User
 from backend.db.types import utcnow
 from vision.errors import Conflict, NotFound
@@ -83,6 +84,21 @@ class TokenPublic(BaseModel):
     expires_at: datetime | None
     revoked: bool
     expired: bool
+
+    @classmethod
+    def of(cls, row: ApiToken) -> TokenPublic:
+        """The listing of a token row (``expired``: as of now)."""
+        expired = row.expires_at is not None and row.expires_at <= utcnow()
+        return cls(
+            id=row.id,
+            prefix=row.prefix,
+            label=row.label,
+            created_at=row.created_at,
+            last_used_at=row.last_used_at,
+            expires_at=row.expires_at,
+            revoked=row.revoked,
+            expired=expired,
+        )
 
 
 class TokenCreated(BaseModel):
@@ -181,6 +197,7 @@ async def delete_user(
     if user.name == me.name:
         raise Conflict("you cannot disable yourself")
     user.disabled = True
+    await users_changed(session, {user.id})
     n = await session.scalar(
         select(func.count()).select_from(ApiToken).where(ApiToken.user_id == user.id)
     )
@@ -211,6 +228,7 @@ async def update_user_role(
     old_role = user.role
     user.role = parse_role(body.role).name
     if old_role != user.role:
+        await users_changed(session, {user.id})
         audit.record(
             session,
             actor=audit.Actor.of(me),
@@ -223,20 +241,6 @@ async def update_user_role(
         )
     await session.flush()
     return UserPublic.model_validate(user, from_attributes=True).model_dump(mode="json")
-
-
-def _token_public(row: ApiToken) -> dict[str, Any]:
-    expired = row.expires_at is not None and row.expires_at <= utcnow()
-    return TokenPublic(
-        id=row.id,
-        prefix=row.prefix,
-        label=row.label,
-        created_at=row.created_at,
-        last_used_at=row.last_used_at,
-        expires_at=row.expires_at,
-        revoked=row.revoked,
-        expired=expired,
-    ).model_dump(mode="json")
 
 
 async def _user_named(session: Any, name: str) -> User:
@@ -253,7 +257,7 @@ async def _user_named(session: Any, name: str) -> User:
 )
 async def read_tokens(
     _: EngineerUser, session: SessionDep, name: NameStr, limit: Limit = 100, offset: Offset = 0
-) -> dict[str, Any]:
+) -> Page[TokenPublic]:
     user = await _user_named(session, name)
     where = ApiToken.user_id == user.id
     total = await session.scalar(select(func.count()).select_from(ApiToken).where(where))
@@ -262,7 +266,7 @@ async def read_tokens(
             select(ApiToken).where(where).order_by(ApiToken.id).limit(limit).offset(offset)
         )
     ).all()
-    return {"data": [_token_public(r) for r in rows], "count": int(total or 0)}
+    return Page[TokenPublic](data=[TokenPublic.of(r) for r in rows], count=int(total or 0))
 
 
 @router.post(
@@ -273,7 +277,7 @@ async def read_tokens(
 )
 async def create_token(
     me: EngineerUser, session: SessionDep, settings: SettingsDep, name: NameStr, body: TokenCreate
-) -> dict[str, Any]:
+) -> TokenCreated:
     user = await _user_named(session, name)
     if user.disabled:
         raise Conflict(f"user {name!r} is disabled")
@@ -285,6 +289,7 @@ async def create_token(
         select(ApiToken).where(ApiToken.token_hash == hash_token(token, secret))
     )
     assert row is not None
+    info = TokenPublic.of(row)
     audit.record(
         session,
         actor=audit.Actor.of(me),
@@ -292,10 +297,14 @@ async def create_token(
         entity_id=row.id,
         action="create",
         old=None,
-        new={"user": name, "label": row.label, "expires_at": _token_public(row)["expires_at"]},
+        new={
+            "user": name,
+            "label": row.label,
+            "expires_at": info.model_dump(mode="json")["expires_at"],
+        },
         reason=None,
     )
-    return {"token": token, "info": _token_public(row)}
+    return TokenCreated(token=token, info=info)
 
 
 @router.delete(
@@ -305,13 +314,14 @@ async def create_token(
 )
 async def revoke_token(
     me: EngineerUser, session: SessionDep, name: NameStr, token_id: DbId
-) -> dict[str, Any]:
+) -> TokenPublic:
     user = await _user_named(session, name)
     row = await session.get(ApiToken, token_id)
     if row is None or row.user_id != user.id:
         raise NotFound(f"user {name!r} has no token {token_id}")
     if not row.revoked:
         row.revoked = True
+        await users_changed(session, {user.id})
         audit.record(
             session,
             actor=audit.Actor.of(me),
@@ -323,4 +333,4 @@ async def revoke_token(
             reason=None,
         )
     await session.flush()
-    return _token_public(row)
+    return TokenPublic.of(row)
