@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import os
 from pathlib import Path
 
@@ -14,6 +15,13 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from backend.settings import Settings
 
 REPO = Path(__file__).resolve().parents[1]
+
+# The test processes allocate in bursts (an app, its database sessions and frames per test,
+# on a heap of a few hundred thousand objects from the imports): with CPython's default
+# thresholds (700, 10, 10) the cyclic collector runs thousands of times per module and takes
+# a large share of the suite's CPU.  Ten times fewer collections of each generation; garbage
+# in cycles still goes, a little later.  (The servers the tests start keep the defaults.)
+gc.set_threshold(10_000, 10, 10)
 
 
 @pytest.fixture(scope="session")
