@@ -4,7 +4,9 @@ one user per role, and the app under a test client.
 A module whose tests only read (or are refused before anything is stored) marks itself
 ``pytestmark = pytest.mark.shared_app``: its tests then share one database, one set of
 users and one running app (the same ``settings``, ``tokens``, ``client`` and ``headers``
-fixtures), built once for the module instead of once per test.
+fixtures), built once for the module instead of once per test.  In a module where only some
+tests are such, those tests carry the mark themselves and share one app among them; the
+others still get their own.
 """
 
 from __future__ import annotations

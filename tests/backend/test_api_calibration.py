@@ -54,6 +54,7 @@ def test_reading_needs_a_viewer_and_writing_an_engineer(client, headers):
     assert r.status_code == 200 and r.json() == {"data": [], "count": 0}
 
 
+@pytest.mark.shared_app  # refused: nothing stored, nothing moved
 @pytest.mark.parametrize(
     ("body", "detail"),
     [

@@ -128,6 +128,7 @@ def test_roles(client, headers):
     assert client.get(f"/api/models/{m['id']}/views", headers=headers["viewer"]).status_code == 200
 
 
+@pytest.mark.shared_app  # refused: nothing stored, nothing moved
 @pytest.mark.parametrize(
     ("body", "fragment"),
     [

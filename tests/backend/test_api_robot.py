@@ -49,6 +49,7 @@ def test_move_without_wait_answers_202_and_runs(client, headers):
     )
 
 
+@pytest.mark.shared_app  # refused: nothing stored, nothing moved
 @pytest.mark.parametrize(
     ("index", "value_deg", "detail"),
     [
@@ -82,6 +83,7 @@ def test_out_of_range_joint_is_422_naming_joint_and_limit(
     assert client.get("/api/jobs", headers=headers["viewer"]).json()["count"] == 0
 
 
+@pytest.mark.shared_app  # refused: nothing stored, nothing moved
 @pytest.mark.parametrize(
     ("body", "fragment"),
     [

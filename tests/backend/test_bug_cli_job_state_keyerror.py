@@ -60,7 +60,7 @@ def cell(tmp_path_factory):
         VISIONCELL_DRIVER="sim",
         VISIONCELL_CAMERA="sim",
         VISIONCELL_SIM_DEMO="false",
-        VISIONCELL_TIME_SCALE="2",
+        VISIONCELL_TIME_SCALE="5",
         VISIONCELL_CAMERA_FPS="4",
         VISIONCELL_VIEW3D_ENABLED="false",
     )

@@ -14,6 +14,7 @@ from robot.trajectory import MIN_SPEED
 HOME_TO_READY = [0.0, 1.2, -1.4, -0.5, 0.0]
 
 
+@pytest.mark.shared_app  # refused or computed only: nothing stored, nothing moved
 @pytest.mark.parametrize("speed", [1e-6, 1e-8, 1e-300, 0.0, -0.5, 0.009])
 def test_move_below_the_speed_floor_is_a_json_422(client, headers, speed):
     r = client.post(
@@ -37,6 +38,7 @@ def test_tiny_default_speed_is_refused_and_home_still_works(client, headers):
     assert r.status_code == 200 and r.json()["job"]["state"] == "done", r.text
 
 
+@pytest.mark.shared_app  # refused or computed only: nothing stored, nothing moved
 def test_boolean_speed_is_not_a_number(client, headers):
     r = client.put("/api/robot/speed", json={"speed": True}, headers=headers["operator"])
     assert r.status_code == 422 and "speed: Input should be a valid number" in r.json()["detail"]

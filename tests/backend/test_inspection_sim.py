@@ -12,6 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
+from tests.utils.cli import wait_station_seen_empty
 from tests.utils.factories import make_settings, make_tokens, migrate
 
 pytestmark = pytest.mark.slow
@@ -92,7 +93,8 @@ def test_teach_then_continuous_inspection_matches_truth(cell):
             assert time.monotonic() - t0 < 120, f"no inspection of {name}"
             time.sleep(0.3)
         engine.clear_objects()
-        time.sleep(1.5)  # the run sees the station empty before the next object comes
+        # the run sees the station empty before the next object comes
+        wait_station_seen_empty(client, op, run_id, done=k + 1, count=len(placed))
     job = _wait(client, op, run_id)
     assert job["state"] == "done", job
     assert job["result"]["inspected"] == 3

@@ -19,6 +19,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
+from tests.utils.cli import wait_station_seen_empty
 from tests.utils.factories import make_settings, make_tokens, migrate
 
 pytestmark = pytest.mark.slow
@@ -111,7 +112,8 @@ def test_a_recipe_selected_between_two_objects_applies_to_the_next(cell):
     r = client.post(f"/api/recipes/{b['id']}/activate", headers=op, json={"reason": "changeover"})
     assert r.status_code == 200, r.text
     engine.clear_objects()
-    time.sleep(1.5)  # the run sees the station empty before the next object comes
+    # the run sees the station empty before the next object comes
+    wait_station_seen_empty(client, op, run["id"], done=1, count=2, timeout_s=HANG_S)
     engine.spawn("gear-housing", s_m=station - 0.002, lateral_m=-0.002, yaw_rad=0.0)
     rows = _rows(client, op, 2)
     job = _wait(client, op, run["id"])

@@ -146,6 +146,7 @@ def test_token_api_issue_list_revoke(client, headers):
     assert client.get("/api/users/me", headers=auth(first)).status_code == 200
 
 
+@pytest.mark.shared_app  # refused or computed only: nothing stored, nothing moved
 @pytest.mark.parametrize("days", [0, -1, 3651, "7", True, "1e999"])
 def test_token_api_refuses_bad_expiry(client, headers, days):
     raw = '{"expires_in_days": 1e999}' if days == "1e999" else None
@@ -158,6 +159,7 @@ def test_token_api_refuses_bad_expiry(client, headers, days):
     assert r.status_code == 422, r.text
 
 
+@pytest.mark.shared_app  # refused or computed only: nothing stored, nothing moved
 def test_token_api_unknown_user_and_token(client, headers):
     eng = headers["engineer"]
     assert client.get("/api/users/nobody/tokens", headers=eng).status_code == 404

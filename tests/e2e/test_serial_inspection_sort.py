@@ -22,6 +22,7 @@ from backend import hardware
 from backend.app import create_app
 from robot.drivers.serial.emulator import Emulator
 from robot.sim import CATALOGUE, SimConfig, SimDriver, SimEngine, suction_point
+from tests.utils.cli import wait_station_seen_empty
 from tests.utils.factories import make_settings, make_tokens, migrate
 
 
@@ -134,7 +135,8 @@ def test_teach_inspect_and_sort_over_the_serial_link(tmp_path, serial_sim):
                 assert time.monotonic() - t0 < 600, f"no inspection of {name}"
                 time.sleep(0.3)
             engine.clear_objects()  # anything the pick left behind
-            time.sleep(8.0)  # the run sees the station empty before the next object comes
+            # the run sees the station empty before the next object comes
+            wait_station_seen_empty(client, op, run_id, done=k + 1, count=len(placed))
         job = _wait(client, op, run_id)
         assert job["state"] == "done", job
         rows = sorted(client.get("/api/inspections?limit=10", headers=op).json()["data"],

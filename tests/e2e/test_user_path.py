@@ -53,6 +53,7 @@ SPACING_M = 0.42
 #: Bounds that only end a hang: the machine may be loaded by other work.
 TEACH_S = 1500.0
 RUN_S = 2400.0
+HANG_MS = 180_000
 
 
 @pytest.fixture(scope="module")
@@ -100,6 +101,9 @@ def auth(token) -> dict[str, str]:
 @pytest.fixture(scope="module")
 def page(browser, cell, token):
     p = browser.new_page(viewport=VIEWPORT, accept_downloads=True)
+    # Every wait of the page without a bound of its own only ends a hang (Playwright's
+    # default, 30 s, is short of what a loaded machine takes to answer a click).
+    p.set_default_timeout(HANG_MS)
     p.goto(cell.base + "/#models")
     p.fill("#token", token)
     p.click("#login")

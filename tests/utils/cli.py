@@ -73,3 +73,27 @@ def clear_station(client: Any, eng: dict[str, str]) -> None:
     assert r.status_code == 200, r.text
     for o in client.get("/api/sim/objects?limit=100", headers=eng).json()["data"]:
         assert client.delete(f"/api/sim/objects/{o['id']}", headers=eng).status_code == 204
+
+
+def wait_station_seen_empty(client: Any, headers: dict[str, str], run_id: int, *, done: int,
+                            count: int, timeout_s: float = 600.0) -> dict[str, Any]:  # fmt: skip
+    """Wait until the continuous run ``run_id`` (of ``count`` objects) has inspected ``done``
+    of them and then looked at the station and found no part there (its job says "waiting
+    for a part at the station" at that progress; the part just inspected is "the next part"),
+    or has ended.  What a fixed pause before the next object used to hope for; the timeout
+    only bounds a hang."""
+    t0 = time.monotonic()
+    job: dict[str, Any] = {}
+    while time.monotonic() - t0 < timeout_s:
+        job = client.get(f"/api/jobs/{run_id}", headers=headers).json()["job"]
+        if job["state"] != "running":
+            return job
+        if job["progress"] >= done / count - 1e-9 and (job["message"] or "").startswith(
+            "waiting for a part at the station"
+        ):
+            return job
+        time.sleep(0.1)
+    raise AssertionError(
+        f"run {run_id} did not see the station empty after {done} inspection(s) within "
+        f"{timeout_s} s: {job.get('message')}"
+    )
