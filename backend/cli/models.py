@@ -323,6 +323,8 @@ def teach(
         raise job_failure(job, "teach")
     res = job["result"]
     print(f"taught {len(res['views'])} views of {name!r}; threshold: {res['threshold']['reason']}")
+    for why in res.get("left_out") or ():
+        print(f"left out: {why}")
     guide = res.get("rounds") or {}
     if guide.get("next_round"):
         k, n = guide["next_round"], guide["recommended"]

@@ -279,9 +279,17 @@ async def _teach(
             )
         )
     job.report(done / steps, "storing the views")
-    rows = await add_views(db, live, model_id, inputs, replace=options.replace, by=by)
+    # A view with too few features (one roll of a plain face, say) is left out and said;
+    # the round fails only when no top view would be left.
+    weak: list[tuple[int, str]] = []
+    rows = await add_views(db, live, model_id, inputs, replace=options.replace, by=by,
+                           skipped=weak, needs_viewpoint=1)  # fmt: skip
+    left_out = {k for k, _ in weak}
+    for _, why in weak:
+        job.report(done / steps, f"left out: {why}")
     job.report(done / steps, "measuring the part's height")
-    stored = [s for s in silhouettes if not s[0].geometry_only]
+    stored = [s for k, s in enumerate(s for s in silhouettes if not s[0].geometry_only)
+              if k not in left_out]  # fmt: skip
     tops = [
         TopShot(Features.from_bytes(r.features), sil.T_base_cam)
         for r, (shot, sil) in zip(rows, stored, strict=True)
@@ -305,6 +313,7 @@ async def _teach(
         "model": {"id": model_id, "name": name, "kind": kind},
         "views": [view_public(r) for r in rows],
         "shots": shots_out,
+        "left_out": [why for _, why in weak],
         "geometry": geometry_out,
         "threshold": outcome.public(),
         "confusable_from_top": list(outcome.confusable),

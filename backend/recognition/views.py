@@ -31,6 +31,7 @@ __all__ = [
     "MAX_VIEWS_PER_MODEL",
     "MAX_VIEWS_PER_REQUEST",
     "MIN_FEATURES",
+    "TooFewFeatures",
     "ViewInput",
     "add_views",
     "delete_view",
@@ -122,11 +123,15 @@ def _audit_value(row: TrainedView, model_name: str) -> dict[str, Any]:
     }
 
 
+class TooFewFeatures(InvalidInput):
+    """A view with fewer than :data:`MIN_FEATURES` features inside the object's region."""
+
+
 def _prepare_one(live: LiveIndex, v: ViewInput) -> tuple[Features, bytes, bytes | None, bytes]:
     """Extract the features of one view and encode its images (CPU work, in a thread)."""
     feats = live.extract(v.image, v.mask)
     if len(feats) < MIN_FEATURES:
-        raise InvalidInput(
+        raise TooFewFeatures(
             f"{v.name}: only {len(feats)} {live.method} features inside the object's "
             f"region (need {MIN_FEATURES}); use a sharper, larger or more textured view"
         )
@@ -139,10 +144,22 @@ def _prepare_one(live: LiveIndex, v: ViewInput) -> tuple[Features, bytes, bytes 
 
 
 def _prepare(
-    live: LiveIndex, views: Sequence[ViewInput]
-) -> list[tuple[Features, bytes, bytes | None, bytes]]:
-    """:func:`_prepare_one` of every view (CPU work, run in a thread)."""
-    return [_prepare_one(live, v) for v in views]
+    live: LiveIndex, views: Sequence[ViewInput], skip_weak: bool = False
+) -> list[tuple[Features, bytes, bytes | None, bytes] | TooFewFeatures]:
+    """:func:`_prepare_one` of every view (CPU work, run in a thread); with ``skip_weak``
+    a view with too few features gives its error in its place instead of raising it."""
+    return [_prepare_or_weak(live, v, skip_weak) for v in views]
+
+
+def _prepare_or_weak(
+    live: LiveIndex, v: ViewInput, skip_weak: bool
+) -> tuple[Features, bytes, bytes | None, bytes] | TooFewFeatures:
+    try:
+        return _prepare_one(live, v)
+    except TooFewFeatures as exc:
+        if not skip_weak:
+            raise
+        return exc
 
 
 async def add_views(
@@ -154,9 +171,17 @@ async def add_views(
     replace: bool = False,
     by: audit.By | None = None,
     run: Callable[..., Awaitable[Any]] | None = None,
+    skipped: list[tuple[int, str]] | None = None,
+    needs_viewpoint: int | None = None,
 ) -> list[TrainedView]:
     """Store ``views`` of a model (all or none) and add them to the live index; with
     ``replace``, the model's earlier views are deleted in the same transaction.
+
+    ``skipped`` (a list): a view with too few features (:class:`TooFewFeatures`) is left
+    out instead of refusing them all, and ``(index, reason)`` is appended for it; the
+    error is raised when every view is such, or when every view of ``needs_viewpoint``
+    given is such (a teach's top views: without one the part cannot be matched).  The
+    rows are those of the views kept, in order.
 
     ``run`` runs the feature extraction of each view (a request's heavy-work job,
     :meth:`backend.heavy.HeavyJob.run`: one view per unit, so a client that leaves stops
@@ -173,10 +198,22 @@ async def add_views(
             f"model {model.name!r} has {have} views; {len(views)} more would pass the limit "
             f"of {MAX_VIEWS_PER_MODEL}: delete some first"
         )
+    skip_weak = skipped is not None
     if run is None:
-        prepared = await asyncio.to_thread(_prepare, live, views)
+        ready = await asyncio.to_thread(_prepare, live, views, skip_weak)
     else:
-        prepared = [await run(_prepare_one, live, v) for v in views]
+        ready = [await run(_prepare_or_weak, live, v, skip_weak) for v in views]
+    weak = [(k, r) for k, r in enumerate(ready) if isinstance(r, TooFewFeatures)]
+    if weak and len(weak) == len(ready):
+        raise weak[0][1]
+    needed = [k for k, v in enumerate(views) if v.viewpoint == needs_viewpoint]
+    needed_weak = [r for k, r in weak if k in needed]
+    if needed and len(needed_weak) == len(needed):
+        raise needed_weak[0]
+    if skipped is not None:
+        skipped.extend((k, exc.detail) for k, exc in weak)
+    views = [v for v, r in zip(views, ready, strict=True) if not isinstance(r, TooFewFeatures)]
+    prepared = [r for r in ready if not isinstance(r, TooFewFeatures)]
     added: list[int] = []
     try:
         async with db.session() as session:
