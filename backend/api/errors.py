@@ -33,6 +33,7 @@ from backend.recognition.images import ImageTooLarge, UnsupportedImage
 from backend.recognition.index import StaleFeatures
 from backend.recognition.segment import SegmentationFailed
 from backend.recognition.teach import TeachTimeout
+from backend.recognition.views import TooFewFeatures
 from robot.errors import (
     DriverError,
     JointLimitError,
@@ -92,6 +93,7 @@ STATUS_OF_ERROR: dict[type[VisionCellError], int] = {
     VisionCellError: 400,
     # the request's values or files
     InvalidInput: 422,
+    TooFewFeatures: 422,
     ImageError: 422,
     IndexFormatError: 422,
     ImageTooLarge: 413,

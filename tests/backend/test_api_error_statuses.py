@@ -43,6 +43,7 @@ EXPECTED = [
     ("backend.recognition.images", "UnsupportedImage", "unsupported_media_type", 415),
     ("backend.cell.errors", "PathBlocked", "path_blocked", 422),
     ("backend.recognition.segment", "SegmentationFailed", "segmentation_failed", 422),
+    ("backend.recognition.views", "TooFewFeatures", "invalid_value", 422),
     ("robot.errors", "JointLimitError", "joint_limit", 422),
     ("robot.errors", "JointLimitsBlock", "unreachable", 422),
     ("robot.errors", "OrientationNotAchievable", "unreachable", 422),
