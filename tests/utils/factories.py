@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import socket
+from collections import deque
 from pathlib import Path
 
 import cv2
@@ -19,11 +20,22 @@ from tests.utils import templates
 TEST_SECRET = "test-secret-0123456789abcdef"
 
 
+#: Ports this process handed out lately: two calls in a row (an HTTP and a 3D view port)
+#: could get the same port back from the kernel once the first socket was closed.
+_RECENT_PORTS: deque[int] = deque(maxlen=256)
+
+
 def free_port() -> int:
-    """A TCP port that was free a moment ago on 127.0.0.1."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A TCP port that was free a moment ago on 127.0.0.1, not one of the last 256 this
+    process handed out."""
+    for _ in range(100):
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = int(s.getsockname()[1])
+        if port not in _RECENT_PORTS:
+            _RECENT_PORTS.append(port)
+            return port
+    raise RuntimeError("no free port that was not handed out lately")
 
 
 def make_image_folder(folder: Path, n: int = 3, *, size: tuple[int, int] = (160, 120)) -> Path:
