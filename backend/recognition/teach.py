@@ -288,8 +288,8 @@ async def _teach(
     for _, why in weak:
         job.report(done / steps, f"left out: {why}")
     job.report(done / steps, "measuring the part's height")
-    stored = [s for k, s in enumerate(s for s in silhouettes if not s[0].geometry_only)
-              if k not in left_out]  # fmt: skip
+    shot_views = [sil for sil in silhouettes if not sil[0].geometry_only]  # as ``inputs``
+    stored = [sil for k, sil in enumerate(shot_views) if k not in left_out]
     tops = [
         TopShot(Features.from_bytes(r.features), sil.T_base_cam)
         for r, (shot, sil) in zip(rows, stored, strict=True)
