@@ -86,4 +86,9 @@ async def plc_links(rt: Any) -> AsyncIterator[PlcLinks]:
             stack.push_async_callback(mlink.stop)
             links.modbus = mlink
             links.handshakes.append(hs)
-        yield links
+        # Where the benchmark and the in-process tools find the running links.
+        rt.plc_links = links
+        try:
+            yield links
+        finally:
+            rt.plc_links = None
