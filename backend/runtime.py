@@ -33,7 +33,7 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 
 from backend.auth import load_known_tokens
-from backend.caches import AuthCache, ReadCache
+from backend.caches import AuthCache
 from backend.cell import Cell, EventBus
 from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Cell as CellRow
@@ -46,6 +46,7 @@ from backend.inspection.state import InspectionState
 from backend.jobs import JobManager
 from backend.knowntokens import KnownTokens
 from backend.planning import BackgroundStore
+from backend.readcache import ReadCache
 from backend.recognition.index import LiveIndex, load_live_index
 from backend.settings import Settings
 from backend.taskutil import cancel_and_wait
@@ -180,7 +181,7 @@ class CellRuntime:
         self.auth_cache = AuthCache(known=self.known_tokens)
         #: Writes every E-STOP press and reset to the audit trail (after entering).
         self.estop_log: EStopLog | None = None
-        #: Hot list and status reads reused for ``read_cache_ttl_s`` (``backend.caches``).
+        #: Hot list and status reads reused for ``read_cache_ttl_s`` (``backend.readcache``).
         self.read_cache = ReadCache(ttl_s=settings.read_cache_ttl_s)
         #: On PostgreSQL: drops the sign-ins other processes revoke (``backend.authsync``).
         self.auth_sync: AuthSync | None = None
