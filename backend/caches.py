@@ -1,8 +1,10 @@
 """The runtime's two small caches: the console's hot reads and the token sign-ins.
 
-Both are :class:`cachetools.TTLCache` (bounded, least recently used first out, entries
-expire after a TTL counted by an injectable clock).  They are kept correct by explicit
-invalidation, not by watching the database:
+This module keeps the sign-in cache (:class:`AuthCache`) and the notes of sign-in changes;
+the read cache is :class:`backend.readcache.ReadCache` (named here too).  Both are
+:class:`cachetools.TTLCache` (bounded, least recently used first out, entries expire after
+a TTL counted by an injectable clock).  They are kept correct by explicit invalidation, not
+by watching the database:
 
 - the services that write call :func:`backend.db.session.changed` (a topic: a table name,
   or :data:`USERS` for sign-ins) in the transaction; when its session ends, the
@@ -26,22 +28,23 @@ invalidation, not by watching the database:
 
 from __future__ import annotations
 
-import asyncio
 import os
 import threading
 import time
-from collections.abc import Awaitable, Callable, Hashable, Iterable
+from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
 from datetime import datetime
-from typing import Any, TypeVar, cast
+from typing import Any
 
 from cachetools import TTLCache
 from sqlalchemy import text
 
-from backend.db.models import Role, User
+from backend.cachebase import Flights, check_limits
+from backend.db.models import User
 from backend.db.session import Changes, changed
 from backend.db.types import utcnow
 from backend.knowntokens import KnownTokens
+from backend.readcache import Answer, ReadCache
 
 __all__ = [
     "AUTH_CHANNEL",
@@ -61,8 +64,6 @@ USERS = "users"
 AUTH_CHANNEL = "visioncell_auth"
 #: Most user ids one notification lists (PostgreSQL caps a payload at 8000 bytes).
 _MAX_IDS = 500
-
-T = TypeVar("T")
 
 #: A successful sign-in read from the database: the user and the token's expiry.
 SignIn = tuple[User, datetime | None]
@@ -96,191 +97,6 @@ def parse_payload(payload: str) -> frozenset[int] | None:
     except ValueError:
         return None
     return ids if ids else None
-
-
-def _check(ttl_s: float, max_entries: int, max_ttl_s: float) -> None:
-    if isinstance(ttl_s, bool) or not isinstance(ttl_s, int | float):
-        raise TypeError(f"ttl_s must be a number, got {ttl_s!r}")
-    if not 0.0 <= float(ttl_s) <= max_ttl_s:
-        raise ValueError(f"ttl_s must be within 0..{max_ttl_s:g} s, got {ttl_s!r}")
-    if isinstance(max_entries, bool) or not isinstance(max_entries, int):
-        raise TypeError(f"max_entries must be an int, got {max_entries!r}")
-    if not 1 <= max_entries <= 1_000_000:
-        raise ValueError(f"max_entries must be within 1..1000000, got {max_entries!r}")
-
-
-@dataclass(frozen=True, eq=False)
-class Answer:
-    """One kept answer.  Equal only to itself: a new read makes a new one (the fast path
-    of :mod:`backend.api.fastpath` keeps its rendered bytes per answer)."""
-
-    #: The role it was read for (served to that role and stronger ones only).
-    role: Role
-    #: The topics it read.
-    topics: frozenset[str]
-    #: The answer, shared: not to be mutated.
-    value: Any
-
-
-@dataclass(frozen=True)
-class _Flight:
-    loop: asyncio.AbstractEventLoop
-    tag: Any
-    future: asyncio.Future[Any]
-
-
-class _Flights:
-    """One read per key at a time: callers that miss while a read of their key is in
-    flight share its answer (or its error), when ``may_share`` accepts its ``tag``; a
-    caller whose reader went away (cancelled) reads itself."""
-
-    def __init__(self) -> None:
-        self._flights: dict[Hashable, _Flight] = {}
-        #: Callers that shared a read in flight.
-        self.shared = 0
-
-    async def read(
-        self, key: Hashable, tag: Any, may_share: Callable[[Any], bool],
-        read: Callable[[], Awaitable[T]],
-    ) -> T:  # fmt: skip
-        loop = asyncio.get_running_loop()
-        flight = self._flights.get(key)
-        if flight is not None and flight.loop is loop and may_share(flight.tag):
-            self.shared += 1
-            try:
-                return cast(T, await asyncio.shield(flight.future))
-            except asyncio.CancelledError:
-                if not flight.future.cancelled():
-                    raise  # this caller was cancelled, not the read it waited for
-        mine = _Flight(loop, tag, loop.create_future())
-        self._flights[key] = mine
-        try:
-            value = await read()
-        except asyncio.CancelledError:
-            mine.future.cancel()
-            raise
-        except BaseException as exc:
-            mine.future.set_exception(exc)
-            mine.future.exception()  # marked retrieved: its waiters, if any, get it too
-            raise
-        finally:
-            if self._flights.get(key) is mine:
-                del self._flights[key]
-        mine.future.set_result(value)
-        return value
-
-    def clear(self) -> None:
-        self._flights.clear()
-
-
-class ReadCache:
-    """Answers by key for ``ttl_s`` seconds, dropped when a topic they read is written.
-
-    Parameters
-    ----------
-    ttl_s : float
-        Reuse time, seconds, in [0, 10]; 0 turns the cache off.
-    max_entries : int
-        Most answers kept (the least recently used go first).
-    clock : callable
-        Monotonic seconds the TTL is counted in (a test gives its own).
-    """
-
-    def __init__(
-        self, *, ttl_s: float = 1.0, max_entries: int = 512,
-        clock: Callable[[], float] = time.monotonic,
-    ) -> None:  # fmt: skip
-        _check(ttl_s, max_entries, 10.0)
-        self._answers: TTLCache[Hashable, Answer] = TTLCache(max_entries, ttl_s, timer=clock)
-        self._generation: dict[str, int] = {}
-        self._epoch = 0  # grows with every clear()
-        self._flights = _Flights()
-        #: Answers served from memory, and reads made (and :attr:`shared`).
-        self.hits = 0
-        self.misses = 0
-
-    @property
-    def ttl_s(self) -> float:
-        """Reuse time, seconds (fixed when the cache is made)."""
-        return float(self._answers.ttl)
-
-    def _gen(self, topics: frozenset[str]) -> tuple[int, ...]:
-        return (self._epoch, *(self._generation.get(t, 0) for t in sorted(topics)))
-
-    async def get_or_read(
-        self, key: Hashable, *, role: Role, topics: Iterable[str],
-        read: Callable[[], Awaitable[T]],
-    ) -> T:  # fmt: skip
-        """The answer of ``key`` read for a role no stronger than ``role`` within the TTL
-        and since the last change of ``topics``; else ``await read()``, kept.  Callers
-        that miss while a read of ``key`` for a role no stronger than theirs is in flight
-        share it.  The value is shared: not to be mutated."""
-        if not isinstance(role, Role):
-            raise TypeError(f"role must be a Role, got {role!r}")
-        deps = frozenset(topics)
-        if not deps or not all(isinstance(t, str) and t for t in deps):
-            raise ValueError(f"topics must name at least one topic, got {topics!r}")
-        if self.ttl_s <= 0:
-            self.misses += 1
-            return await read()
-        found = self._answers.get(key)
-        if found is not None and found.topics == deps and role >= found.role:
-            self.hits += 1
-            return found.value
-        gen = self._gen(deps)
-
-        async def read_and_keep() -> T:
-            self.misses += 1
-            value = await read()
-            if self._gen(deps) == gen:  # nothing it read was written meanwhile
-                self._answers[key] = Answer(role, deps, value)
-            return value
-
-        def may_share(tag: tuple[Role, tuple[int, ...]]) -> bool:
-            return role >= tag[0] and tag[1] == gen
-
-        return await self._flights.read(key, (role, gen), may_share, read_and_keep)
-
-    def peek(self, key: Hashable, *, role: Role, topics: Iterable[str]) -> Answer | None:
-        """The answer :meth:`get_or_read` would give ``key`` now for ``role`` without
-        reading (the same TTL, topics and role rule; counted as a hit), or None."""
-        found = self._answers.get(key)
-        if (
-            found is None or self.ttl_s <= 0 or role < found.role
-            or found.topics != frozenset(topics)
-        ):  # fmt: skip
-            return None
-        self.hits += 1
-        return found
-
-    @property
-    def shared(self) -> int:
-        """Callers that shared a read in flight instead of reading."""
-        return self._flights.shared
-
-    def invalidate(self, topics: Iterable[str]) -> int:
-        """Drop the answers that read one of ``topics``; a read in progress is not kept
-        after this.  Returns how many were dropped."""
-        names = set(topics)
-        for t in names:
-            self._generation[t] = self._generation.get(t, 0) + 1
-        gone = [k for k, a in list(self._answers.items()) if a.topics & names]
-        for k in gone:
-            self._answers.pop(k, None)
-        return len(gone)
-
-    def clear(self) -> None:
-        """Drop every answer (a read in progress is not kept)."""
-        self._epoch += 1
-        self._flights.clear()
-        self._answers.clear()
-
-    def on_change(self, changes: Changes) -> None:
-        """The database's hook: drop what was read of the changed topics."""
-        self.invalidate(changes)
-
-    def __len__(self) -> int:
-        return len(self._answers)
 
 
 @dataclass(frozen=True)
@@ -325,7 +141,7 @@ class AuthCache:
         self, *, ttl_s: float = 2.0, max_entries: int = 10_000,
         clock: Callable[[], float] = time.monotonic, known: KnownTokens | None = None,
     ) -> None:  # fmt: skip
-        _check(ttl_s, max_entries, 60.0)
+        check_limits(ttl_s, max_entries, 60.0)
         self.known = known
         self._entries: TTLCache[str, _SignedIn] = TTLCache(max_entries, ttl_s, timer=clock)
         self._lock = threading.Lock()  # the 3D view signs in from viser's threads
@@ -333,7 +149,7 @@ class AuthCache:
         self.generation = 0
         #: Sign-ins read from the database.
         self.lookups = 0
-        self._flights = _Flights()
+        self._flights = Flights()
 
     @property
     def ttl_s(self) -> float:

@@ -20,6 +20,9 @@ Entering builds, in this order, and exiting undoes in the reverse order:
    and its table and belt as the collision model);
 4. the :class:`~backend.cell.Cell` (driver connected, camera feed, jobs, event bus);
 5. the viser 3D view, when ``view3d_enabled`` (or ``view3d=True``).
+
+The database checks of steps 1 and 2 are :mod:`backend.startup`, steps 3 to 5
+:mod:`backend.assembly`; this module puts them and the cell's services together.
 """
 
 from __future__ import annotations
@@ -29,25 +32,23 @@ import contextlib
 import logging
 from typing import TYPE_CHECKING, Any
 
-from sqlalchemy import select
-from sqlalchemy.exc import IntegrityError
-
+from backend.assembly import assemble_cell, start_view3d
 from backend.auth import load_known_tokens
-from backend.caches import AuthCache, ReadCache
+from backend.caches import AuthCache
 from backend.cell import Cell, EventBus
-from backend.db.migrate import current_revision, head_revision
-from backend.db.models import Cell as CellRow
-from backend.db.session import Database, changed
+from backend.db.session import Database
 from backend.estoplog import EStopLog
-from backend.hardware import CellWorld, Hardware, NominalCamera, make_hardware
+from backend.hardware import CellWorld, Hardware, NominalCamera
 from backend.heavy import HeavyPool
 from backend.inspection import recovery
 from backend.inspection.state import InspectionState
 from backend.jobs import JobManager
 from backend.knowntokens import KnownTokens
 from backend.planning import BackgroundStore
+from backend.readcache import ReadCache
 from backend.recognition.index import LiveIndex, load_live_index
 from backend.settings import Settings
+from backend.startup import StartupError, check_database, ensure_cell_row
 from backend.taskutil import cancel_and_wait
 from backend.throttle import SignInThrottle
 
@@ -65,50 +66,6 @@ __all__ = ["CellRuntime", "StartupError", "check_database", "ensure_cell_row"]
 log = logging.getLogger(__name__)
 
 
-class StartupError(RuntimeError):
-    """The cell cannot start; the message says what to do."""
-
-
-def _arm_owner(cell: Cell) -> str | None:
-    """Who holds the cell's motion lock now (None: nobody)."""
-    holder = cell.jobs.arm_holder
-    return None if holder is None else str(holder.owner)
-
-
-async def check_database(db: Database) -> None:
-    """Raise :class:`StartupError` unless ``db`` answers and is at the head revision."""
-    try:
-        rev = await current_revision(db.engine)
-    except Exception as exc:
-        raise StartupError(f"cannot open the database {db.url!r}: {exc}") from exc
-    head = head_revision()
-    if rev != head:
-        raise StartupError(
-            f"the database is at revision {rev!r} but this VisionCell needs {head!r}: "
-            "run `visioncell db upgrade`"
-        )
-
-
-async def ensure_cell_row(db: Database, name: str, *, description: str = "") -> int:
-    """Id of the cell row called ``name``, created if it does not exist yet (two processes
-    starting together on one PostgreSQL database both get the one row)."""
-    for _ in range(2):
-        async with db.session() as session:
-            cell_id = await session.scalar(select(CellRow.id).where(CellRow.name == name))
-            if cell_id is not None:
-                return int(cell_id)
-        try:
-            async with db.session() as session:
-                row = CellRow(name=name, description=description or f"Cell {name}")
-                session.add(row)
-                changed(session, "cells")
-                await session.flush()
-                return int(row.id)
-        except IntegrityError:  # another process created it meanwhile: read it again
-            continue
-    raise StartupError(f"cannot create or read the cell row {name!r}")
-
-
 async def _cancel(task: asyncio.Task[None]) -> None:
     await cancel_and_wait(task)
 
@@ -124,7 +81,8 @@ class CellRuntime:
         Start the 3D view (default: ``settings.view3d_enabled``).
     hardware : Hardware, optional
         Driver, camera and engine built by the caller (the fault campaign puts the serial
-        driver in front of a simulated arm); default: :func:`make_hardware` of the settings.
+        driver in front of a simulated arm); default:
+        :func:`~backend.hardware.make_hardware` of the settings.
 
     Attributes (after entering)
     ---------------------------
@@ -180,7 +138,7 @@ class CellRuntime:
         self.auth_cache = AuthCache(known=self.known_tokens)
         #: Writes every E-STOP press and reset to the audit trail (after entering).
         self.estop_log: EStopLog | None = None
-        #: Hot list and status reads reused for ``read_cache_ttl_s`` (``backend.caches``).
+        #: Hot list and status reads reused for ``read_cache_ttl_s`` (``backend.readcache``).
         self.read_cache = ReadCache(ttl_s=settings.read_cache_ttl_s)
         #: On PostgreSQL: drops the sign-ins other processes revoke (``backend.authsync``).
         self.auth_sync: AuthSync | None = None
@@ -356,7 +314,7 @@ class CellRuntime:
         # complete failed rows before this one inspects; the stored backgrounds come back.
         owners: dict[int, str] = {}
         self.interrupted_at_start = await recovery.mark_interrupted(db, self.cell_id, owners=owners)
-        from backend.jobjournal import JobJournal, interrupted_jobs
+        from backend.jobjournal import interrupted_jobs
 
         interrupted = await interrupted_jobs(db, self.cell_id, inspections=owners)
         self.teach_backgrounds.images.update(await recovery.load_backgrounds(db, self.cell_id))
@@ -367,44 +325,10 @@ class CellRuntime:
             pruning = asyncio.get_running_loop().create_task(prune_loop(db, s), name="image-prune")
             stack.push_async_callback(_cancel, pruning)
 
-        hardware: Hardware = (
-            self._hardware
-            if self._hardware is not None
-            else await asyncio.to_thread(make_hardware, s)
-        )
-        if hardware.sim is not None:
-            engine = hardware.sim
-            stack.push_async_callback(asyncio.to_thread, engine.stop)
-        cell_world = hardware.cell_world()
-        world = None
-        if hardware.sim is not None:
-            from robot.sim.obstacles import collision_world
-
-            world = collision_world(hardware.sim.config.layout, model=hardware.sim.arm_model)
-        # The E-STOP halts every conveyor that can move (a fixed station cannot).
-        conveyors = [cell_world.conveyor] if cell_world.conveyor.controllable else []
-        driver: Any = hardware.driver
-        logged = None
-        if s.motion_log is not None:  # the audit sits between the cell and its driver
-            from backend.cell.motionlog import LoggedDriver, MotionLog
-
-            motion_log = MotionLog(s.motion_log)
-            stack.callback(motion_log.close)
-            driver = logged = LoggedDriver(driver, motion_log)
-        cell = Cell(s, driver, hardware.camera, world=world, conveyors=conveyors, bus=self.bus)
-        if logged is not None:
-            logged.holder = lambda: _arm_owner(cell)
-        cell.db_id = self.cell_id
-        # Jobs the last process left running are listed as interrupted; this process's
-        # jobs are journalled so that the next one can do the same (the journal drains
-        # after the cell has stopped its jobs, before the database goes).
-        cell.jobs.remember(interrupted)
-        journal = JobJournal(db, self.cell_id)
-        journal.start()
-        stack.push_async_callback(journal.close)
-        cell.jobs.add_listener(journal)
-        await cell.start()
-        stack.push_async_callback(cell.stop)
+        hardware, cell_world, cell = await assemble_cell(
+            stack, s, self._hardware, db=db, cell_id=self.cell_id, bus=self.bus,
+            interrupted=interrupted,
+        )  # fmt: skip
         self._sim = hardware.sim
         self._world = cell_world
         self._cell = cell
@@ -422,26 +346,10 @@ class CellRuntime:
                 keeper.changed()
 
         if self._want_view:
-            from backend.view3d import View3D, ViewAccess
-
-            access = ViewAccess(
-                db,
-                secret=s.secret_key.get_secret_value(),
-                auth_enabled=s.auth_enabled,
-                throttle=self.signin_throttle,
-                known=self.known_tokens,
-            )
-            view = View3D(
-                cell,
-                host=s.viser_host,
-                port=s.viser_port,
-                sim=hardware.sim,
-                access=access,
-                bins=cell_world.layout.bins,
-            )
-            await view.start()
-            stack.push_async_callback(view.stop)
-            self.view3d = view
+            self.view3d = await start_view3d(
+                stack, s, cell, db=db, sim=hardware.sim, bins=cell_world.layout.bins,
+                throttle=self.signin_throttle, known=self.known_tokens,
+            )  # fmt: skip
         log.info(
             "cell %r (id %d) running: driver=%s camera=%s", s.cell_name, self.cell_id,
             s.driver, s.camera,

@@ -17,7 +17,7 @@ security-header, CORS and URL-length layers, so those apply unchanged), answers 
   the role passes the route's own :class:`~backend.api.deps.RoleCheck` (found among the
   route's dependencies, never restated here);
 - only when the route's :attr:`FastRead.answer` can answer from memory: a read-cache
-  entry (:meth:`backend.caches.ReadCache.peek`, the same freshness and role rule as
+  entry (:meth:`backend.readcache.ReadCache.peek`, the same freshness and role rule as
   the handler's read) or the cell's in-memory state;
 - the answer is rendered by FastAPI's own serialisation of that route (response model,
   response class) once per :attr:`Fresh.version` and the bytes reused until the version
@@ -94,7 +94,7 @@ class Fresh:
     """An answer the fast path may give now."""
 
     #: Equal versions give equal answers (compared with ``==``; a read-cache
-    #: :class:`~backend.caches.Answer` compares by identity).
+    #: :class:`~backend.readcache.Answer` compares by identity).
     version: Any
     #: The handler's return value for this version (called when the version is new).
     content: Callable[[], Any]

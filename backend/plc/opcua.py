@@ -27,6 +27,8 @@ Process: asyncua builds its address space and parses the nodesets in long synchr
 stretches (seconds), so this server runs in a child process of its own
 (:mod:`backend.plc.opcua_link`); its method calls go to the cell's handshake over a pipe, the
 handshake's changes come back the same way.  Nothing here ever holds the cell's loop.
+The nodes and the values written to them are :mod:`backend.plc.opcua_space`; this module
+runs the server: security, sessions, the writer of the handshake's snapshots, the methods.
 """
 
 from __future__ import annotations
@@ -37,7 +39,6 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
@@ -45,13 +46,20 @@ from urllib.parse import urlsplit
 from backend.db.models import Role
 from backend.plc.handshake import ErrorCode, LinkUser, Snapshot
 from backend.plc.opcua_access import _hook_sessions, _ruleset, _session_user, _UserManager
+from backend.plc.opcua_space import (
+    NAMESPACE,
+    Var,
+    build_address_space,
+    fill_event,
+    snapshot_values,
+    write_order,
+)
 from backend.plc.signin import Credentials
 
 __all__ = ["NAMESPACE", "OpcUaServer", "nodeset_files"]
 
 log = logging.getLogger(__name__)
 
-NAMESPACE = "urn:visioncell:plc"
 #: The server's application URI (in its certificate).
 APP_URI = "urn:visioncell:server"
 #: Most OPC UA sessions at once.
@@ -66,21 +74,6 @@ def nodeset_files(data_dir: Path) -> list[Path]:
     """The OPC 40100 nodesets under ``data_dir/opcua`` (empty when any is missing)."""
     files = [data_dir / "opcua" / n for n in NODESETS]
     return files if all(f.is_file() for f in files) else []
-
-
-def _mm(v: float | None) -> float:
-    return float("nan") if v is None else round(v * 1000.0, 2)
-
-
-def _deg(v: float | None) -> float:
-    return float("nan") if v is None else round(math.degrees(v), 2)
-
-
-@dataclass
-class _Var:
-    node: Any
-    vtype: Any
-    value: Any = None
 
 
 class OpcUaServer:
@@ -122,7 +115,7 @@ class OpcUaServer:
         """Seconds the nodesets took to load."""
         self.stop_event = asyncio.Event()
         self._snapshots: asyncio.Queue[Snapshot] = asyncio.Queue()
-        self._vars: dict[str, _Var] = {}
+        self._vars: dict[str, Var] = {}
         self._server: Any = None
         self._events: Any = None
         self._last_event_id = 0
@@ -205,62 +198,21 @@ class OpcUaServer:
             log.warning("OPC UA: could not re-read the sign-in tables", exc_info=True)
 
     async def _build(self, server: Any) -> None:
-        from asyncua import ua
-
-        idx = await server.register_namespace(NAMESPACE)
-        V = ua.VariantType
-        cell = await server.nodes.objects.add_object(idx, "VisionCell")
-        groups: dict[str, Any] = {}
-        for g in ("StateMachine", "Status", "RecipeManagement", "ResultManagement"):
-            groups[g] = await cell.add_object(idx, g)
-        groups["Result"] = await groups["ResultManagement"].add_object(idx, "Result")
-        spec: dict[str, list[tuple[str, Any, Any]]] = {
-            "StateMachine": [("CurrentState", "Idle", V.String), ("CurrentStateCode", 0, V.Int32)],
-            "Status": [("TriggerEnabled", False, V.Boolean), ("TriggerReady", False, V.Boolean),
-                       ("Busy", False, V.Boolean), ("ResultsValid", False, V.Boolean),
-                       ("Running", False, V.Boolean), ("EStop", False, V.Boolean),
-                       ("ErrorCode", 0, V.UInt16), ("ErrorText", "", V.String),
-                       ("Triggers", 0, V.UInt32), ("QueuedResults", 0, V.UInt32)],
-            "RecipeManagement": [("ActiveRecipeId", 0, V.UInt16)],
-            "Result": [("InspectionId", 0, V.UInt32), ("TriggerNumber", 0, V.UInt32),
-                       ("Decision", "", V.String), ("DecisionCode", 0, V.UInt16),
-                       ("Model", "", V.String), ("ModelId", 0, V.UInt32),
-                       ("Score", float("nan"), V.Double), ("X_mm", float("nan"), V.Double),
-                       ("Y_mm", float("nan"), V.Double), ("Yaw_deg", float("nan"), V.Double),
-                       ("Bin", 0, V.UInt16), ("BinName", "", V.String),
-                       ("Duration_s", 0.0, V.Double)],
-        }  # fmt: skip
-        for group, items in spec.items():
-            for name, value, vtype in items:
-                node = await groups[group].add_variable(idx, name, ua.Variant(value, vtype))
-                self._vars[name] = _Var(node, vtype, value)
-        self._events = await server.create_custom_event_type(
-            idx, "InspectionResultEventType", ua.ObjectIds.BaseEventType,
-            [("InspectionId", V.UInt32), ("TriggerNumber", V.UInt32), ("Decision", V.String),
-             ("Model", V.String), ("ModelId", V.UInt32), ("Score", V.Double), ("X_mm", V.Double),
-             ("Y_mm", V.Double), ("Yaw_deg", V.Double), ("Bin", V.UInt16),
-             ("Duration_s", V.Double)],
-        )  # fmt: skip
-        self._evgen = await server.get_event_generator(self._events, cell)
-        A = ua.Argument
-
-        def arg(name: str, vtype: Any) -> Any:
-            a = A()
-            a.Name, a.DataType, a.ValueRank = name, ua.NodeId(vtype.value), -1
-            return a
-
-        await cell.add_method(idx, "EnableTrigger", self._m_enable, [arg("Enable", V.Boolean)], [])
-        await cell.add_method(idx, "Trigger", self._m_trigger, [], [arg("TriggerNumber", V.UInt32)])
-        await cell.add_method(idx, "StartRun", self._m_start_run, [arg("Count", V.UInt32)], [])
-        await cell.add_method(idx, "StopRun", self._m_stop_run, [], [])
-        await cell.add_method(idx, "Reset", self._m_reset, [], [])
-        await groups["RecipeManagement"].add_method(
-            idx, "SelectRecipe", self._m_select, [arg("RecipeId", V.UInt16)], []
+        space = await build_address_space(
+            server,
+            {
+                "EnableTrigger": self._m_enable,
+                "Trigger": self._m_trigger,
+                "StartRun": self._m_start_run,
+                "StopRun": self._m_stop_run,
+                "Reset": self._m_reset,
+                "SelectRecipe": self._m_select,
+                "AcknowledgeResult": self._m_ack,
+            },
         )
-        await groups["ResultManagement"].add_method(
-            idx, "AcknowledgeResult", self._m_ack, [arg("InspectionId", V.UInt32)],
-            [arg("Acknowledged", V.Boolean)],
-        )  # fmt: skip
+        self._vars = space.variables
+        self._events = space.event_type
+        self._evgen = space.event_generator
 
     async def _writer(self) -> None:
         """Copy each handshake snapshot into the variables (only what changed) and send an
@@ -271,26 +223,8 @@ class OpcUaServer:
         while True:
             snap = await self._snapshots.get()
             r = snap.result
-            values: dict[str, Any] = {
-                "CurrentState": snap.state.label, "CurrentStateCode": int(snap.state),
-                "TriggerEnabled": snap.trigger_enabled, "TriggerReady": snap.trigger_ready,
-                "Busy": snap.busy, "ResultsValid": snap.results_valid, "Running": snap.running,
-                "EStop": snap.estop, "ErrorCode": int(snap.error), "ErrorText": snap.error_text,
-                "Triggers": snap.triggers % 2**32, "QueuedResults": snap.queued,
-                "ActiveRecipeId": snap.recipe,
-            }  # fmt: skip
-            if r is not None:
-                values.update({
-                    "InspectionId": r.inspection_id % 2**32, "TriggerNumber": r.trigger % 2**32,
-                    "Decision": r.decision, "DecisionCode": r.decision_code,
-                    "Model": r.model or "", "ModelId": r.model_id,
-                    "Score": float("nan") if r.score is None else float(r.score),
-                    "X_mm": _mm(r.x_m), "Y_mm": _mm(r.y_m), "Yaw_deg": _deg(r.yaw_rad),
-                    "Bin": r.bin, "BinName": r.bin_name or "", "Duration_s": r.duration_s,
-                })  # fmt: skip
-            # the result's words first, its valid flag and the state after them
-            order = sorted(values, key=lambda k: k not in _RESULT_WORDS)
-            for name in order:
+            values = snapshot_values(snap)
+            for name in write_order(values):
                 var = self._vars[name]
                 value = values[name]
                 same = var.value == value or (
@@ -305,13 +239,7 @@ class OpcUaServer:
                 )
             if r is not None and snap.results_valid and r.inspection_id != self._last_event_id:
                 self._last_event_id = r.inspection_id
-                ev = self._evgen.event
-                ev.InspectionId, ev.TriggerNumber = r.inspection_id % 2**32, r.trigger % 2**32
-                ev.Decision, ev.Model, ev.ModelId = r.decision, r.model or "", r.model_id
-                ev.Score = float("nan") if r.score is None else float(r.score)
-                ev.X_mm, ev.Y_mm, ev.Yaw_deg = _mm(r.x_m), _mm(r.y_m), _deg(r.yaw_rad)
-                ev.Bin, ev.Duration_s = r.bin, r.duration_s
-                ev.Severity = 100
+                fill_event(self._evgen.event, r)
                 await self._evgen.trigger(message=f"inspection {r.inspection_id}: {r.decision}")
 
     # -- methods (server loop) ------------------------------------------------------------
@@ -383,12 +311,6 @@ class OpcUaServer:
             "cmd", "ack", (user.name, int(user.role)), (int(_value(inspection_id)),)
         )
         return [ua.Variant(bool(took), ua.VariantType.Boolean)]
-
-
-_RESULT_WORDS = frozenset(
-    ("InspectionId", "TriggerNumber", "Decision", "DecisionCode", "Model", "ModelId", "Score",
-     "X_mm", "Y_mm", "Yaw_deg", "Bin", "BinName", "Duration_s")
-)  # fmt: skip
 
 
 def _status(code: int) -> Any:

@@ -25,7 +25,9 @@ With the object at the station the job
 5. recomputes the automatic threshold (:mod:`backend.recognition.thresholds`) and reports
    the models confusable from the top, with what to add when the views are too few.
 
-Progress is reported per shot.  Nothing is stored unless every shot succeeded.
+Progress is reported per shot.  Nothing is stored unless every shot succeeded.  This
+module plans the round, has its backgrounds, waits for the object and starts the job; the
+round at the shots (steps 3 to 5) is :mod:`backend.recognition.teachround`.
 """
 
 from __future__ import annotations
@@ -42,13 +44,11 @@ from backend import audit
 from backend.db.session import Database
 from backend.heavy import HeavyPool
 from backend.planning import BackgroundStore, Shot, mounting_or_nominal, plan_shots
-from backend.recognition import thresholds
 from backend.recognition.autothreshold import ThresholdKeeper
-from backend.recognition.geometry import Silhouette, TopShot
 from backend.recognition.index import LiveIndex
-from backend.recognition.models import get_model, taught_rounds
-from backend.recognition.segment import SegmentationFailed, foreground_mask, segment_object
-from backend.recognition.teachheight import geometry_shot, measure, store_geometry
+from backend.recognition.models import get_model
+from backend.recognition.segment import SegmentationFailed, foreground_mask
+from backend.recognition.teachheight import geometry_shot
 from backend.recognition.teachoptions import (
     MAX_ROUNDS,
     MAX_WAIT_S,
@@ -57,12 +57,10 @@ from backend.recognition.teachoptions import (
     rounds_guide,
     teach_yaws_rad,
 )
-from backend.recognition.views import ViewInput, add_views, view_public
+from backend.recognition.teachround import look_at_shots, store_round
 from robot.collision import CollisionWorld
-from robot.kinematics import T_base_ee
 from vision.camera import PinholeCamera
 from vision.errors import Conflict, InvalidInput, VisionCellError
-from vision.features.types import Features
 from vision.segmentation import iou
 
 __all__ = [
@@ -226,99 +224,23 @@ async def _teach(
                     f"{math.degrees(shot.roll_rad):.0f} deg: teach once with background='grab'"
                 )
             backgrounds[k] = bg
-    inputs: list[ViewInput] = []
-    shots_out: list[dict[str, Any]] = []
-    silhouettes: list[tuple[Shot, Silhouette]] = []
-    frame_size: tuple[int, int] = (640, 480)
-    for k, shot in enumerate(shots):
-        job.report(
-            done / steps,
-            f"view {k + 1}/{n}: viewpoint {shot.viewpoint}, "
-            f"roll {math.degrees(shot.roll_rad):.0f} deg",
-        )
-        t0 = time.monotonic()
-        frame = await cell.look(shot.q, speed=options.speed)
-        t1 = time.monotonic()
-        try:
-            region = await asyncio.to_thread(segment_object, frame.rgb, backgrounds[k])
-        except SegmentationFailed as exc:
-            raise SegmentationFailed(f"viewpoint {shot.viewpoint}: {exc.detail}") from exc
-        mask = region.mask
-        state = frame.robot_state
-        q_seen = np.asarray(getattr(state, "q", shot.q), dtype=np.float64)
-        frame_size = (int(frame.rgb.shape[1]), int(frame.rgb.shape[0]))
-        silhouettes.append((shot, Silhouette(mask, T_base_ee(q_seen) @ T_seen)))
-        shots_out.append(
-            {
-                "viewpoint": shot.viewpoint,
-                "roll_rad": shot.roll_rad,
-                "joints": [float(v) for v in q_seen],
-                "mask_px": int(mask.sum()),
-                "segmentation": region.method,
-                "segmentation_note": region.note,
-                "planner": shot.reason,
-                "look_s": round(t1 - t0, 3),
-                "segment_s": round(time.monotonic() - t1, 3),
-                "geometry_only": shot.geometry_only,
-            }
-        )
-        done += 1
-        if shot.geometry_only:
-            continue
-        inputs.append(
-            ViewInput(
-                frame.rgb,
-                shot.viewpoint,
-                mask,
-                yaw_rad=options.yaw_rad,
-                roll_rad=shot.roll_rad,
-                source="teach",
-                joints=q_seen,
-                T_base_cam=shot.T_base_cam,
-                name=f"viewpoint {shot.viewpoint} roll {math.degrees(shot.roll_rad):.0f} deg",
-            )
-        )
-    job.report(done / steps, "storing the views")
-    # A view with too few features (one roll of a plain face, say) is left out and said;
-    # the round fails only when no top view would be left.
-    weak: list[tuple[int, str]] = []
-    rows = await add_views(db, live, model_id, inputs, replace=options.replace, by=by,
-                           skipped=weak, needs_viewpoint=1)  # fmt: skip
-    left_out = {k for k, _ in weak}
-    for _, why in weak:
-        job.report(done / steps, f"left out: {why}")
-    job.report(done / steps, "measuring the part's height")
-    shot_views = [sil for sil in silhouettes if not sil[0].geometry_only]  # as ``inputs``
-    stored = [sil for k, sil in enumerate(shot_views) if k not in left_out]
-    tops = [
-        TopShot(Features.from_bytes(r.features), sil.T_base_cam)
-        for r, (shot, sil) in zip(rows, stored, strict=True)
-        if shot.viewpoint == 1 and r.viewpoint == 1
-    ]
-    geometry = await measure(silhouettes, tops, camera, frame_size, float(point[2]))
-    geometry_out = await store_geometry(db, live, model_id, geometry)
-    async with db.session() as session:
-        taught = (await taught_rounds(session, [model_id]))[model_id]
-    if not options.threshold:
-        outcome = await thresholds.deferred(db)
-    elif keeper is not None:
-        job.report(1.0, "choosing the threshold")
-        outcome = await keeper.choose(
-            lambda f, msg: job.report(1.0, f"choosing the threshold: {msg}")
-        )
-    else:
-        job.report(1.0, "choosing the threshold")
-        outcome = await thresholds.recompute(db, live, heavy=heavy)
-    return {
-        "model": {"id": model_id, "name": name, "kind": kind},
-        "views": [view_public(r) for r in rows],
-        "shots": shots_out,
-        "left_out": [why for _, why in weak],
-        "geometry": geometry_out,
-        "threshold": outcome.public(),
-        "confusable_from_top": list(outcome.confusable),
-        "rounds": rounds_guide(taught, thresholds.recommended_rounds(kind)),
-    }
+    looked = await look_at_shots(job, cell, shots, backgrounds, options=options,
+                                 T_ee_cam_seen=T_seen, done=done, steps=steps)  # fmt: skip
+    done += n
+    return await store_round(
+        job,
+        looked,
+        db=db,
+        live=live,
+        model={"id": model_id, "name": name, "kind": kind},
+        options=options,
+        station_z_m=float(point[2]),
+        progress=done / steps,
+        by=by,
+        heavy=heavy,
+        camera=camera,
+        keeper=keeper,
+    )
 
 
 def check_live_camera(cell: Any) -> None:
