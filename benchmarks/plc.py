@@ -28,14 +28,14 @@ The cell is the ideal arm with a folder camera replaying a COIL-20 image (two mo
 from COIL-20 views), so the inspection itself is short and the protocols' overhead shows.
 
 4. ``--sim-objects`` > 0: the simulated cell (MuJoCo arm, camera and belt, two demo parts
-   taught, the demo's belt indexing them to the station): the simulated PLC starts a
-   continuous run of that many objects over Modbus (RUN bit) and then over OPC UA
+   taught at ``--teach-yaws`` yaws, 8 by default as a 3D part needs, the demo's belt
+   indexing them to the station): the simulated PLC starts a continuous run of that many objects over Modbus (RUN bit) and then over OPC UA
    (``StartRun``), acknowledges each result, and checks it against the simulator's truth
    of the inspected object (the part's model, its x/y in the base frame).
 
 Run::
 
-    .venv/bin/python -m benchmarks.plc [--count 1000] [--estops 20] [--sim-objects 6] [--json]
+    .venv/bin/python -m benchmarks.plc [--count 1000] [--estops 20] [--sim-objects 6] [--teach-yaws 8] [--json]
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import math
 import os
 import statistics
 import sys
@@ -465,7 +466,11 @@ def run_sim(args: argparse.Namespace, progress: Callable[[str], None]) -> dict[s
         try:
             rt = srv.runtime
             progress(f"teaching {', '.join(SIM_PARTS)} in the simulated cell")
-            teach_s, _ = _call(srv, _teach_all(rt, list(SIM_PARTS)))
+            from backend.recognition.teach import teach_yaws_rad
+
+            # Each part at the yaws a 3D part needs to be recognised at any yaw on the belt.
+            yaws = tuple(math.degrees(y) for y in teach_yaws_rad(args.teach_yaws))
+            teach_s, _ = _call(srv, _teach_all(rt, list(SIM_PARTS), yaws))
             ids = _call(srv, _model_ids(rt))
             populate_demo(rt.sim, names=SIM_PARTS * 2)
             checked = asyncio.run(_sim_runs(srv, tokens, args.sim_objects, ids, progress))
@@ -563,6 +568,12 @@ def main(argv: list[str] | None = None) -> None:
         default=6,
         help="objects of each protocol's run in the simulated cell (0: skip)",
     )
+    p.add_argument(
+        "--teach-yaws",
+        type=int,
+        default=8,
+        help="teach rounds (object yaws) of each part of the simulated cell",
+    )
     p.add_argument("--data-dir", type=Path, default=None)
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
@@ -570,8 +581,12 @@ def main(argv: list[str] | None = None) -> None:
         not 0 <= args.count <= 100_000
         or not 1 <= args.estops <= 1000
         or not 0 <= args.sim_objects <= 1000
+        or not 1 <= args.teach_yaws <= 16
     ):
-        p.error("--count must be in 0..100000, --estops in 1..1000, --sim-objects in 0..1000")
+        p.error(
+            "--count must be in 0..100000, --estops in 1..1000, --sim-objects in 0..1000, "
+            "--teach-yaws in 1..16"
+        )
     import logging
 
     logging.basicConfig(level=logging.WARNING)
