@@ -30,8 +30,9 @@ from COIL-20 views), so the inspection itself is short and the protocols' overhe
 4. ``--sim-objects`` > 0: the simulated cell (MuJoCo arm, camera and belt, two demo parts
    taught at ``--teach-yaws`` yaws, 8 by default as a 3D part needs, the demo's belt
    indexing them to the station): the simulated PLC starts a continuous run of that many
-   objects over Modbus (RUN bit) and then over OPC UA (``StartRun``), acknowledges each result, and checks it against the simulator's truth
-   of the inspected object (the part's model, its x/y in the base frame).
+   objects over Modbus (RUN bit) and then over OPC UA (``StartRun``), acknowledges each
+   result, and checks it against the simulator's truth of the inspected object (the
+   part's model, its x/y in the base frame).
 
 Run::
 
