@@ -7,12 +7,12 @@ OpenAPI documents them.  Lists are :class:`Page` (``{"data": [...], "count": tot
 from __future__ import annotations
 
 import math
-from datetime import datetime
-from typing import Annotated, Any, Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from backend.api.types import ApproachComponent, JointList, Metres
+from backend.publictypes import IsoTime
 from robot.kinematics.analytic import UNIT_TOL
 
 __all__ = [
@@ -31,15 +31,6 @@ __all__ = [
 ]
 
 T = TypeVar("T")
-
-
-def _iso(value: object) -> object:
-    return value.isoformat() if isinstance(value, datetime) else value
-
-
-#: A time as the API writes it: ``datetime.isoformat()`` (``2026-01-02T03:04:05.678+00:00``),
-#: read from a ``datetime`` attribute of a row.
-IsoTime = Annotated[str, BeforeValidator(_iso)]
 
 
 class ErrorOut(BaseModel):

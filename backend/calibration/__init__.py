@@ -17,6 +17,12 @@ from backend.calibration.autoplan import (
     PlannedView,
     plan_calibration_poses,
 )
+from backend.calibration.public import (
+    CalibrationPublic,
+    CalibrationReport,
+    SamplePublic,
+    SessionPublic,
+)
 from backend.calibration.reports import PLOTS, calibration_public, calibration_report, report_png
 from backend.calibration.sessions import (
     NotFound,
@@ -54,12 +60,16 @@ __all__ = [
     "AutoOptions",
     "AutoPlan",
     "AutoRun",
+    "CalibrationPublic",
+    "CalibrationReport",
     "CalibrationViewLog",
     "CameraCalibration",
     "NotFound",
     "OtherCell",
     "PlannedView",
     "SampleIn",
+    "SamplePublic",
+    "SessionPublic",
     "SolveOptions",
     "SolveOutcome",
     "activate",
