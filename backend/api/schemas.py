@@ -128,11 +128,17 @@ class JobPublic(BaseModel):
     )
     progress: float = Field(description="0 .. 1")
     message: str
-    params: dict[str, Any]
+    params: dict[str, Any] = Field(
+        description="What the job was asked to do; open because each kind of job takes its "
+        "own parameters (a move's target, a solve's options, a teach's rounds)"
+    )
     created_at: str
     finished_at: str | None
-    result: dict[str, Any] | None
-    error: dict[str, Any] | None
+    result: dict[str, Any] | None = Field(
+        description="What a finished job produced (None until then); open because each kind "
+        "of job answers its own result (a move's final state, a solve's calibration id)"
+    )
+    error: ErrorOut | None = Field(description="Why the job failed (None unless it did)")
 
 
 class JobOut(BaseModel):

@@ -243,6 +243,7 @@ async def read_inspection(
     "/inspections/{inspection_id}/images/{n}.jpg",
     response_class=Response,
     summary="The n-th viewpoint image (0-based) with the contour drawn",
+    responses={200: {"content": {"image/jpeg": {}}, "description": "The image (JPEG)"}},
 )
 async def read_inspection_image(
     _: ViewerUser,

@@ -202,8 +202,17 @@ async def read_confusion(_: ViewerUser, session: SessionDep, f: FiltersDep) -> d
     return await confusion(session, f)
 
 
-@router.get("/reports/export.csv", response_class=StreamingResponse,
-            summary="Every matching inspection as CSV (streamed, header first)")  # fmt: skip
+@router.get(
+    "/reports/export.csv",
+    response_class=StreamingResponse,
+    summary="Every matching inspection as CSV (streamed, header first)",
+    responses={
+        200: {
+            "content": {"text/csv": {}},
+            "description": "A header line, then one line per inspection (a file download)",
+        }
+    },
+)
 async def export_inspections_csv(
     _: ViewerUser, db: DatabaseDep, f: FiltersDep
 ) -> StreamingResponse:
@@ -215,8 +224,18 @@ async def export_inspections_csv(
     )
 
 
-@router.get("/reports/export.jsonl", response_class=StreamingResponse,
-            summary="Every matching inspection as JSON lines (streamed)")  # fmt: skip
+@router.get(
+    "/reports/export.jsonl",
+    response_class=StreamingResponse,
+    summary="Every matching inspection as JSON lines (streamed)",
+    responses={
+        200: {
+            "content": {"application/x-ndjson": {}},
+            "description": "One object per inspection, with the CSV export's columns as "
+            "keys (a file download)",
+        }
+    },
+)
 async def export_inspections_jsonl(
     _: ViewerUser, db: DatabaseDep, f: FiltersDep
 ) -> StreamingResponse:
@@ -251,8 +270,17 @@ async def prune_storage(
     return res.public()
 
 
-@router.get("/inspections/{inspection_id}/scene", response_class=Response,
-            summary="The 3D scene recorded during the inspection (viser scene serializer)")  # fmt: skip
+@router.get(
+    "/inspections/{inspection_id}/scene",
+    response_class=Response,
+    summary="The 3D scene recorded during the inspection (viser scene serializer)",
+    responses={
+        200: {
+            "content": {"application/octet-stream": {}},
+            "description": "The recording, as viser's scene serializer writes it",
+        }
+    },
+)
 async def read_inspection_scene(
     _: ViewerUser, rt: RuntimeDep, session: SessionDep, inspection_id: DbId
 ) -> Response:
