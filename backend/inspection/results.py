@@ -25,6 +25,7 @@ from backend.db.models import (
 )
 from backend.db.session import Database, changed
 from backend.db.types import utcnow
+from backend.inspection.public import InspectionPublic, PickOutcome
 from vision.errors import InvalidInput, NotFound
 
 __all__ = ["PICK_OUTCOMES", "InspectionRecord", "ViewRecord", "get_image", "get_inspection",
@@ -277,32 +278,10 @@ def pick_outcome(pick: Any, decision: str) -> dict[str, Any]:
 
 
 def inspection_public(row: Inspection, n_images: int | None = None) -> dict[str, Any]:
-    """The API's form of a row."""
+    """The API's form of a row (:class:`InspectionPublic`) as JSON values."""
     n = len(row.images) if n_images is None else n_images
-    return {
-        "id": row.id,
-        "cell_id": row.cell_id,
-        "started_at": row.started_at.isoformat(),
-        "finished_at": None if row.finished_at is None else row.finished_at.isoformat(),
-        "decision": row.decision.value,
-        "reason": row.reason,
-        "policy": row.policy,
-        "model": row.model_name,
-        "model_id": row.model_id,
-        "score": row.score,
-        "scores": row.scores or {},
-        "viewpoints_visited": list(row.viewpoints_visited or []),
-        "pose": row.pose,
-        "durations": row.durations or {},
-        "duration_s": row.duration_s,
-        "pick": row.pick,
-        "pick_outcome": pick_outcome(row.pick, row.decision.value),
-        "truth": row.truth,
-        "source": row.source,
-        "recipe_id": row.recipe_id,
-        "recipe": row.recipe_name,
-        "images": [f"/api/inspections/{row.id}/images/{k}.jpg" for k in range(n)],
-    }
+    outcome = PickOutcome.model_validate(pick_outcome(row.pick, row.decision.value))
+    return InspectionPublic.of(row, outcome, n).model_dump(mode="json")
 
 
 #: The JSON columns of an inspection row (their stored form: tuples become lists).

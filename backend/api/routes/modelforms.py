@@ -184,7 +184,3 @@ class TeachIn(BaseModel):
         None, min_length=3, max_length=3, description="Station point x, y, z in metres"
     )
     reason: Reason = None
-
-
-class JobAccepted(BaseModel):
-    job: dict[str, Any]
