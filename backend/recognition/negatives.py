@@ -21,6 +21,7 @@ from backend import audit
 from backend.db.models import NegativeImage
 from backend.db.session import Database
 from backend.recognition import images as im
+from backend.recognition.public import NegativePublic
 from vision.errors import Conflict, InvalidInput, NotFound
 
 __all__ = [
@@ -44,15 +45,8 @@ NEGATIVE_SIDE_PX = 1024
 
 
 def negative_public(row: NegativeImage) -> dict[str, Any]:
-    """JSON form of a stored negative (no image data)."""
-    return {
-        "id": row.id,
-        "width": row.width,
-        "height": row.height,
-        "source": row.source,
-        "note": row.note,
-        "created_at": row.created_at.isoformat(),
-    }
+    """JSON form of a stored negative (:class:`NegativePublic`, no image data)."""
+    return NegativePublic.model_validate(row).model_dump(mode="json")
 
 
 def _shrink(rgb: NDArray[np.uint8]) -> NDArray[np.uint8]:

@@ -20,6 +20,7 @@ from backend.api.uploads import read_capped
 from backend.api.work import HeavyWorkDep
 from backend.recognition import images as im
 from backend.recognition import negatives as neg
+from backend.recognition import public
 from backend.runtime import CellRuntime
 from vision.errors import InvalidInput
 
@@ -31,17 +32,8 @@ router = APIRouter(prefix="/recognition", tags=["recognition"])
 # -- negative images ------------------------------------------------------------------------
 
 
-class NegativePublic(BaseModel):
-    id: int
-    width: int
-    height: int
-    source: str
-    note: str
-    created_at: str
-
-
 class NegativeList(BaseModel):
-    data: list[NegativePublic]
+    data: list[public.NegativePublic]
     count: int
 
 
