@@ -4,14 +4,24 @@ prints and a teach job reports (the API adds the live index's counts, see
 
 from __future__ import annotations
 
+from typing import Any, Literal
+
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.db.models import ObjectKind, ObjectModel, TrainedView
+from backend.db.models import ObjectKind, ObjectModel, RecognitionSettings, TrainedView
 from backend.publictypes import IsoTime
 from backend.recognition.modelfields import grasp_of
 from backend.recognition.thresholdadvice import recommended_rounds
+from backend.recognition.thresholdstore import DEFAULT_THRESHOLD
 
-__all__ = ["ModelPublic", "NegativePublic", "TeachRounds", "ViewDescriptor", "ViewPublic"]
+__all__ = [
+    "ModelPublic",
+    "NegativePublic",
+    "RecognitionSettingsPublic",
+    "TeachRounds",
+    "ViewDescriptor",
+    "ViewPublic",
+]
 
 
 class TeachRounds(BaseModel):
@@ -129,3 +139,32 @@ class NegativePublic(BaseModel):
     source: str
     note: str
     created_at: IsoTime
+
+
+class RecognitionSettingsPublic(BaseModel):
+    """The recognition settings in force: the global threshold and how it was chosen."""
+
+    global_threshold: float = Field(description="Score above which a model is reported")
+    chosen_by: Literal["default", "auto", "manual"] = Field(
+        description="default (never chosen), auto (the automatic rule) or manual (an engineer)"
+    )
+    detail: dict[str, Any] = Field(
+        description="How it was chosen; open because each way records its own: manual: by "
+        "and note; auto: the rule, the per-model thresholds and the score distributions; "
+        "default: empty"
+    )
+    created_at: IsoTime | None = Field(description="When it was chosen (None: the default)")
+
+    @classmethod
+    def of(cls, row: RecognitionSettings | None) -> RecognitionSettingsPublic:
+        """The public form of the settings row in force (None: none was ever stored)."""
+        if row is None:
+            return cls(
+                global_threshold=DEFAULT_THRESHOLD, chosen_by="default", detail={}, created_at=None
+            )
+        return cls(
+            global_threshold=row.global_threshold,
+            chosen_by=row.chosen_by,
+            detail=row.detail,
+            created_at=row.created_at,  # IsoTime writes it in ISO form
+        )
