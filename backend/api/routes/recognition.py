@@ -165,10 +165,18 @@ class ImageResultOut(BaseModel):
     inspection_id: int | None = Field(None, description="The stored row (store=true)")
 
 
+class AppliedThresholdOut(BaseModel):
+    """The thresholds applied to a request's images and how they were chosen."""
+
+    chosen_by: str = Field(description="default, auto or manual (the settings in force)")
+    global_threshold: float = Field(description="The global threshold at the viewpoint")
+    rule: str = Field(description="The rule that chose the thresholds")
+
+
 class RecogniseOut(BaseModel):
     data: list[ImageResultOut]
     count: int
-    threshold: dict[str, Any] = Field(description="The thresholds applied: how they were chosen")
+    threshold: AppliedThresholdOut
     durations: dict[str, float] = Field(description="Seconds of the request: total, store")
 
 

@@ -106,6 +106,21 @@ class ModelStats(BaseModel):
     hist: Histogram
 
 
+class FiltersEcho(BaseModel):
+    """The filters a report covers, as given (null: not filtered on)."""
+
+    model_config = ConfigDict(populate_by_name=True)
+
+    from_: str | None = Field(
+        alias="from", serialization_alias="from", description="Started at or after, ISO time"
+    )
+    to: str | None = Field(description="Started at or before, ISO time")
+    cell: str | None
+    model: str | None
+    decision: str | None
+    policy: str | None
+
+
 class SummaryPublic(BaseModel):
     """Totals, yield, cycle-time nearest-rank percentiles, the stage breakdown, per model scores."""
 
@@ -118,7 +133,7 @@ class SummaryPublic(BaseModel):
     per_model: list[ModelStats]
     first: str | None
     last: str | None
-    filters: dict[str, Any]
+    filters: FiltersEcho
 
     model_config = ConfigDict(populate_by_name=True)
 
@@ -135,7 +150,7 @@ class BucketPublic(BaseModel):
 class TimeseriesPublic(BaseModel):
     bucket: str
     data: list[BucketPublic]
-    filters: dict[str, Any]
+    filters: FiltersEcho
 
 
 class ConfusionPublic(BaseModel):
@@ -143,7 +158,7 @@ class ConfusionPublic(BaseModel):
     truth: list[str] = Field(description="True catalogue names (simulator)")
     matrix: list[list[int]] = Field(description="Rows: truth; columns: labels")
     count: int
-    filters: dict[str, Any]
+    filters: FiltersEcho
 
 
 class StoragePublic(BaseModel):
