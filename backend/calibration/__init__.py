@@ -23,7 +23,7 @@ from backend.calibration.public import (
     SamplePublic,
     SessionPublic,
 )
-from backend.calibration.reports import PLOTS, calibration_public, calibration_report, report_png
+from backend.calibration.reports import PLOTS, calibration_report, report_png
 from backend.calibration.sessions import (
     NotFound,
     OtherCell,
@@ -76,7 +76,6 @@ __all__ = [
     "active_calibrations",
     "active_camera_calibration",
     "add_samples",
-    "calibration_public",
     "calibration_report",
     "cell_id_of",
     "check_own",

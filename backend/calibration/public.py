@@ -1,5 +1,5 @@
 """The public shapes of stored calibration data: a session, a sample, a calibration and a
-calibration's report (what the API answers and the CLI prints; no images, no residuals)."""
+calibration's report (what the API answers; no images, no residuals)."""
 
 from __future__ import annotations
 
@@ -13,8 +13,9 @@ from backend.publictypes import IsoTime
 __all__ = ["CalibrationPublic", "CalibrationReport", "SamplePublic", "SessionPublic"]
 
 
-def _count(corners: object) -> object:
-    return len(corners) if isinstance(corners, list) else 0 if corners is None else corners
+def _count(corners: list[Any] | None) -> int:
+    """The number of stored corners (the column holds a list of corners, or None)."""
+    return len(corners) if corners else 0
 
 
 class SamplePublic(BaseModel):

@@ -15,23 +15,10 @@ from backend.db.models import Calibration, CalibrationKind
 from vision.calibration import HandEyeResult, IntrinsicsResult
 from vision.calibration import report as plots
 
-__all__ = [
-    "PLOTS",
-    "CalibrationPublic",
-    "CalibrationReport",
-    "calibration_public",
-    "calibration_report",
-    "report_png",
-]
+__all__ = ["PLOTS", "calibration_report", "report_png"]
 
 #: The PNG plots a report offers, by name.
 PLOTS = ("residuals", "coverage", "consistency")
-
-
-def calibration_public(cal: Calibration) -> dict[str, Any]:
-    """The calibration row without its full residuals, as JSON values
-    (:class:`CalibrationPublic`)."""
-    return CalibrationPublic.model_validate(cal).model_dump(mode="json")
 
 
 def _intrinsic_summary(r: IntrinsicsResult) -> dict[str, Any]:

@@ -10,7 +10,7 @@ empty-belt backgrounds a teach grabs are negatives of the cell that grabbed them
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, cast
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,7 +21,6 @@ from backend import audit
 from backend.db.models import NegativeImage
 from backend.db.session import Database
 from backend.recognition import images as im
-from backend.recognition.public import NegativePublic
 from vision.errors import Conflict, InvalidInput, NotFound
 
 __all__ = [
@@ -32,7 +31,6 @@ __all__ = [
     "list_negatives",
     "load_negatives",
     "negative_ids",
-    "negative_public",
 ]
 
 #: Most stored negative images (each costs one search per viewpoint per recomputation).
@@ -42,11 +40,6 @@ MAX_NEGATIVES_PER_REQUEST = 16
 #: Longest side a negative is stored with, pixels (larger ones are scaled down: a negative
 #: only has to produce the features an untrained scene would).
 NEGATIVE_SIDE_PX = 1024
-
-
-def negative_public(row: NegativeImage) -> dict[str, Any]:
-    """JSON form of a stored negative (:class:`NegativePublic`, no image data)."""
-    return NegativePublic.model_validate(row).model_dump(mode="json")
 
 
 def _shrink(rgb: NDArray[np.uint8]) -> NDArray[np.uint8]:

@@ -51,7 +51,7 @@ async def read_negatives(
     offset: Annotated[int, Query(ge=0, le=DB_ID_MAX)] = 0,
 ) -> dict[str, Any]:
     rows, total = await neg.list_negatives(db, limit=limit, offset=offset)
-    return {"data": [neg.negative_public(r) for r in rows], "count": total}
+    return {"data": [public.NegativePublic.model_validate(r) for r in rows], "count": total}
 
 
 @router.post(
@@ -89,7 +89,7 @@ async def create_negatives(
         runtime.database, encoded, note=note, by=audit.By(audit.Actor.of(user), reason)
     )
     _keeper_changed(runtime)
-    return {"data": [neg.negative_public(r) for r in rows], "count": len(rows)}
+    return {"data": [public.NegativePublic.model_validate(r) for r in rows], "count": len(rows)}
 
 
 @router.delete(
