@@ -7,12 +7,12 @@ OpenAPI documents them.  Lists are :class:`Page` (``{"data": [...], "count": tot
 from __future__ import annotations
 
 import math
-from datetime import datetime
-from typing import Annotated, Any, Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from backend.api.types import ApproachComponent, JointList, Metres
+from backend.publictypes import IsoTime
 from robot.kinematics.analytic import UNIT_TOL
 
 __all__ = [
@@ -31,15 +31,6 @@ __all__ = [
 ]
 
 T = TypeVar("T")
-
-
-def _iso(value: object) -> object:
-    return value.isoformat() if isinstance(value, datetime) else value
-
-
-#: A time as the API writes it: ``datetime.isoformat()`` (``2026-01-02T03:04:05.678+00:00``),
-#: read from a ``datetime`` attribute of a row.
-IsoTime = Annotated[str, BeforeValidator(_iso)]
 
 
 class ErrorOut(BaseModel):
@@ -137,11 +128,17 @@ class JobPublic(BaseModel):
     )
     progress: float = Field(description="0 .. 1")
     message: str
-    params: dict[str, Any]
+    params: dict[str, Any] = Field(
+        description="What the job was asked to do; open because each kind of job takes its "
+        "own parameters (a move's target, a solve's options, a teach's rounds)"
+    )
     created_at: str
     finished_at: str | None
-    result: dict[str, Any] | None
-    error: dict[str, Any] | None
+    result: dict[str, Any] | None = Field(
+        description="What a finished job produced (None until then); open because each kind "
+        "of job answers its own result (a move's final state, a solve's calibration id)"
+    )
+    error: ErrorOut | None = Field(description="Why the job failed (None unless it did)")
 
 
 class JobOut(BaseModel):

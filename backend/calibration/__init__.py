@@ -17,7 +17,13 @@ from backend.calibration.autoplan import (
     PlannedView,
     plan_calibration_poses,
 )
-from backend.calibration.reports import PLOTS, calibration_public, calibration_report, report_png
+from backend.calibration.public import (
+    CalibrationPublic,
+    CalibrationReport,
+    SamplePublic,
+    SessionPublic,
+)
+from backend.calibration.reports import PLOTS, calibration_report, report_png
 from backend.calibration.sessions import (
     NotFound,
     OtherCell,
@@ -54,19 +60,22 @@ __all__ = [
     "AutoOptions",
     "AutoPlan",
     "AutoRun",
+    "CalibrationPublic",
+    "CalibrationReport",
     "CalibrationViewLog",
     "CameraCalibration",
     "NotFound",
     "OtherCell",
     "PlannedView",
     "SampleIn",
+    "SamplePublic",
+    "SessionPublic",
     "SolveOptions",
     "SolveOutcome",
     "activate",
     "active_calibrations",
     "active_camera_calibration",
     "add_samples",
-    "calibration_public",
     "calibration_report",
     "cell_id_of",
     "check_own",

@@ -8,32 +8,17 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from backend.calibration.public import CalibrationPublic, CalibrationReport
 from backend.calibration.sessions import NotFound
 from backend.calibration.solving import result_of
 from backend.db.models import Calibration, CalibrationKind
 from vision.calibration import HandEyeResult, IntrinsicsResult
 from vision.calibration import report as plots
 
-__all__ = ["PLOTS", "calibration_public", "calibration_report", "report_png"]
+__all__ = ["PLOTS", "calibration_report", "report_png"]
 
 #: The PNG plots a report offers, by name.
 PLOTS = ("residuals", "coverage", "consistency")
-
-
-def calibration_public(cal: Calibration) -> dict[str, Any]:
-    """The calibration row without its full residuals."""
-    return {
-        "id": cal.id,
-        "cell_id": cal.cell_id,
-        "session_id": cal.session_id,
-        "kind": cal.kind.value,
-        "active": cal.active,
-        "rms_px": cal.rms_px,
-        "sample_count": cal.sample_count,
-        "parameters": cal.parameters,
-        "options": cal.options,
-        "created_at": cal.created_at.isoformat(),
-    }
 
 
 def _intrinsic_summary(r: IntrinsicsResult) -> dict[str, Any]:
@@ -120,7 +105,8 @@ def _check_solved(cal: Calibration) -> None:
 
 
 def calibration_report(cal: Calibration) -> dict[str, Any]:
-    """The report of a calibration: the row, a readable summary and the links to its plots."""
+    """The report of a calibration as JSON values (:class:`CalibrationReport`): the row, a
+    readable summary and the links to its plots."""
     _check_solved(cal)
     result = result_of(cal)
     summary = (
@@ -130,11 +116,11 @@ def calibration_report(cal: Calibration) -> dict[str, Any]:
     )
     available = [p for p in PLOTS if p != "consistency" or cal.kind is CalibrationKind.hand_eye]
     base = f"/api/calibration/calibrations/{cal.id}/report"
-    return {
-        "calibration": calibration_public(cal),
-        "summary": summary,
-        "plots": {p: f"{base}/{p}.png" for p in available},
-    }
+    return CalibrationReport(
+        calibration=CalibrationPublic.model_validate(cal),
+        summary=summary,
+        plots={p: f"{base}/{p}.png" for p in available},
+    ).model_dump(mode="json")
 
 
 def report_png(cal: Calibration, plot: str) -> bytes:

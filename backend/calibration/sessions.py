@@ -20,6 +20,7 @@ from sqlalchemy import func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import selectinload
 
+from backend.calibration.public import SessionPublic
 from backend.db.models import CalibrationKind, CalibrationSample, CalibrationSession
 from backend.db.models import Cell as CellRow
 from vision.calibration import Board, Detection, board_from_dict, check_poses, detect_pattern
@@ -288,30 +289,6 @@ async def count_sessions(session: AsyncSession, *, cell_id: int | None = None) -
 
 
 def session_summary(s: CalibrationSession) -> dict[str, Any]:
-    """JSON summary of a session (no images) with a derived status:
-    ``empty`` (no samples), ``collecting`` (not solved yet), ``solved``, ``active``
-    (one of its calibrations is in force)."""
-    accepted = sum(1 for x in s.samples if x.accepted)
-    cals = sorted(s.calibrations, key=lambda c: c.id)
-    if not s.samples:
-        status = "empty"
-    elif any(c.active for c in cals):
-        status = "active"
-    elif cals:
-        status = "solved"
-    else:
-        status = "collecting"
-    return {
-        "id": s.id,
-        "cell_id": s.cell_id,
-        "kind": s.kind.value,
-        "source": s.source,
-        "board": s.board,
-        "note": s.note,
-        "created_at": s.created_at.isoformat(),
-        "status": status,
-        "sample_count": len(s.samples),
-        "accepted_count": accepted,
-        "rejected_count": len(s.samples) - accepted,
-        "calibration_ids": [c.id for c in cals],
-    }
+    """JSON summary of a session (no images) with its derived status
+    (:class:`SessionPublic`)."""
+    return SessionPublic.of(s).model_dump(mode="json")

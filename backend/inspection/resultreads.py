@@ -13,6 +13,7 @@ from sqlalchemy import func, select
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from backend.db.models import Decision, Inspection, InspectionImage
+from backend.inspection.public import InspectionPublic, PickOutcome
 from vision.errors import InvalidInput, NotFound
 
 __all__ = ["DECISIONS", "PICK_OUTCOMES", "get_image", "get_inspection", "inspection_public",
@@ -61,32 +62,10 @@ def pick_outcome(pick: Any, decision: str) -> dict[str, Any]:
 
 
 def inspection_public(row: Inspection, n_images: int | None = None) -> dict[str, Any]:
-    """The API's form of a row."""
+    """The API's form of a row (:class:`InspectionPublic`) as JSON values."""
     n = len(row.images) if n_images is None else n_images
-    return {
-        "id": row.id,
-        "cell_id": row.cell_id,
-        "started_at": row.started_at.isoformat(),
-        "finished_at": None if row.finished_at is None else row.finished_at.isoformat(),
-        "decision": row.decision.value,
-        "reason": row.reason,
-        "policy": row.policy,
-        "model": row.model_name,
-        "model_id": row.model_id,
-        "score": row.score,
-        "scores": row.scores or {},
-        "viewpoints_visited": list(row.viewpoints_visited or []),
-        "pose": row.pose,
-        "durations": row.durations or {},
-        "duration_s": row.duration_s,
-        "pick": row.pick,
-        "pick_outcome": pick_outcome(row.pick, row.decision.value),
-        "truth": row.truth,
-        "source": row.source,
-        "recipe_id": row.recipe_id,
-        "recipe": row.recipe_name,
-        "images": [f"/api/inspections/{row.id}/images/{k}.jpg" for k in range(n)],
-    }
+    outcome = PickOutcome.model_validate(pick_outcome(row.pick, row.decision.value))
+    return InspectionPublic.of(row, outcome, n).model_dump(mode="json")
 
 
 async def list_inspections(

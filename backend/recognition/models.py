@@ -30,6 +30,7 @@ from backend.recognition.modelfields import (
     grasp_of,
     parse_kind,
 )
+from backend.recognition.public import ModelPublic
 from vision.errors import Conflict, InvalidInput, NotFound
 
 __all__ = [
@@ -137,27 +138,10 @@ async def taught_rounds(session: AsyncSession, model_ids: list[int]) -> dict[int
 def model_public(
     row: ObjectModel, counts: dict[int, int] | None = None, rounds: int = 0
 ) -> dict[str, Any]:
-    """JSON form of a model (``counts``: trained views per viewpoint; ``rounds``: its teach
-    rounds, :func:`taught_rounds`, shown beside the rounds its kind needs)."""
-    from backend.recognition.thresholds import recommended_rounds
-
-    counts = counts or {}
-    return {
-        "id": row.id,
-        "name": row.name,
-        "part": row.part,
-        "sitting_base": row.sitting_base,
-        "kind": row.kind.value,
-        "threshold": row.threshold,
-        "description": row.description,
-        "height_m": row.height_m,
-        "grasp_obj": None if grasp_of(row) is None else list(grasp_of(row)),  # type: ignore[arg-type]
-        "geometry_source": row.geometry_source or "",
-        "created_at": row.created_at.isoformat(),
-        "views": sum(counts.values()),
-        "views_per_viewpoint": {str(k): v for k, v in sorted(counts.items())},
-        "rounds": {"taught": int(rounds), "recommended": recommended_rounds(row.kind.value)},
-    }
+    """JSON form of a model (:class:`ModelPublic`; ``counts``: trained views per viewpoint;
+    ``rounds``: its teach rounds, :func:`taught_rounds`, shown beside the rounds its kind
+    needs)."""
+    return ModelPublic.of(row, counts, rounds).model_dump(mode="json")
 
 
 async def list_models(

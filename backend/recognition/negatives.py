@@ -10,7 +10,7 @@ empty-belt backgrounds a teach grabs are negatives of the cell that grabbed them
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, cast
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,7 +31,6 @@ __all__ = [
     "list_negatives",
     "load_negatives",
     "negative_ids",
-    "negative_public",
 ]
 
 #: Most stored negative images (each costs one search per viewpoint per recomputation).
@@ -41,18 +40,6 @@ MAX_NEGATIVES_PER_REQUEST = 16
 #: Longest side a negative is stored with, pixels (larger ones are scaled down: a negative
 #: only has to produce the features an untrained scene would).
 NEGATIVE_SIDE_PX = 1024
-
-
-def negative_public(row: NegativeImage) -> dict[str, Any]:
-    """JSON form of a stored negative (no image data)."""
-    return {
-        "id": row.id,
-        "width": row.width,
-        "height": row.height,
-        "source": row.source,
-        "note": row.note,
-        "created_at": row.created_at.isoformat(),
-    }
 
 
 def _shrink(rgb: NDArray[np.uint8]) -> NDArray[np.uint8]:

@@ -12,30 +12,14 @@ from sqlalchemy.orm import defer
 from backend.db.models import TrainedView
 from backend.recognition import images as im
 from backend.recognition.models import get_model
+from backend.recognition.public import ViewPublic
 from vision.errors import NotFound
 
 
 def view_public(row: TrainedView) -> dict[str, Any]:
-    """JSON form of a view, with URLs of its image, thumbnail and mask."""
-    base = f"/api/models/{row.model_id}/views/{row.id}/image"
-    return {
-        "id": row.id,
-        "model_id": row.model_id,
-        "viewpoint": row.viewpoint,
-        "width": row.width,
-        "height": row.height,
-        "keypoints": row.keypoint_count,
-        "descriptor": {"kind": row.descriptor_kind, "version": row.descriptor_version},
-        "yaw_rad": row.yaw_rad,
-        "roll_rad": row.roll_rad,
-        "source": row.source,
-        "joints": row.joints,
-        "T_base_cam": row.T_base_cam,
-        "created_at": row.created_at.isoformat(),
-        "image_url": base,
-        "thumbnail_url": f"{base}?thumb=1",
-        "mask_url": f"{base}?mask=1",
-    }
+    """JSON form of a view (:class:`ViewPublic`), with URLs of its image, thumbnail and
+    mask."""
+    return ViewPublic.of(row).model_dump(mode="json")
 
 
 async def _view_total(session: AsyncSession, model_id: int) -> int:

@@ -6,7 +6,7 @@ from datetime import datetime
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from fastapi import APIRouter, Query
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field
 
 from backend import audit
 from backend.api.deps import EngineerUser, SessionDep
@@ -39,8 +39,13 @@ class AuditPublic(BaseModel):
     kind: str
     entity_id: str
     action: str
-    old: dict[str, Any] | None
-    new: dict[str, Any] | None
+    old: dict[str, Any] | None = Field(
+        description="The entity's audited values before (null: it did not exist); open "
+        "because each kind of entity (model, recipe, threshold, user ...) has its own"
+    )
+    new: dict[str, Any] | None = Field(
+        description="Its audited values after (null: it was deleted); open as old is"
+    )
     reason: str
 
 

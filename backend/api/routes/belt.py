@@ -31,11 +31,20 @@ class BeltIn(BaseModel):
     running: bool = Field(description="true: start the belt; false: stop it")
 
 
+class BeltPublic(BaseModel):
+    """What the operator and a waiting run need to know about the belt."""
+
+    running: bool = Field(description="It runs (commanded to, and not held by the E-STOP)")
+    halted: bool = Field(description="The emergency stop holds it")
+    mode: str = Field(description="continuous, or index: it stops each object at the station")
+    speed_m_s: float = Field(description="Its speed when it runs, m/s")
+    holding: bool = Field(description="Index mode: it holds an object at the station now")
+    travel_m: float = Field(description="Its encoder: metres travelled since start-up")
+    objects: int | None = Field(description="Objects on it (null: it cannot count them)")
+
+
 class BeltOut(BaseModel):
-    belt: dict[str, Any] | None = Field(
-        description="running, halted, mode, speed_m_s, holding, travel_m, objects (null: "
-        "the conveyor cannot count them); null when the cell has no conveyor it can read"
-    )
+    belt: BeltPublic | None = Field(description="null when the cell has no conveyor it can read")
     summary: str = Field(description="One line for the operator")
 
 

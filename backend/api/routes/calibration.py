@@ -118,26 +118,25 @@ class SessionIn(BaseModel):
     note: str = Field("", max_length=2000)
 
 
-Open = Annotated[dict[str, Any], Field(description="See the endpoint's summary")]
-
-
 class SessionOut(BaseModel):
-    session: Open
+    session: svc.SessionPublic
 
 
 class SessionDetailOut(BaseModel):
-    session: Open
-    samples: list[Open]
-    calibrations: list[Open]
+    session: svc.SessionPublic
+    samples: list[svc.SamplePublic] = Field(description="By index")
+    calibrations: list[svc.CalibrationPublic] = Field(description="Newest first")
 
 
-class SamplesOut(Page[Open]):
+class SamplesOut(Page[svc.SamplePublic]):
+    """The samples of one upload, in upload order, and how many were accepted."""
+
     accepted: int
     rejected: int
 
 
 class CalibrationOut(BaseModel):
-    calibration: Open
+    calibration: svc.CalibrationPublic
 
 
 def _check_upload(name: str, data: bytes) -> tuple[int, int]:
@@ -242,32 +241,21 @@ async def create_calibration_session(
         session, kind=body.kind, board=board, cell_id=cell_id, note=body.note
     )
     row = await svc.get_session(session, row.id)
-    return {"session": svc.session_summary(row)}
+    return {"session": svc.SessionPublic.of(row)}
 
 
 @router.get(
-    "/sessions", summary="This cell's calibration sessions, newest first", response_model=Page[Open]
+    "/sessions",
+    summary="This cell's calibration sessions, newest first",
+    response_model=Page[svc.SessionPublic],
 )
 async def read_calibration_sessions(
     _: ViewerUser, session: SessionDep, cell: CellDep, limit: Limit = 100, offset: Offset = 0
 ) -> dict[str, Any]:
     cell_id = await svc.cell_id_of(session, cell.name)
     rows = await svc.list_sessions(session, cell_id=cell_id, limit=limit, offset=offset)
-    data = [svc.session_summary(r) for r in rows]
+    data = [svc.SessionPublic.of(r) for r in rows]
     return {"data": data, "count": await svc.count_sessions(session, cell_id=cell_id)}
-
-
-def _sample_public(s: Any) -> dict[str, Any]:
-    return {
-        "index": s.index,
-        "name": s.name,
-        "accepted": s.accepted,
-        "reason": s.reason,
-        "corner_count": len(s.corners) if s.corners else 0,
-        "joints": s.joints,
-        "T_base_ee": s.T_base_ee,
-        "created_at": s.created_at.isoformat(),
-    }
 
 
 @router.get(
@@ -278,9 +266,11 @@ def _sample_public(s: Any) -> dict[str, Any]:
 async def read_calibration_session(_: ViewerUser, row: CalibrationSessionDep) -> dict[str, Any]:
     cals = sorted(row.calibrations, key=lambda c: c.id, reverse=True)
     return {
-        "session": svc.session_summary(row),
-        "samples": [_sample_public(s) for s in sorted(row.samples, key=lambda s: s.index)],
-        "calibrations": [svc.calibration_public(c) for c in cals],
+        "session": svc.SessionPublic.of(row),
+        "samples": [
+            svc.SamplePublic.model_validate(s) for s in sorted(row.samples, key=lambda s: s.index)
+        ],
+        "calibrations": [svc.CalibrationPublic.model_validate(c) for c in cals],
     }
 
 
@@ -368,7 +358,7 @@ async def _store_samples(
         ],
         run=job.run,
     )
-    data = [_sample_public(r) for r in rows]
+    data = [svc.SamplePublic.model_validate(r) for r in rows]
     accepted = sum(1 for r in rows if r.accepted)
     return {
         "data": data,

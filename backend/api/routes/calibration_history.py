@@ -11,11 +11,12 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Query
 from fastapi.responses import Response
+from pydantic import BaseModel
 
 from backend import audit
 from backend import calibration as svc
 from backend.api.deps import CellDep, EngineerUser, SessionDep, ViewerUser
-from backend.api.routes.calibration import CalibrationDep, CalibrationOut, Open
+from backend.api.routes.calibration import CalibrationDep, CalibrationOut
 from backend.api.schemas import Page
 from backend.api.types import DbId, DbIdQuery, Limit, Offset
 from backend.api.work import HeavyWorkDep
@@ -24,6 +25,14 @@ from backend.db.models import CalibrationKind
 __all__ = ["router"]
 
 router = APIRouter(prefix="/calibration", tags=["calibration"])
+
+
+class ActiveCalibrationsOut(BaseModel):
+    """The active calibration of each kind (None where none is active)."""
+
+    intrinsic: svc.CalibrationPublic | None
+    hand_eye: svc.CalibrationPublic | None
+
 
 PlotName = Annotated[str, Path(max_length=64, description="residuals, coverage or consistency")]
 
@@ -34,7 +43,7 @@ PlotName = Annotated[str, Path(max_length=64, description="residuals, coverage o
 @router.get(
     "/calibrations",
     summary="This cell's calibration history, newest first",
-    response_model=Page[Open],
+    response_model=Page[svc.CalibrationPublic],
 )
 async def read_calibrations(
     _: ViewerUser,
@@ -49,7 +58,7 @@ async def read_calibrations(
     rows = await svc.history(
         session, cell_id=cell_id, kind=kind, session_id=session_id, limit=limit, offset=offset
     )
-    data = [svc.calibration_public(r) for r in rows]
+    data = [svc.CalibrationPublic.model_validate(r) for r in rows]
     total = await svc.count_history(session, cell_id=cell_id, kind=kind, session_id=session_id)
     return {"data": data, "count": total}
 
@@ -57,27 +66,29 @@ async def read_calibrations(
 @router.get(
     "/active",
     summary="The active calibration of each kind in this cell",
-    response_model=dict[str, Open | None],
+    response_model=ActiveCalibrationsOut,
 )
 async def read_active_calibrations(
     _: ViewerUser, session: SessionDep, cell: CellDep
 ) -> dict[str, Any]:
     cell_id = await svc.cell_id_of(session, cell.name)
     act = await svc.active_calibrations(session, cell_id)
-    return {k.value: (svc.calibration_public(v) if v else None) for k, v in act.items()}
+    return {
+        k.value: (svc.CalibrationPublic.model_validate(v) if v else None) for k, v in act.items()
+    }
 
 
 @router.get(
     "/calibrations/{calibration_id}", summary="One calibration", response_model=CalibrationOut
 )
 async def read_calibration(_: ViewerUser, cal: CalibrationDep) -> dict[str, Any]:
-    return {"calibration": svc.calibration_public(cal)}
+    return {"calibration": svc.CalibrationPublic.model_validate(cal)}
 
 
 @router.get(
     "/calibrations/{calibration_id}/report",
     summary="Report: summary and plot links",
-    response_model=Open,
+    response_model=svc.CalibrationReport,
 )
 async def read_calibration_report(_: ViewerUser, cal: CalibrationDep) -> dict[str, Any]:
     return svc.calibration_report(cal)
@@ -114,4 +125,4 @@ async def update_calibration_activate(
     row = await svc.get_calibration(session, calibration_id)
     svc.check_own("calibration", row.id, row.cell_id, await svc.cell_id_of(session, cell.name))
     cal = await svc.activate(session, calibration_id, by=audit.By(audit.Actor.of(user), reason))
-    return {"calibration": svc.calibration_public(cal)}
+    return {"calibration": svc.CalibrationPublic.model_validate(cal)}

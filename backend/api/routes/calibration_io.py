@@ -82,4 +82,4 @@ async def create_calibration_import(
         make_active=body.activate,
         by=audit.By(audit.Actor.of(user), body.reason),
     )
-    return {"calibration": svc.calibration_public(row)}
+    return {"calibration": svc.CalibrationPublic.model_validate(row)}

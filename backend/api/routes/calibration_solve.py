@@ -14,7 +14,7 @@ from pydantic import BaseModel, Field, model_validator
 from backend import calibration as svc
 from backend.api.deps import CellDep, DatabaseDep, EngineerUser, SessionDep
 from backend.api.errors import error_body
-from backend.api.schemas import JobOut
+from backend.api.schemas import ErrorOut, JobOut, JobPublic
 from backend.api.types import MAX_DB_ID, DbId, StrictBool, bounded_int
 from backend.jobs import Job, JobState
 from vision.calibration import ALL_METHODS, HandEyeOptions, IntrinsicsOptions
@@ -74,6 +74,14 @@ class SolveIn(BaseModel):
         )
 
 
+class SolveFailedOut(ErrorOut):
+    """An error answer; with ?wait=true, a failed solve adds its job."""
+
+    job: JobPublic | None = Field(
+        None, description="With ?wait=true, the failed job (absent from other errors)"
+    )
+
+
 @router.post(
     "/sessions/{session_id}/solve",
     summary="Solve the session as a job (202 with the job, or 200/422 with ?wait=true)",
@@ -82,6 +90,15 @@ class SolveIn(BaseModel):
     responses={
         200: {"model": JobOut, "description": "With ?wait=true: the finished job"},
         202: {"model": JobOut, "description": "The job, started"},
+        422: {
+            "model": SolveFailedOut,
+            "description": "A value is out of range, or (with ?wait=true) the solve failed: "
+            "too few usable views, degenerate motion (with the failed job)",
+        },
+        500: {
+            "model": SolveFailedOut,
+            "description": "A bug in VisionCell (logged); with ?wait=true, with the failed job",
+        },
     },
 )
 async def create_calibration_solve(

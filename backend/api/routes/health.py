@@ -6,7 +6,7 @@ import platform
 from typing import Any
 
 from fastapi import APIRouter
-from pydantic import BaseModel
+from pydantic import BaseModel, Field
 
 from backend import __version__
 from backend.api.deps import (
@@ -18,6 +18,8 @@ from backend.api.deps import (
     ViewerUser,
 )
 from backend.api.fastpath import FastRequest, Fresh
+from backend.api.routes.camera import CameraStatusOut
+from backend.api.schemas import JobPublic
 from backend.cell import Cell
 from backend.db.migrate import current_revision, head_revision
 from backend.db.models import Role
@@ -32,16 +34,53 @@ class HealthOut(BaseModel):
     viser_port: int | None
 
 
+class CellStatusOut(BaseModel):
+    name: str
+    id: int | None = Field(description="The cell's row id (None until it is registered)")
+    estopped: bool = Field(description="The cell-wide emergency stop holds")
+
+
+class DriverStatusOut(BaseModel):
+    name: str = Field(description="sim, serial or ideal")
+    connected: bool
+    moving: bool
+    estopped: bool
+    fault: str = Field(description="The driver's fault, empty when healthy")
+
+
+class CameraHealthOut(CameraStatusOut):
+    retries: int = Field(description="Failed attempts in the current outage (0 when healthy)")
+
+
+class DatabaseStatusOut(BaseModel):
+    url: str = Field(description="The database URL without its password")
+    ok: bool = Field(description="The database answered")
+    revision: str | None = Field(description="Its schema revision (None: not reachable)")
+    head: str | None = Field(description="The newest revision this VisionCell knows")
+
+
+class View3DStatusOut(BaseModel):
+    port: int | None = Field(description="The 3D view's port (None: not running)")
+    clients: int = Field(description="Browsers connected to it")
+    frames_shown: int = Field(description="Camera images it has shown")
+
+
+class JobsStatusOut(BaseModel):
+    running: list[JobPublic]
+
+
 class StatusOut(BaseModel):
     """Driver, camera, database, 3D view, running jobs and library versions."""
 
-    cell: dict[str, Any]
-    driver: dict[str, Any]
-    camera: dict[str, Any]
-    database: dict[str, Any]
-    view3d: dict[str, Any]
-    jobs: dict[str, Any]
-    versions: dict[str, str]
+    cell: CellStatusOut
+    driver: DriverStatusOut
+    camera: CameraHealthOut
+    database: DatabaseStatusOut
+    view3d: View3DStatusOut
+    jobs: JobsStatusOut
+    versions: dict[str, str] = Field(
+        description="Version of visioncell, python, numpy, opencv, mujoco and viser"
+    )
 
 
 def health_answer(view: Any) -> dict[str, Any]:

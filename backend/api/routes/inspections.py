@@ -26,9 +26,10 @@ from backend.api.deps import (
     read_through,
 )
 from backend.api.fastpath import FastRequest, Fresh
-from backend.api.schemas import IsoTime, Page
+from backend.api.schemas import JobOut, Page
 from backend.api.types import DbId, Limit, Offset, instant_query
 from backend.inspection import results, service
+from backend.inspection.public import InspectionPublic
 from backend.recipes import follower, resolve_options
 
 __all__ = ["router"]
@@ -79,13 +80,9 @@ class RunIn(InspectIn):
     count: int | None = Field(None, ge=1, le=service.MAX_COUNT)
 
 
-class JobAccepted(BaseModel):
-    job: dict[str, Any]
-
-
 @router.post(
     "/inspections",
-    response_model=JobAccepted,
+    response_model=JobOut,
     status_code=status.HTTP_202_ACCEPTED,
     summary="Inspect the object at the station: a job whose result names the inspection "
     "(operator); the active recipe's options unless the request names others",
@@ -98,7 +95,7 @@ async def create_inspection(_: OperatorUser, rt: RuntimeDep, body: InspectIn) ->
 
 @router.post(
     "/inspection/run",
-    response_model=JobAccepted,
+    response_model=JobOut,
     status_code=status.HTTP_202_ACCEPTED,
     summary="Start continuous inspection (operator): it follows the active recipe (or "
     "`recipe`), read again before each object, under the options given",
@@ -113,7 +110,7 @@ async def start_run(_: OperatorUser, rt: RuntimeDep, body: RunIn) -> dict[str, A
 
 @router.post(
     "/inspection/belt-background",
-    response_model=JobAccepted,
+    response_model=JobOut,
     status_code=status.HTTP_202_ACCEPTED,
     summary="Grab the empty belt's background registered to its travel (engineer; belt and "
     "station empty): needed at constant belt speed",
@@ -125,7 +122,7 @@ async def grab_belt_background(_: EngineerUser, rt: RuntimeDep) -> dict[str, Any
 
 @router.post(
     "/inspection/stop",
-    response_model=JobAccepted,
+    response_model=JobOut,
     status_code=status.HTTP_202_ACCEPTED,
     summary="End continuous inspection after the current object (operator)",
 )
@@ -145,42 +142,6 @@ def inspections_key(cell_id: int | None, params: Mapping[str, Any]) -> tuple[Has
 
 
 _LIST_PARAMS = ("limit", "offset", "decision", "model", "policy", "since", "until")
-
-
-class PickOutcome(BaseModel):
-    """What happened to the object (:func:`backend.inspection.results.pick_outcome`)."""
-
-    outcome: str
-    bin: str | None
-    text: str
-
-
-class InspectionPublic(BaseModel):
-    """A stored inspection as the API shows it
-    (:func:`backend.inspection.results.inspection_public`)."""
-
-    id: int
-    cell_id: int
-    started_at: IsoTime
-    finished_at: IsoTime | None
-    decision: Literal["recognized", "unknown", "failed"]
-    reason: str
-    policy: str
-    model: str | None
-    model_id: int | None
-    score: float | None
-    scores: dict[str, Any]
-    viewpoints_visited: list[Any]
-    pose: dict[str, Any] | None
-    durations: dict[str, Any]
-    duration_s: float | None
-    pick: dict[str, Any] | None
-    pick_outcome: PickOutcome
-    truth: dict[str, Any] | None
-    source: str
-    recipe_id: int | None
-    recipe: str | None
-    images: list[str] = Field(description="URLs of the viewpoint images, in order")
 
 
 @router.get(
@@ -243,6 +204,7 @@ async def read_inspection(
     "/inspections/{inspection_id}/images/{n}.jpg",
     response_class=Response,
     summary="The n-th viewpoint image (0-based) with the contour drawn",
+    responses={200: {"content": {"image/jpeg": {}}, "description": "The image (JPEG)"}},
 )
 async def read_inspection_image(
     _: ViewerUser,

@@ -12,6 +12,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from backend import audit
 from backend.recognition import models as svc
+from backend.recognition import public
 from backend.recognition import teach as teach_svc
 from vision.errors import InvalidInput
 
@@ -97,28 +98,12 @@ class ModelUpdate(BaseModel):
     reason: Reason = None
 
 
-class TeachRounds(BaseModel):
-    taught: int = Field(description="Teach rounds: distinct object yaws of the top views")
-    recommended: int = Field(
-        description="Rounds a model of this kind needs to be recognised at any yaw"
-    )
+class ModelPublic(public.ModelPublic):
+    """An object model with its views counted in the database and in the live index."""
 
-
-class ModelPublic(BaseModel):
-    id: int
-    name: str
-    part: str
-    sitting_base: str
-    kind: str
-    threshold: float | None
-    description: str
-    height_m: float | None = Field(description="Height above the sitting base, metres")
-    grasp_obj: list[float] | None = Field(description="Suction point, object frame, metres")
-    geometry_source: str = Field(description="measured (teach), entered (engineer) or empty")
-    created_at: datetime
-    views: int
-    views_per_viewpoint: dict[str, int]
-    rounds: TeachRounds
+    # The API has always written this time as pydantic does (``...Z``), the CLI and the
+    # teach result as ``isoformat()`` does (``...+00:00``); both stay as they are.
+    created_at: datetime  # type: ignore[assignment]
     indexed_views: int = Field(description="Views in the live index")
     stale_views: int = Field(description="Views refused by the index (stale features)")
 
@@ -128,24 +113,12 @@ class ModelList(BaseModel):
     count: int
 
 
-class ViewPublic(BaseModel):
-    id: int
-    model_id: int
-    viewpoint: int
-    width: int
-    height: int
-    keypoints: int
-    descriptor: dict[str, str]
-    yaw_rad: float
-    roll_rad: float
-    source: str
-    joints: list[float] | None
-    T_base_cam: list[list[float]] | None
-    created_at: datetime
-    image_url: str
-    thumbnail_url: str
-    mask_url: str
-    indexed: bool
+class ViewPublic(public.ViewPublic):
+    """A trained view with what the live index made of it."""
+
+    # Written as pydantic does (``...Z``), as the API always has (see ModelPublic).
+    created_at: datetime  # type: ignore[assignment]
+    indexed: bool = Field(description="The view is in the live index")
     stale: str | None = Field(description="Why the index refused the view, if it did")
 
 
@@ -184,7 +157,3 @@ class TeachIn(BaseModel):
         None, min_length=3, max_length=3, description="Station point x, y, z in metres"
     )
     reason: Reason = None
-
-
-class JobAccepted(BaseModel):
-    job: dict[str, Any]

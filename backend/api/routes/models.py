@@ -29,7 +29,6 @@ from backend.api.deps import (
 from backend.api.fastpath import FastRequest, Fresh
 from backend.api.routes.modelforms import (
     DB_ID_MAX,
-    JobAccepted,
     ModelCreate,
     ModelId,
     ModelList,
@@ -39,6 +38,7 @@ from backend.api.routes.modelforms import (
     TeachIn,
     _height_fields,
 )
+from backend.api.schemas import JobOut
 from backend.recognition import models as svc
 from backend.recognition import teach as teach_svc
 from backend.recognition.index import IndexedModel, LiveIndex
@@ -226,7 +226,7 @@ def get_backgrounds(runtime: RuntimeDep) -> teach_svc.BackgroundStore:
 
 @router.post(
     "/{model_id}/teach",
-    response_model=JobAccepted,
+    response_model=JobOut,
     status_code=status.HTTP_202_ACCEPTED,
     summary="Teach the model with the arm: a job (engineer)",
 )

@@ -20,6 +20,7 @@ from backend.api.uploads import read_capped
 from backend.api.work import HeavyWorkDep
 from backend.recognition import images as im
 from backend.recognition import negatives as neg
+from backend.recognition import public
 from backend.runtime import CellRuntime
 from vision.errors import InvalidInput
 
@@ -31,17 +32,8 @@ router = APIRouter(prefix="/recognition", tags=["recognition"])
 # -- negative images ------------------------------------------------------------------------
 
 
-class NegativePublic(BaseModel):
-    id: int
-    width: int
-    height: int
-    source: str
-    note: str
-    created_at: str
-
-
 class NegativeList(BaseModel):
-    data: list[NegativePublic]
+    data: list[public.NegativePublic]
     count: int
 
 
@@ -59,7 +51,7 @@ async def read_negatives(
     offset: Annotated[int, Query(ge=0, le=DB_ID_MAX)] = 0,
 ) -> dict[str, Any]:
     rows, total = await neg.list_negatives(db, limit=limit, offset=offset)
-    return {"data": [neg.negative_public(r) for r in rows], "count": total}
+    return {"data": [public.NegativePublic.model_validate(r) for r in rows], "count": total}
 
 
 @router.post(
@@ -97,7 +89,7 @@ async def create_negatives(
         runtime.database, encoded, note=note, by=audit.By(audit.Actor.of(user), reason)
     )
     _keeper_changed(runtime)
-    return {"data": [neg.negative_public(r) for r in rows], "count": len(rows)}
+    return {"data": [public.NegativePublic.model_validate(r) for r in rows], "count": len(rows)}
 
 
 @router.delete(

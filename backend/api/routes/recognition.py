@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import time
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, File, Form, UploadFile
 from pydantic import BaseModel, Field
@@ -33,9 +33,9 @@ from backend.db.session import changed
 from backend.db.types import utcnow
 from backend.inspection.results import store_all
 from backend.recognition import images as im
+from backend.recognition.public import RecognitionSettingsPublic
 from backend.recognition.recognise import Region, inspection_record, recognise_upload
 from backend.recognition.thresholds import (
-    DEFAULT_THRESHOLD,
     back_to_automatic,
     current_choice,
     latest_settings,
@@ -65,46 +65,25 @@ class RecognitionSettingsIn(BaseModel):
     )
 
 
-class RecognitionSettingsOut(BaseModel):
-    global_threshold: float
-    chosen_by: str
-    detail: dict[str, Any]
-    created_at: str | None
-
-
-def _public(row: RecognitionSettings | None) -> dict[str, Any]:
-    if row is None:
-        return {
-            "global_threshold": DEFAULT_THRESHOLD,
-            "chosen_by": "default",
-            "detail": {},
-            "created_at": None,
-        }
-    return {
-        "global_threshold": row.global_threshold,
-        "chosen_by": row.chosen_by,
-        "detail": row.detail,
-        "created_at": row.created_at.isoformat(),
-    }
-
-
 @router.get(
     "/settings",
     summary="The recognition settings in force",
-    response_model=RecognitionSettingsOut,
+    response_model=RecognitionSettingsPublic,
 )
-async def read_recognition_settings(_: ViewerUser, session: SessionDep) -> dict[str, Any]:
-    return _public(await latest_settings(session))
+async def read_recognition_settings(
+    _: ViewerUser, session: SessionDep
+) -> RecognitionSettingsPublic:
+    return RecognitionSettingsPublic.of(await latest_settings(session))
 
 
 @router.put(
     "/settings",
     summary="Set the global threshold by hand, or null to hand it back to the automatic rule (engineer)",
-    response_model=RecognitionSettingsOut,
+    response_model=RecognitionSettingsPublic,
 )
 async def update_recognition_settings(
     user: EngineerUser, session: SessionDep, body: RecognitionSettingsIn
-) -> dict[str, Any]:
+) -> RecognitionSettingsPublic:
     """A number sets the threshold by hand (``chosen_by="manual"``), which the automatic
     rule then never overwrites; ``null`` ends that: the newest automatic choice (or the
     default) is in force again and later teaches recompute it.  Each change is audited
@@ -113,7 +92,7 @@ async def update_recognition_settings(
         before, after = await back_to_automatic(session)
         if after is not None and after is not before:
             _audit_threshold(session, user, body, "automatic", before, after)
-        return _public(after)
+        return RecognitionSettingsPublic.of(after)
     before = await latest_settings(session)
     row = RecognitionSettings(
         global_threshold=body.global_threshold,
@@ -124,7 +103,7 @@ async def update_recognition_settings(
     changed(session, "recognition_settings")
     await session.flush()
     _audit_threshold(session, user, body, "set", before, row)
-    return _public(row)
+    return RecognitionSettingsPublic.of(row)
 
 
 def _audit_threshold(
@@ -186,10 +165,18 @@ class ImageResultOut(BaseModel):
     inspection_id: int | None = Field(None, description="The stored row (store=true)")
 
 
+class AppliedThresholdOut(BaseModel):
+    """The thresholds applied to a request's images and how they were chosen."""
+
+    chosen_by: str = Field(description="default, auto or manual (the settings in force)")
+    global_threshold: float = Field(description="The global threshold at the viewpoint")
+    rule: str = Field(description="The rule that chose the thresholds")
+
+
 class RecogniseOut(BaseModel):
     data: list[ImageResultOut]
     count: int
-    threshold: dict[str, Any] = Field(description="The thresholds applied: how they were chosen")
+    threshold: AppliedThresholdOut
     durations: dict[str, float] = Field(description="Seconds of the request: total, store")
 
 
@@ -325,12 +312,14 @@ async def recognise_images(
 
 class ThresholdStatusOut(BaseModel):
     follow: bool = Field(description="Recomputed after every change of the views (setting)")
-    state: str = Field(description="idle, waiting (changes seen) or running")
+    state: Literal["idle", "waiting", "running"] = Field(
+        description="idle, waiting (changes seen) or running"
+    )
     job: str | None
     runs: int = Field(description="Recomputations finished")
     superseded: int = Field(description="Recomputations stopped by a change while they ran")
     last: dict[str, Any] | None = Field(description="The last recomputation's outcome")
-    settings: RecognitionSettingsOut
+    settings: RecognitionSettingsPublic
 
 
 @router.get(
@@ -354,5 +343,5 @@ async def read_threshold_status(
         "runs": state["runs"],
         "superseded": state["superseded"],
         "last": state["last"],
-        "settings": _public(await latest_settings(session)),
+        "settings": RecognitionSettingsPublic.of(await latest_settings(session)),
     }

@@ -106,6 +106,21 @@ class ModelStats(BaseModel):
     hist: Histogram
 
 
+class FiltersEcho(BaseModel):
+    """The filters a report covers, as given (null: not filtered on)."""
+
+    model_config = ConfigDict(populate_by_name=True)
+
+    from_: str | None = Field(
+        alias="from", serialization_alias="from", description="Started at or after, ISO time"
+    )
+    to: str | None = Field(description="Started at or before, ISO time")
+    cell: str | None
+    model: str | None
+    decision: str | None
+    policy: str | None
+
+
 class SummaryPublic(BaseModel):
     """Totals, yield, cycle-time nearest-rank percentiles, the stage breakdown, per model scores."""
 
@@ -118,7 +133,7 @@ class SummaryPublic(BaseModel):
     per_model: list[ModelStats]
     first: str | None
     last: str | None
-    filters: dict[str, Any]
+    filters: FiltersEcho
 
     model_config = ConfigDict(populate_by_name=True)
 
@@ -135,7 +150,7 @@ class BucketPublic(BaseModel):
 class TimeseriesPublic(BaseModel):
     bucket: str
     data: list[BucketPublic]
-    filters: dict[str, Any]
+    filters: FiltersEcho
 
 
 class ConfusionPublic(BaseModel):
@@ -143,7 +158,7 @@ class ConfusionPublic(BaseModel):
     truth: list[str] = Field(description="True catalogue names (simulator)")
     matrix: list[list[int]] = Field(description="Rows: truth; columns: labels")
     count: int
-    filters: dict[str, Any]
+    filters: FiltersEcho
 
 
 class StoragePublic(BaseModel):
@@ -202,8 +217,17 @@ async def read_confusion(_: ViewerUser, session: SessionDep, f: FiltersDep) -> d
     return await confusion(session, f)
 
 
-@router.get("/reports/export.csv", response_class=StreamingResponse,
-            summary="Every matching inspection as CSV (streamed, header first)")  # fmt: skip
+@router.get(
+    "/reports/export.csv",
+    response_class=StreamingResponse,
+    summary="Every matching inspection as CSV (streamed, header first)",
+    responses={
+        200: {
+            "content": {"text/csv": {}},
+            "description": "A header line, then one line per inspection (a file download)",
+        }
+    },
+)
 async def export_inspections_csv(
     _: ViewerUser, db: DatabaseDep, f: FiltersDep
 ) -> StreamingResponse:
@@ -215,8 +239,18 @@ async def export_inspections_csv(
     )
 
 
-@router.get("/reports/export.jsonl", response_class=StreamingResponse,
-            summary="Every matching inspection as JSON lines (streamed)")  # fmt: skip
+@router.get(
+    "/reports/export.jsonl",
+    response_class=StreamingResponse,
+    summary="Every matching inspection as JSON lines (streamed)",
+    responses={
+        200: {
+            "content": {"application/x-ndjson": {}},
+            "description": "One object per inspection, with the CSV export's columns as "
+            "keys (a file download)",
+        }
+    },
+)
 async def export_inspections_jsonl(
     _: ViewerUser, db: DatabaseDep, f: FiltersDep
 ) -> StreamingResponse:
@@ -251,8 +285,17 @@ async def prune_storage(
     return res.public()
 
 
-@router.get("/inspections/{inspection_id}/scene", response_class=Response,
-            summary="The 3D scene recorded during the inspection (viser scene serializer)")  # fmt: skip
+@router.get(
+    "/inspections/{inspection_id}/scene",
+    response_class=Response,
+    summary="The 3D scene recorded during the inspection (viser scene serializer)",
+    responses={
+        200: {
+            "content": {"application/octet-stream": {}},
+            "description": "The recording, as viser's scene serializer writes it",
+        }
+    },
+)
 async def read_inspection_scene(
     _: ViewerUser, rt: RuntimeDep, session: SessionDep, inspection_id: DbId
 ) -> Response:

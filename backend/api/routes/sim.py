@@ -15,6 +15,17 @@ from pydantic import BaseModel, Field, field_validator, model_validator
 
 from backend.api.deps import CellDep, EngineerUser, SettingsDep, get_sim_or_none
 from backend.api.errors import ApiError
+from backend.api.routes.simpublic import (
+    BoardOut,
+    BoardsOut,
+    CameraOut,
+    CataloguePublic,
+    ConveyorOut,
+    ConveyorReadOut,
+    LightOut,
+    ObjectOut,
+    ObjectPublic,
+)
 from backend.api.schemas import Page, page
 from backend.api.types import (
     MAX_DB_ID,
@@ -160,37 +171,6 @@ class CameraIn(BaseModel):
     motion_blur: StrictBool | None = None
 
 
-class CameraOut(BaseModel):
-    exposure_s: float
-    gain: float
-    noise_std_dn: float
-    motion_blur: bool
-
-
-Open = Annotated[dict[str, Any], Field(description="See the endpoint's summary")]
-
-
-class ConveyorOut(BaseModel):
-    conveyor: Open
-
-
-class ObjectOut(BaseModel):
-    object: Open
-
-
-class LightOut(BaseModel):
-    name: str
-    intensity: float
-
-
-class BoardOut(BaseModel):
-    board: Open
-
-
-class BoardsOut(Page[Open]):
-    kinds: list[str]
-
-
 ObjectId = Annotated[int, Path(ge=1, le=MAX_DB_ID, description="Object id, 1 .. 2^63 - 1")]
 
 
@@ -198,7 +178,7 @@ ObjectId = Annotated[int, Path(ge=1, le=MAX_DB_ID, description="Object id, 1 .. 
 @router.get(
     "/conveyor",
     summary="Belt settings and whether an object waits at the station",
-    response_model=ConveyorOut,
+    response_model=ConveyorReadOut,
 )
 async def read_conveyor(_: EngineerUser, sim: SimDep) -> dict[str, Any]:
     # station_s_m: where along the belt the station is (the console places objects there);
@@ -232,7 +212,9 @@ async def create_release(_: EngineerUser, sim: SimDep) -> dict[str, Any]:
 
 
 # -- catalogue and objects -------------------------------------------------------------------
-@router.get("/catalogue", summary="Objects that can be spawned", response_model=Page[Open])
+@router.get(
+    "/catalogue", summary="Objects that can be spawned", response_model=Page[CataloguePublic]
+)
 async def read_catalogue(
     _: EngineerUser, sim: SimDep, limit: Limit = 100, offset: Offset = 0
 ) -> dict[str, Any]:
@@ -241,7 +223,9 @@ async def read_catalogue(
 
 
 @router.get(
-    "/objects", summary="Objects on the belt with their true poses", response_model=Page[Open]
+    "/objects",
+    summary="Objects on the belt with their true poses",
+    response_model=Page[ObjectPublic],
 )
 async def read_objects(
     _: EngineerUser, sim: SimDep, limit: Limit = 100, offset: Offset = 0

@@ -6,6 +6,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from pydantic import BaseModel, Field
 
 from backend.api.deps import SettingsDep, View3DDep, ViewerUser
 from backend.api.errors import ApiError
@@ -16,7 +17,27 @@ router = APIRouter(prefix="/view3d", tags=["view3d"])
 _bearer = HTTPBearer(auto_error=False)
 
 
-@router.post("/link", summary="A short-lived link that signs the embedded 3D view in as you")
+class ViewLinkOut(BaseModel):
+    """How the console opens the embedded 3D view signed in."""
+
+    link: str | None = Field(description="The one-use link (None: authentication is off)")
+    ws_path: str = Field(description="Websocket path to open the view with")
+    expires_in_s: float | None = Field(
+        description="Seconds within which the link must be used (None: no link)"
+    )
+    viser_port: int = Field(description="Port of the 3D view's server")
+    user: str | None = Field(
+        None, description="Who the link signs in; left out when authentication is off"
+    )
+
+
+@router.post(
+    "/link",
+    summary="A short-lived link that signs the embedded 3D view in as you",
+    response_model=ViewLinkOut,
+    # ``user`` is only part of the answer with a link.
+    response_model_exclude_unset=True,
+)
 async def create_view_link(
     user: ViewerUser,
     settings: SettingsDep,

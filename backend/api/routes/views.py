@@ -56,7 +56,12 @@ async def read_views(
 @router.get(
     "/{model_id}/views/{view_id}/image",
     summary="A view's image (PNG), thumbnail (JPEG, ?thumb=1) or mask (PNG, ?mask=1)",
-    responses={200: {"content": {"image/png": {}, "image/jpeg": {}}}},
+    responses={
+        200: {
+            "content": {"image/png": {}, "image/jpeg": {}},
+            "description": "The image or mask (PNG) or the thumbnail (JPEG)",
+        }
+    },
     response_class=Response,
 )
 async def read_view_image(
