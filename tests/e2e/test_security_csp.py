@@ -1,5 +1,5 @@
 """The console and the API docs load in headless Chromium under their Content-Security-Policy
-without a single violation."""
+without a single violation.  The pages only read, so the module shares one server."""
 
 from __future__ import annotations
 
@@ -19,7 +19,8 @@ def _violations(page, console: list[str]) -> list[str]:
     return seen + list(page.evaluate("window.__csp"))
 
 
-def test_console_loads_without_csp_violation(browser, server):
+def test_console_loads_without_csp_violation(browser, shared_server):
+    server = shared_server
     token = server.token("csp-viewer", "engineer")
     context = browser.new_context()
     context.add_init_script(_LISTEN)
@@ -42,7 +43,8 @@ def test_console_loads_without_csp_violation(browser, server):
 
 
 @pytest.mark.parametrize("path", ["/docs", "/redoc"])
-def test_docs_load_without_csp_violation(browser, server, path):
+def test_docs_load_without_csp_violation(browser, shared_server, path):
+    server = shared_server
     context = browser.new_context()
     context.add_init_script(_LISTEN)
     page = context.new_page()
@@ -58,7 +60,8 @@ def test_docs_load_without_csp_violation(browser, server, path):
 
 
 @pytest.mark.parametrize("page_id", ["inspection", "models", "recognise", "reports"])
-def test_operation_pages_load_without_csp_violation(browser, server, page_id):
+def test_operation_pages_load_without_csp_violation(browser, shared_server, page_id):
+    server = shared_server
     token = server.token(f"csp-{page_id}", "engineer")
     context = browser.new_context()
     context.add_init_script(_LISTEN)
