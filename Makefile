@@ -27,12 +27,11 @@ install-dev: $(VENV)/.installed-dev
 run: install
 	$(BIN)/visioncell serve
 
-# Three workers on two cores (many tests wait on a server, a browser or the simulated clock,
-# so a third keeps the cores busy), whole files each, handed out in collection order
-# (tests/conftest.py puts the long files first, so the workers end together); bytecode is
-# cached, so the workers and every `visioncell` subprocess reuse the compiled modules.
+# Two workers, whole files each, handed out in collection order (tests/conftest.py puts the
+# long files first, so both workers end together); bytecode is cached, so the workers and
+# every `visioncell` subprocess reuse the compiled modules (pytest's rewritten tests too).
 test: install-dev
-	PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest -q -ra -n 3 --dist loadfile --no-loadscope-reorder --durations=15
+	PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest -q -ra -n 2 --dist loadfile --no-loadscope-reorder --durations=15
 
 # Lint and the type checker (mypy, configured in pyproject.toml) on robot/, vision/ and backend/.
 lint: install-dev
