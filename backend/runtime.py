@@ -54,6 +54,7 @@ from backend.throttle import SignInThrottle
 
 if TYPE_CHECKING:
     from backend.authsync import AuthSync
+    from backend.plc.links import PlcLinks
     from backend.recognition.autothreshold import ThresholdKeeper
     from backend.recognition.sync import IndexSync
     from backend.view3d import View3D
@@ -142,6 +143,8 @@ class CellRuntime:
         self.read_cache = ReadCache(ttl_s=settings.read_cache_ttl_s)
         #: On PostgreSQL: drops the sign-ins other processes revoke (``backend.authsync``).
         self.auth_sync: AuthSync | None = None
+        #: The PLC links while the app's lifespan runs them (``backend.plc.links``).
+        self.plc_links: PlcLinks | None = None
         self.signin_throttle = SignInThrottle(
             max_failures=settings.signin_max_failures,
             window_s=settings.signin_window_s,

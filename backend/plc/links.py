@@ -86,8 +86,7 @@ async def plc_links(rt: Any) -> AsyncIterator[PlcLinks]:
             stack.push_async_callback(mlink.stop)
             links.modbus = mlink
             links.handshakes.append(hs)
-        # Where the benchmark and the in-process tools find the running links.
-        rt.plc_links = links
+        rt.plc_links = links  # CellRuntime.plc_links: where in-process tools find them
         try:
             yield links
         finally:
